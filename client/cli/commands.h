@@ -1,0 +1,14 @@
+#pragma once
+// The `filigree` subcommands; each registers itself on the app.
+
+namespace CLI {
+class App;
+}
+
+namespace filigree::cli {
+
+void add_preprocess_command(CLI::App& app);
+void add_inspect_command(CLI::App& app);
+void add_export_commands(CLI::App& app);  // export-base, export-cut
+
+}  // namespace filigree::cli

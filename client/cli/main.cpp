@@ -1,0 +1,26 @@
+// `filigree`: the command-line tool (preprocess, inspect, export-base, export-cut).
+
+#include <cstdio>
+#include <exception>
+
+#include <CLI/CLI.hpp>
+
+#include "cli/commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"Filigree: detail-preserving deformation from a small base mesh"};
+  app.require_subcommand(1);
+  filigree::cli::add_preprocess_command(app);
+  filigree::cli::add_inspect_command(app);
+  filigree::cli::add_export_commands(app);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::exception& e) {
+    // Every command reports failures as exceptions with a message for a person.
+    std::fprintf(stderr, "filigree: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

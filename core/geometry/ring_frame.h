@@ -1,0 +1,31 @@
+#pragma once
+// A local frame attached to a vertex's 1-ring, so that a removed vertex's
+// offset from its ring can be stored rotation- and scale-invariantly and put
+// back after the ring moves (thesis eq. 3.10 with the local frame of §3.1.2).
+
+#include <span>
+
+#include <Eigen/Core>
+
+#include "mesh/tri_mesh.h"
+
+namespace filigree {
+
+struct RingFrame {
+  Vec3 center;           // Σ w_k x_k, the weighted ring average
+  Eigen::Matrix3d axes;  // orthonormal columns: tangent, bitangent, normal
+  double scale = 1.0;    // mean distance of the ring vertices to `center`
+
+  // Offset of p from the centre in frame coordinates, divided by scale.
+  Vec3 to_local(const Vec3& p) const;
+  Vec3 from_local(const Vec3& local) const;
+};
+
+// Frame of the ring: the normal is the ring polygon's vector area about the
+// centre (open rings are not closed), the tangent the direction to ring[0]
+// projected into the tangent plane. Degenerate rings get an arbitrary but
+// deterministic orthonormal basis and scale 1, never NaN.
+RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
+                     const std::vector<Vec3>& positions, bool closed);
+
+}  // namespace filigree

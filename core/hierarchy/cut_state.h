@@ -1,0 +1,54 @@
+#pragma once
+// A cut of the hierarchy (thesis §3.1.1): the set of recovered nodes, closed
+// under "a recovered node's parents are recovered", and the cut mesh it
+// defines. The empty cut is the base mesh, the full cut the original mesh.
+
+#include <vector>
+
+#include "hierarchy/hierarchy.h"
+
+namespace filigree {
+
+class CutState {
+ public:
+  // Starts at the empty cut (the base mesh). `h` must outlive the CutState.
+  explicit CutState(const Hierarchy& h);
+
+  bool recovered(NodeId k) const { return recovered_[k]; }
+  // Not recovered and every parent recovered.
+  bool can_recover(NodeId k) const { return !recovered_[k] && missing_parents_[k] == 0; }
+  // Recovered and no child recovered.
+  bool can_remove(NodeId k) const { return recovered_[k] && recovered_children_[k] == 0; }
+
+  // Puts node k's vertex back: its created faces go, its fan returns.
+  // Throws std::logic_error unless can_recover(k).
+  void recover(NodeId k);
+  // The inverse: removes k's vertex again. Throws unless can_remove(k).
+  void remove(NodeId k);
+
+  std::size_t recovered_count() const { return recovered_count_; }
+  // A base vertex, or the vertex of a recovered node.
+  bool vertex_present(Index v) const;
+  bool face_alive(FaceId f) const { return face_alive_[f]; }
+  std::size_t alive_face_count() const { return alive_faces_; }
+
+  // The cut mesh: present vertices in ascending original id, alive faces in
+  // ascending face id. `original_ids`, if given, receives the original id of
+  // each output vertex. For the full cut this is exactly the original mesh.
+  TriMesh mesh(std::vector<Index>* original_ids = nullptr) const;
+
+ private:
+  const Hierarchy& h_;
+  std::vector<bool> recovered_;
+  std::vector<Index> missing_parents_;     // parents not yet recovered
+  std::vector<Index> recovered_children_;  // children currently recovered
+  std::vector<bool> face_alive_;
+  std::size_t recovered_count_ = 0;
+  std::size_t alive_faces_ = 0;
+};
+
+// A valid order to recover every node: descending node id (a node's parents
+// were removed after it, so they come first).
+std::vector<NodeId> recovery_order(const Hierarchy& h);
+
+}  // namespace filigree

@@ -1,0 +1,240 @@
+#include "hierarchy/hierarchy_file.h"
+
+#include <bit>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <vector>
+
+#include "hierarchy/hierarchy.h"
+#include "util/content_hash.h"
+
+namespace filigree {
+namespace {
+
+static_assert(std::endian::native == std::endian::little, "the hierarchy file format is little-endian");
+
+constexpr char kMagic[8] = {'F', 'L', 'G', 'H', 'I', 'E', 'R', '\0'};
+
+struct Header {
+  char magic[8];
+  std::uint32_t version;
+  std::uint32_t header_size;
+  std::uint64_t mesh_hash;
+  std::uint64_t payload_size;
+  std::uint64_t payload_hash;
+  std::uint32_t vertex_count, face_count, original_face_count, node_count;
+  std::uint32_t section_count;
+  std::uint32_t reserved;
+};
+static_assert(sizeof(Header) == 64);
+
+struct BuildRecord {
+  std::uint64_t requested_base_vertices;
+  double build_seconds;
+  std::uint32_t threads;
+  std::uint32_t reserved;
+};
+static_assert(sizeof(BuildRecord) == 24);
+
+// The sections in file order. `fn(tag, vector&)` is called for each array of
+// the hierarchy, const or not, so writer and reader cannot disagree.
+template <class H, class Fn>
+void for_each_section(H& h, Fn&& fn) {
+  fn(1, h.rest_positions);
+  fn(2, h.faces);
+  fn(3, h.node_vertex);
+  fn(4, h.node_closed);
+  fn(5, h.ring_offsets);
+  fn(6, h.ring_vertices);
+  fn(7, h.ring_weights);
+  fn(8, h.node_offset);
+  fn(9, h.removed_face_offsets);
+  fn(10, h.removed_faces);
+  fn(11, h.created_face_offsets);
+  fn(12, h.created_faces);
+  fn(13, h.parent_offsets);
+  fn(14, h.parents);
+  fn(15, h.child_offsets);
+  fn(16, h.children);
+  fn(17, h.base_vertices);
+  fn(18, h.base_faces);
+  fn(19, h.maps_face);
+  fn(20, h.maps_bary);
+  fn(21, h.laplacian);
+  fn(22, h.vertex_node);
+}
+constexpr std::uint32_t kBuildTag = 23;
+constexpr std::uint32_t kSectionCount = 23;
+
+using Sink = std::function<void(const void*, std::size_t)>;
+
+void write_section(const Sink& sink, std::uint32_t tag, std::uint32_t elem, std::uint64_t count, const void* data) {
+  const std::uint32_t head[2] = {tag, elem};
+  sink(head, sizeof head);
+  sink(&count, sizeof count);
+  sink(data, elem * count);
+  static constexpr char zeros[8] = {};
+  const std::size_t pad = (8 - (elem * count) % 8) % 8;
+  sink(zeros, pad);
+}
+
+void write_payload(const Hierarchy& h, const Sink& sink) {
+  for_each_section(h, [&](std::uint32_t tag, const auto& v) {
+    using T = typename std::decay_t<decltype(v)>::value_type;
+    write_section(sink, tag, sizeof(T), v.size(), v.data());
+  });
+  const BuildRecord b{h.build.requested_base_vertices, h.build.build_seconds, h.build.threads, 0};
+  write_section(sink, kBuildTag, sizeof b, 1, &b);
+}
+
+Header make_header(const Hierarchy& h) {
+  Header hd{};
+  std::memcpy(hd.magic, kMagic, sizeof kMagic);
+  hd.version = kHierarchyFormatVersion;
+  hd.header_size = sizeof(Header);
+  hd.mesh_hash = h.mesh_hash;
+  ContentHasher hasher;
+  std::uint64_t size = 0;
+  write_payload(h, [&](const void* p, std::size_t n) {
+    hasher.update(p, n);
+    size += n;
+  });
+  hd.payload_size = size;
+  hd.payload_hash = hasher.digest();
+  hd.vertex_count = static_cast<std::uint32_t>(h.rest_positions.size());
+  hd.face_count = static_cast<std::uint32_t>(h.faces.size());
+  hd.original_face_count = h.original_face_count;
+  hd.node_count = static_cast<std::uint32_t>(h.node_vertex.size());
+  hd.section_count = kSectionCount;
+  return hd;
+}
+
+[[noreturn]] void fail(const std::string& name, const std::string& what) { throw HierarchyFileError(name + ": " + what); }
+
+Header parse_header(std::span<const char> bytes, const std::string& name) {
+  if (bytes.size() < sizeof(Header)) {
+    if (bytes.size() >= 8 && std::memcmp(bytes.data(), kMagic, 8) != 0) fail(name, "not a Filigree hierarchy file (bad magic)");
+    fail(name, "truncated: " + std::to_string(bytes.size()) + " bytes, shorter than the " + std::to_string(sizeof(Header)) + "-byte header");
+  }
+  Header hd;
+  std::memcpy(&hd, bytes.data(), sizeof hd);
+  if (std::memcmp(hd.magic, kMagic, sizeof kMagic) != 0) fail(name, "not a Filigree hierarchy file (bad magic)");
+  if (hd.version != kHierarchyFormatVersion)
+    fail(name, "unsupported format version " + std::to_string(hd.version) + " (this build reads version " + std::to_string(kHierarchyFormatVersion) + ")");
+  if (hd.header_size != sizeof(Header)) fail(name, "corrupt header (header size " + std::to_string(hd.header_size) + ")");
+  return hd;
+}
+
+// Reads sections from the payload with every length checked.
+class SectionReader {
+ public:
+  SectionReader(std::span<const char> payload, const std::string& name) : p_(payload), name_(name) {}
+
+  template <class T>
+  void read(std::uint32_t tag, std::vector<T>& out) {
+    std::uint64_t count = 0;
+    const char* data = next(tag, sizeof(T), count);
+    out.resize(count);
+    // Cast through void*: Eigen vectors are plain doubles but not trivially copyable by type.
+    if (count) std::memcpy(static_cast<void*>(out.data()), data, count * sizeof(T));
+  }
+  const char* next(std::uint32_t tag, std::uint32_t elem, std::uint64_t& count) {
+    if (p_.size() - pos_ < 16) fail(name_, "corrupt: section " + std::to_string(tag) + " is missing");
+    std::uint32_t head[2];
+    std::memcpy(head, p_.data() + pos_, sizeof head);
+    std::memcpy(&count, p_.data() + pos_ + 8, sizeof count);
+    pos_ += 16;
+    if (head[0] != tag) fail(name_, "corrupt: expected section " + std::to_string(tag) + ", found " + std::to_string(head[0]));
+    if (head[1] != elem) fail(name_, "corrupt: section " + std::to_string(tag) + " has element size " + std::to_string(head[1]));
+    const std::uint64_t left = p_.size() - pos_;
+    if (count > left / elem) fail(name_, "corrupt: section " + std::to_string(tag) + " claims " + std::to_string(count) + " elements, more than the file holds");
+    const char* data = p_.data() + pos_;
+    const std::uint64_t bytes = count * elem;
+    pos_ += bytes + (8 - bytes % 8) % 8;
+    if (pos_ > p_.size()) fail(name_, "corrupt: section " + std::to_string(tag) + " padding runs past the end");
+    return data;
+  }
+  bool at_end() const { return pos_ == p_.size(); }
+
+ private:
+  std::span<const char> p_;
+  std::size_t pos_ = 0;
+  const std::string& name_;
+};
+
+}  // namespace
+
+std::string serialize_hierarchy(const Hierarchy& h) {
+  const Header hd = make_header(h);
+  std::string out;
+  out.reserve(sizeof hd + hd.payload_size);
+  out.append(reinterpret_cast<const char*>(&hd), sizeof hd);
+  write_payload(h, [&](const void* p, std::size_t n) { out.append(static_cast<const char*>(p), n); });
+  return out;
+}
+
+void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path) {
+  const Header hd = make_header(h);
+  // Write to a temporary name, then rename: a crash never leaves half a file
+  // under the real name.
+  const std::filesystem::path tmp = path.string() + ".partial";
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw HierarchyFileError(path.string() + ": cannot open for writing");
+    out.write(reinterpret_cast<const char*>(&hd), sizeof hd);
+    write_payload(h, [&](const void* p, std::size_t n) { out.write(static_cast<const char*>(p), static_cast<std::streamsize>(n)); });
+    if (!out.flush()) throw HierarchyFileError(path.string() + ": write failed");
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name) {
+  const Header hd = parse_header(bytes, name);
+  const std::span<const char> payload = bytes.subspan(sizeof(Header));
+  if (payload.size() < hd.payload_size)
+    fail(name, "truncated: " + std::to_string(bytes.size()) + " bytes, header promises " + std::to_string(sizeof(Header) + hd.payload_size));
+  if (payload.size() > hd.payload_size) fail(name, "corrupt: " + std::to_string(payload.size() - hd.payload_size) + " unexpected bytes after the payload");
+  if (hash_bytes(payload.data(), payload.size()) != hd.payload_hash) fail(name, "corrupt: payload checksum mismatch");
+  if (hd.section_count != kSectionCount) fail(name, "corrupt: " + std::to_string(hd.section_count) + " sections, expected " + std::to_string(kSectionCount));
+
+  Hierarchy h;
+  SectionReader reader(payload, name);
+  for_each_section(h, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
+  std::vector<BuildRecord> build;
+  reader.read(kBuildTag, build);
+  if (build.size() != 1 || !reader.at_end()) fail(name, "corrupt: unexpected section layout");
+  h.build = {build[0].requested_base_vertices, build[0].build_seconds, build[0].threads};
+  h.mesh_hash = hd.mesh_hash;
+  h.original_face_count = hd.original_face_count;
+  if (h.rest_positions.size() != hd.vertex_count || h.faces.size() != hd.face_count || h.node_vertex.size() != hd.node_count)
+    fail(name, "corrupt: section sizes disagree with the header");
+  try {
+    validate_hierarchy(h);
+  } catch (const HierarchyError& e) {
+    fail(name, std::string("corrupt: ") + e.what());
+  }
+  return h;
+}
+
+Hierarchy load_hierarchy(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) throw HierarchyFileError(path.string() + ": cannot open");
+  const std::streamsize size = in.tellg();
+  in.seekg(0);
+  std::vector<char> bytes(static_cast<std::size_t>(size));
+  if (!in.read(bytes.data(), size)) throw HierarchyFileError(path.string() + ": read failed");
+  return deserialize_hierarchy(bytes, path.string());
+}
+
+HierarchyFileInfo read_hierarchy_file_info(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw HierarchyFileError(path.string() + ": cannot open");
+  std::vector<char> head(sizeof(Header));
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<std::size_t>(in.gcount()));
+  const Header hd = parse_header(head, path.string());
+  return {hd.version, hd.mesh_hash, std::filesystem::file_size(path), hd.vertex_count, hd.face_count, hd.original_face_count, hd.node_count};
+}
+
+}  // namespace filigree

@@ -1,0 +1,47 @@
+#pragma once
+// The hierarchy file (.fgh): a versioned binary blob that loads much faster
+// than the hierarchy builds (DESIGN §2.1.6).
+//
+// Layout (little-endian): a 64-byte header — magic "FLGHIER\0", u32 format
+// version, u32 header size, u64 mesh hash, u64 payload size, u64 XXH3 hash of
+// the payload, u32 vertex count, u32 face count, u32 original face count,
+// u32 node count, u32 section count, u32 reserved — then sections, each
+// u32 tag, u32 element size, u64 element count, the elements, zero padding to
+// 8 bytes. Loading checks the header, every size against the bytes present,
+// the payload hash, then validate_hierarchy(): a truncated, corrupt or forged
+// file is an error, never a crash or an out-of-bounds read.
+
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <stdexcept>
+#include <string>
+
+namespace filigree {
+
+struct Hierarchy;
+
+inline constexpr std::uint32_t kHierarchyFormatVersion = 1;
+
+// what() starts with the file name (or "<memory>") and says what is wrong.
+struct HierarchyFileError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Writing is deterministic: the same hierarchy gives the same bytes.
+void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path);
+std::string serialize_hierarchy(const Hierarchy& h);
+
+Hierarchy load_hierarchy(const std::filesystem::path& path);
+Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name_for_errors = "<memory>");
+
+// Header fields, read without loading the payload (for `inspect` and caches).
+struct HierarchyFileInfo {
+  std::uint32_t version = 0;
+  std::uint64_t mesh_hash = 0;
+  std::uint64_t file_size = 0;
+  std::uint32_t vertex_count = 0, face_count = 0, original_face_count = 0, node_count = 0;
+};
+HierarchyFileInfo read_hierarchy_file_info(const std::filesystem::path& path);
+
+}  // namespace filigree

@@ -1,0 +1,414 @@
+// glTF 2.0 / GLB through tinygltf (Debian's shared library: no
+// TINYGLTF_IMPLEMENTATION here). tinygltf parses the JSON and buffers but does
+// not check that accessors stay inside their buffers; every read below is
+// bounds-checked so that a corrupt file is an error, not an out-of-bounds read.
+
+#include "mesh/gltf_io.h"
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <new>
+#include <string_view>
+
+#include <Eigen/Geometry>
+#include <tiny_gltf.h>
+
+#include "mesh/mesh_io.h"
+
+namespace filigree {
+namespace {
+
+// glTF buffers are little-endian; we copy them with memcpy.
+static_assert(std::endian::native == std::endian::little, "glTF reading assumes a little-endian host");
+
+// Geometry only: images are neither decoded nor needed.
+bool skip_image(tinygltf::Image*, const int, std::string*, std::string*, int, int, const unsigned char*, int,
+                void*) {
+  return true;
+}
+
+// File-system callbacks for input from memory: nothing outside the bytes given
+// may be read.
+bool no_file_exists(const std::string&, void*) { return false; }
+std::string keep_path(const std::string& path, void*) { return path; }
+bool no_read(std::vector<unsigned char>*, std::string* err, const std::string& path, void*) {
+  if (err) *err = "external file '" + path + "' not allowed for input from memory";
+  return false;
+}
+bool no_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  if (err) *err = "writing is not allowed";
+  return false;
+}
+
+const char* mode_name(int mode) {
+  switch (mode) {
+    case TINYGLTF_MODE_POINTS: return "POINTS";
+    case TINYGLTF_MODE_LINE: return "LINES";
+    case TINYGLTF_MODE_LINE_LOOP: return "LINE_LOOP";
+    case TINYGLTF_MODE_LINE_STRIP: return "LINE_STRIP";
+    default: return nullptr;
+  }
+}
+
+class GltfReader {
+ public:
+  GltfReader(const tinygltf::Model& model, const std::string& name) : model_(model), name_(name) {}
+
+  TriMesh read() {
+    std::vector<int> roots;
+    if (!model_.scenes.empty()) {
+      std::size_t scene = 0;
+      if (model_.defaultScene >= 0) {
+        scene = static_cast<std::size_t>(model_.defaultScene);
+        if (scene >= model_.scenes.size()) fail("default scene " + std::to_string(scene) + " does not exist");
+      }
+      roots = model_.scenes[scene].nodes;
+    } else {
+      // No scene: every node that is nobody's child is a root.
+      std::vector<bool> is_child(model_.nodes.size(), false);
+      for (const tinygltf::Node& node : model_.nodes) {
+        for (const int child : node.children) {
+          if (child >= 0 && static_cast<std::size_t>(child) < is_child.size()) is_child[child] = true;
+        }
+      }
+      for (std::size_t i = 0; i < is_child.size(); ++i) {
+        if (!is_child[i]) roots.push_back(static_cast<int>(i));
+      }
+    }
+    add_nodes(roots);
+    return std::move(mesh_);
+  }
+
+ private:
+  struct Elements {
+    const unsigned char* data = nullptr;
+    std::size_t count = 0;
+    std::size_t stride = 0;
+  };
+
+  [[noreturn]] void fail(const std::string& reason) const { throw MeshIoError(name_ + ": " + reason); }
+
+  // Depth-first, parents before children, with an explicit stack so that a deep
+  // hierarchy cannot overflow ours. glTF node graphs are trees, so a node seen
+  // twice means a cycle or shared node: rejected rather than looping.
+  void add_nodes(const std::vector<int>& roots) {
+    struct Pending {
+      int node;
+      Eigen::Affine3d parent;
+    };
+    std::vector<Pending> stack;
+    for (auto it = roots.rbegin(); it != roots.rend(); ++it) stack.push_back({*it, Eigen::Affine3d::Identity()});
+    std::vector<bool> visited(model_.nodes.size(), false);
+    while (!stack.empty()) {
+      const Pending item = stack.back();
+      stack.pop_back();
+      if (item.node < 0 || static_cast<std::size_t>(item.node) >= model_.nodes.size()) {
+        fail("node " + std::to_string(item.node) + " does not exist");
+      }
+      if (visited[item.node]) fail("node " + std::to_string(item.node) + " occurs twice in the node hierarchy");
+      visited[item.node] = true;
+      const tinygltf::Node& node = model_.nodes[item.node];
+      const Eigen::Affine3d world = item.parent * local_transform(node, item.node);
+      if (node.mesh >= 0) add_mesh(node.mesh, world);
+      for (auto it = node.children.rbegin(); it != node.children.rend(); ++it) stack.push_back({*it, world});
+    }
+  }
+
+  Eigen::Affine3d local_transform(const tinygltf::Node& node, int index) const {
+    const std::string what = "node " + std::to_string(index);
+    Eigen::Affine3d transform = Eigen::Affine3d::Identity();
+    if (!node.matrix.empty()) {
+      if (node.matrix.size() != 16) fail(what + ": matrix must have 16 elements");
+      transform.matrix() = Eigen::Map<const Eigen::Matrix4d>(node.matrix.data());  // column-major, like glTF
+      return transform;
+    }
+    if (!node.translation.empty()) {
+      if (node.translation.size() != 3) fail(what + ": translation must have 3 elements");
+      transform.translate(Eigen::Vector3d(node.translation[0], node.translation[1], node.translation[2]));
+    }
+    if (!node.rotation.empty()) {
+      if (node.rotation.size() != 4) fail(what + ": rotation must have 4 elements");
+      // glTF stores x, y, z, w; Eigen's constructor takes w first.
+      Eigen::Quaterniond q(node.rotation[3], node.rotation[0], node.rotation[1], node.rotation[2]);
+      if (!(q.norm() > 0.0)) fail(what + ": rotation quaternion is zero or not finite");
+      transform.rotate(q.normalized());
+    }
+    if (!node.scale.empty()) {
+      if (node.scale.size() != 3) fail(what + ": scale must have 3 elements");
+      transform.scale(Eigen::Vector3d(node.scale[0], node.scale[1], node.scale[2]));
+    }
+    return transform;
+  }
+
+  void add_mesh(int mesh_index, const Eigen::Affine3d& transform) {
+    if (static_cast<std::size_t>(mesh_index) >= model_.meshes.size()) {
+      fail("mesh " + std::to_string(mesh_index) + " does not exist");
+    }
+    const tinygltf::Mesh& mesh = model_.meshes[mesh_index];
+    const std::string label = mesh.name.empty() ? "mesh #" + std::to_string(mesh_index) : "mesh '" + mesh.name + "'";
+    for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
+      add_primitive(mesh.primitives[p], "primitive " + std::to_string(p) + " of " + label, transform);
+    }
+  }
+
+  void add_primitive(const tinygltf::Primitive& primitive, const std::string& what, const Eigen::Affine3d& transform) {
+    const int mode = primitive.mode < 0 ? TINYGLTF_MODE_TRIANGLES : primitive.mode;
+    if (const char* name = mode_name(mode)) fail(what + " uses mode " + name + "; only triangle modes are supported");
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP && mode != TINYGLTF_MODE_TRIANGLE_FAN) {
+      fail(what + " uses unknown mode " + std::to_string(mode));
+    }
+    if (primitive.extensions.count("KHR_draco_mesh_compression") != 0) {
+      fail(what + " uses KHR_draco_mesh_compression, which is not supported");
+    }
+    const auto position = primitive.attributes.find("POSITION");
+    if (position == primitive.attributes.end()) fail(what + " has no POSITION attribute");
+
+    const tinygltf::Accessor& position_accessor = accessor(position->second, what + " POSITION");
+    if (position_accessor.type != TINYGLTF_TYPE_VEC3 ||
+        position_accessor.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT) {
+      fail(what + ": POSITION must be float VEC3");
+    }
+    const Elements points = elements(position_accessor, 3 * sizeof(float), what + " POSITION");
+    const std::size_t base = mesh_.positions.size();
+    if (points.count > static_cast<std::size_t>(std::numeric_limits<Index>::max()) - base) {
+      fail("too many vertices for 32-bit indices");
+    }
+    for (std::size_t i = 0; i < points.count; ++i) {
+      float xyz[3];
+      std::memcpy(xyz, points.data + i * points.stride, sizeof xyz);
+      mesh_.positions.push_back(transform * Eigen::Vector3d(xyz[0], xyz[1], xyz[2]));
+    }
+
+    const std::vector<Index> indices = read_indices(primitive, points.count, what);
+    // A mirroring transform turns counter-clockwise faces clockwise.
+    const bool flip = transform.linear().determinant() < 0.0;
+    auto add = [&](Index a, Index b, Index c) {
+      const Index offset = static_cast<Index>(base);
+      if (flip) std::swap(b, c);
+      mesh_.faces.push_back({a + offset, b + offset, c + offset});
+    };
+    const std::size_t n = indices.size();
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+      if (n % 3 != 0) fail(what + ": " + std::to_string(n) + " indices is not a multiple of 3");
+      for (std::size_t i = 0; i < n; i += 3) add(indices[i], indices[i + 1], indices[i + 2]);
+    } else if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
+      // Odd triangles of a strip are reversed to keep a consistent winding.
+      for (std::size_t i = 0; i + 2 < n; ++i) {
+        if (i % 2 == 0) add(indices[i], indices[i + 1], indices[i + 2]);
+        else add(indices[i], indices[i + 2], indices[i + 1]);
+      }
+    } else {
+      for (std::size_t i = 1; i + 1 < n; ++i) add(indices[0], indices[i], indices[i + 1]);
+    }
+  }
+
+  // Without an index accessor, vertices are used in order.
+  std::vector<Index> read_indices(const tinygltf::Primitive& primitive, std::size_t vertex_count,
+                                  const std::string& what) const {
+    std::vector<Index> indices;
+    if (primitive.indices < 0) {
+      indices.resize(vertex_count);
+      for (std::size_t i = 0; i < vertex_count; ++i) indices[i] = static_cast<Index>(i);
+      return indices;
+    }
+    const tinygltf::Accessor& index_accessor = accessor(primitive.indices, what + " indices");
+    std::size_t size = 0;
+    switch (index_accessor.componentType) {
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
+      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
+      default: fail(what + ": indices must be unsigned byte, short or int");
+    }
+    if (index_accessor.type != TINYGLTF_TYPE_SCALAR) fail(what + ": indices must be SCALAR");
+    const Elements data = elements(index_accessor, size, what + " indices");
+    indices.resize(data.count);
+    for (std::size_t i = 0; i < data.count; ++i) {
+      const unsigned char* at = data.data + i * data.stride;
+      Index value = 0;
+      if (size == 1) {
+        value = at[0];
+      } else if (size == 2) {
+        std::uint16_t v16;
+        std::memcpy(&v16, at, 2);
+        value = v16;
+      } else {
+        std::memcpy(&value, at, 4);
+      }
+      // Primitives are merged with vertex offsets, so an index past this
+      // primitive's vertices would silently point into the next one.
+      if (value >= vertex_count) {
+        fail(what + ": index " + std::to_string(value) + " is out of range (" + std::to_string(vertex_count) +
+             " vertices)");
+      }
+      indices[i] = value;
+    }
+    return indices;
+  }
+
+  const tinygltf::Accessor& accessor(int index, const std::string& what) const {
+    if (index < 0 || static_cast<std::size_t>(index) >= model_.accessors.size()) {
+      fail(what + ": accessor " + std::to_string(index) + " does not exist");
+    }
+    const tinygltf::Accessor& result = model_.accessors[index];
+    if (result.sparse.isSparse) fail(what + ": sparse accessors are not supported");
+    return result;
+  }
+
+  // Locates an accessor's elements, checking that all of them lie inside its
+  // bufferView and the bufferView inside its buffer.
+  Elements elements(const tinygltf::Accessor& accessor, std::size_t element_size, const std::string& what) const {
+    if (accessor.bufferView < 0 || static_cast<std::size_t>(accessor.bufferView) >= model_.bufferViews.size()) {
+      fail(what + ": accessor has no valid bufferView");
+    }
+    const tinygltf::BufferView& view = model_.bufferViews[accessor.bufferView];
+    if (view.buffer < 0 || static_cast<std::size_t>(view.buffer) >= model_.buffers.size()) {
+      fail(what + ": bufferView refers to a missing buffer");
+    }
+    const std::vector<unsigned char>& buffer = model_.buffers[view.buffer].data;
+    if (view.byteOffset > buffer.size() || view.byteLength > buffer.size() - view.byteOffset) {
+      fail(what + ": bufferView (offset " + std::to_string(view.byteOffset) + ", length " +
+           std::to_string(view.byteLength) + ") exceeds its buffer of " + std::to_string(buffer.size()) + " bytes");
+    }
+    const std::size_t stride = view.byteStride != 0 ? view.byteStride : element_size;
+    if (stride < element_size) {
+      fail(what + ": byteStride " + std::to_string(stride) + " is smaller than an element (" +
+           std::to_string(element_size) + " bytes)");
+    }
+    if (accessor.count == 0) return {};
+    const std::size_t length = view.byteLength;
+    if (accessor.byteOffset > length || element_size > length - accessor.byteOffset ||
+        accessor.count - 1 > (length - accessor.byteOffset - element_size) / stride) {
+      fail(what + ": accessor (offset " + std::to_string(accessor.byteOffset) + ", " +
+           std::to_string(accessor.count) + " elements) reads past the end of its bufferView");
+    }
+    return {buffer.data() + view.byteOffset + accessor.byteOffset, accessor.count, stride};
+  }
+
+  const tinygltf::Model& model_;
+  const std::string& name_;
+  TriMesh mesh_;
+};
+
+}  // namespace
+
+TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name_for_errors,
+                  const std::filesystem::path& base_dir) {
+  if (bytes.size() > std::numeric_limits<unsigned int>::max()) {
+    throw MeshIoError(name_for_errors + ": file too large for glTF (4 GiB limit)");
+  }
+  tinygltf::TinyGLTF loader;
+  loader.SetImageLoader(&skip_image, nullptr);
+  if (base_dir.empty()) loader.SetFsCallbacks({&no_file_exists, &keep_path, &no_read, &no_write, nullptr});
+  tinygltf::Model model;
+  std::string error, warning;
+  bool ok = false;
+  try {
+    const auto size = static_cast<unsigned int>(bytes.size());
+    ok = binary ? loader.LoadBinaryFromMemory(&model, &error, &warning,
+                                               reinterpret_cast<const unsigned char*>(bytes.data()), size,
+                                               base_dir.string())
+                : loader.LoadASCIIFromString(&model, &error, &warning, bytes.data(), size, base_dir.string());
+  } catch (const std::bad_alloc&) {
+    throw;
+  } catch (const std::exception& e) {
+    // tinygltf's JSON layer may throw on malformed input.
+    error = e.what();
+  }
+  if (!ok) {
+    while (!error.empty() && (error.back() == '\n' || error.back() == ' ')) error.pop_back();
+    throw MeshIoError(name_for_errors + ": invalid " + (binary ? "GLB" : "glTF") + ": " +
+                      (error.empty() ? std::string("unknown error") : error));
+  }
+  return GltfReader(model, name_for_errors).read();
+}
+
+void write_glb(const TriMesh& mesh, const std::filesystem::path& path) {
+  const std::string name = path.string();
+  // glTF accessors and bufferViews must not be empty.
+  if (mesh.positions.empty() || mesh.faces.empty()) throw MeshIoError(name + ": cannot write an empty mesh as GLB");
+
+  const std::size_t position_bytes = mesh.positions.size() * 3 * sizeof(float);
+  const std::size_t index_bytes = mesh.faces.size() * 3 * sizeof(Index);
+  tinygltf::Buffer buffer;
+  buffer.data.resize(position_bytes + index_bytes);
+  std::vector<double> lo(3, std::numeric_limits<double>::infinity());
+  std::vector<double> hi(3, -std::numeric_limits<double>::infinity());
+  unsigned char* out = buffer.data.data();
+  for (const Vec3& p : mesh.positions) {
+    const float xyz[3] = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+    for (int k = 0; k < 3; ++k) {
+      // min/max are mandatory for POSITION, and JSON cannot hold NaN or Inf.
+      if (!std::isfinite(xyz[k])) throw MeshIoError(name + ": cannot write a non-finite position as GLB");
+      lo[k] = std::min(lo[k], static_cast<double>(xyz[k]));
+      hi[k] = std::max(hi[k], static_cast<double>(xyz[k]));
+    }
+    std::memcpy(out, xyz, sizeof xyz);
+    out += sizeof xyz;
+  }
+  for (const Triangle& f : mesh.faces) {
+    std::memcpy(out, f.data(), 3 * sizeof(Index));
+    out += 3 * sizeof(Index);
+  }
+
+  tinygltf::Model model;
+  model.asset.version = "2.0";
+  model.asset.generator = "filigree";
+  model.buffers.push_back(std::move(buffer));
+
+  tinygltf::BufferView positions_view;
+  positions_view.buffer = 0;
+  positions_view.byteOffset = 0;
+  positions_view.byteLength = position_bytes;
+  positions_view.target = TINYGLTF_TARGET_ARRAY_BUFFER;
+  tinygltf::BufferView indices_view;
+  indices_view.buffer = 0;
+  indices_view.byteOffset = position_bytes;
+  indices_view.byteLength = index_bytes;
+  indices_view.target = TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER;
+  model.bufferViews = {positions_view, indices_view};
+
+  tinygltf::Accessor positions;
+  positions.bufferView = 0;
+  positions.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  positions.type = TINYGLTF_TYPE_VEC3;
+  positions.count = mesh.positions.size();
+  positions.minValues = lo;
+  positions.maxValues = hi;
+  tinygltf::Accessor indices;
+  indices.bufferView = 1;
+  indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+  indices.type = TINYGLTF_TYPE_SCALAR;
+  indices.count = mesh.faces.size() * 3;
+  model.accessors = {positions, indices};
+
+  tinygltf::Primitive primitive;
+  primitive.attributes["POSITION"] = 0;
+  primitive.indices = 1;
+  primitive.mode = TINYGLTF_MODE_TRIANGLES;
+  tinygltf::Mesh gltf_mesh;
+  gltf_mesh.primitives.push_back(primitive);
+  model.meshes.push_back(gltf_mesh);
+  tinygltf::Node node;
+  node.mesh = 0;
+  model.nodes.push_back(node);
+  tinygltf::Scene scene;
+  scene.nodes.push_back(0);
+  model.scenes.push_back(scene);
+  model.defaultScene = 0;
+
+  // WriteGltfSceneToFile ignores stream errors (it returns true even when the
+  // file cannot be created), so we own the stream and check it.
+  std::ofstream file(path, std::ios::binary);
+  if (!file) throw MeshIoError(name + ": cannot open for writing: " + std::strerror(errno));
+  tinygltf::TinyGLTF writer;
+  if (!writer.WriteGltfSceneToStream(&model, file, false, true)) throw MeshIoError(name + ": GLB serialisation failed");
+  file.close();
+  if (!file) throw MeshIoError(name + ": write failed");
+}
+
+}  // namespace filigree

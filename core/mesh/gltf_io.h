@@ -1,0 +1,23 @@
+#pragma once
+// glTF 2.0 / GLB support behind mesh_io.h; only mesh_io.cpp (and tests) use it.
+
+#include <filesystem>
+#include <string>
+
+#include "mesh/tri_mesh.h"
+
+namespace filigree {
+
+// Parses a .gltf (JSON, `binary` false) or .glb document held in `bytes` as
+// described for read_mesh(). External buffer files are looked up relative to
+// `base_dir`; with an empty base_dir (input from memory) every external file
+// reference is refused, so a document cannot make us read arbitrary files.
+// Throws MeshIoError whose message starts with `name_for_errors`.
+TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name_for_errors,
+                  const std::filesystem::path& base_dir = {});
+
+// Writes one mesh / primitive / node / scene with float32 positions and uint32
+// indices in a single binary buffer. Throws MeshIoError on failure.
+void write_glb(const TriMesh& mesh, const std::filesystem::path& path);
+
+}  // namespace filigree

@@ -1,0 +1,38 @@
+#pragma once
+// Reading and writing triangle meshes. Formats are chosen by file extension
+// (case-insensitive): read .obj .ply .off .gltf .glb; write .obj .ply .glb.
+
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mesh/tri_mesh.h"
+
+namespace filigree {
+
+// Thrown for unreadable, unsupported or malformed files; what() names the file
+// and what is wrong with it.
+struct MeshIoError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Reads a mesh as it is stored: no vertex is welded, no face dropped, polygons
+// with more than three corners are fan-triangulated. Indices are NOT checked
+// against the vertex count and coordinates are not checked for NaN: that is
+// validate_mesh()'s job, so that a bad file gets a precise report.
+// glTF/GLB: every triangle primitive of every mesh instanced by the default
+// scene (or scene 0, or every root node if there is no scene) is merged, with
+// node transforms applied. Primitives in point or line modes, or without a
+// POSITION attribute, are an error.
+TriMesh read_mesh(const std::filesystem::path& path);
+
+// Same as read_mesh, from bytes in memory; `format` is an extension such as
+// "obj" or ".glb".
+TriMesh read_mesh_from_memory(const std::string& bytes, const std::string& format);
+
+// Writes positions and faces in the given vertex and face order. PLY is binary
+// little-endian; GLB stores float32 positions and uint32 indices.
+void write_mesh(const TriMesh& mesh, const std::filesystem::path& path);
+
+}  // namespace filigree

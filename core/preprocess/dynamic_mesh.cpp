@@ -1,0 +1,110 @@
+#include "preprocess/dynamic_mesh.h"
+
+#include <algorithm>
+
+namespace filigree {
+
+DynamicMesh::DynamicMesh(const TriMesh& mesh)
+    : positions_(mesh.positions), faces_(mesh.faces), alive_(mesh.faces.size(), true), incident_(mesh.positions.size()),
+      boundary_(mesh.positions.size(), false) {
+  for (FaceId f = 0; f < faces_.size(); ++f)
+    for (Index v : faces_[f]) incident_[v].push_back(f);
+  // On a manifold mesh a vertex is on the boundary exactly when some incident
+  // face's outgoing edge from it has no twin: count edge uses around the vertex.
+  for (Index v = 0; v < positions_.size(); ++v) {
+    std::vector<Index> from, to;
+    for (FaceId f : incident_[v]) {
+      const Triangle& t = faces_[f];
+      const int c = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+      from.push_back(t[(c + 1) % 3]);
+      to.push_back(t[(c + 2) % 3]);
+    }
+    std::sort(from.begin(), from.end());
+    std::sort(to.begin(), to.end());
+    boundary_[v] = from != to;
+  }
+}
+
+bool DynamicMesh::has_edge(Index a, Index b) const {
+  for (FaceId f : incident_[a]) {
+    const Triangle& t = faces_[f];
+    if (t[0] == b || t[1] == b || t[2] == b) return true;
+  }
+  return false;
+}
+
+bool DynamicMesh::ring(Index v, VertexRing& out) const {
+  out.ring.clear();
+  out.fan.clear();
+  const auto& inc = incident_[v];
+  const std::size_t n = inc.size();
+  if (n == 0) return false;
+  // Each face (v, a, b) links a → b; small n, so linear scans beat hashing.
+  auto next_of = [&](FaceId f, Index& a, Index& b) {
+    const Triangle& t = faces_[f];
+    const int c = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+    a = t[(c + 1) % 3];
+    b = t[(c + 2) % 3];
+  };
+  // Start: for a boundary vertex, the face whose `a` is no face's `b`.
+  std::size_t start = 0;
+  if (boundary_[v]) {
+    start = n;
+    for (std::size_t i = 0; i < n && start == n; ++i) {
+      Index a, b;
+      next_of(inc[i], a, b);
+      bool is_target = false;
+      for (std::size_t j = 0; j < n && !is_target; ++j) {
+        Index a2, b2;
+        next_of(inc[j], a2, b2);
+        is_target = b2 == a;
+      }
+      if (!is_target) start = i;
+    }
+    if (start == n) return false;
+  }
+  Index a, b;
+  next_of(inc[start], a, b);
+  out.ring.push_back(a);
+  out.fan.push_back(inc[start]);
+  Index cur = b;
+  while (out.fan.size() < n) {
+    std::size_t found = n;
+    for (std::size_t j = 0; j < n; ++j) {
+      Index a2, b2;
+      next_of(inc[j], a2, b2);
+      if (a2 == cur) {
+        found = j;
+        b = b2;
+        break;
+      }
+    }
+    if (found == n) break;
+    out.ring.push_back(cur);
+    out.fan.push_back(inc[found]);
+    cur = b;
+  }
+  if (out.fan.size() != n) return false;
+  out.closed = !boundary_[v];
+  if (out.closed) return cur == out.ring.front();
+  out.ring.push_back(cur);
+  return true;
+}
+
+FaceId DynamicMesh::add_face(const Triangle& t) {
+  const FaceId f = static_cast<FaceId>(faces_.size());
+  faces_.push_back(t);
+  alive_.push_back(true);
+  for (Index v : t) incident_[v].push_back(f);
+  return f;
+}
+
+void DynamicMesh::kill_face(FaceId f) {
+  alive_[f] = false;
+  for (Index v : faces_[f]) {
+    auto& inc = incident_[v];
+    inc.erase(std::find(inc.begin(), inc.end(), f));
+  }
+}
+
+}  // namespace filigree

@@ -1,0 +1,86 @@
+#include "preprocess/preprocess.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "geometry/cotangent_laplacian.h"
+#include "mesh/mesh_validation.h"
+#include "preprocess/mean_curvature.h"
+#include "preprocess/mesh_saliency.h"
+#include "util/content_hash.h"
+
+namespace filigree {
+
+std::size_t default_base_vertices(std::size_t vertex_count) {
+  const std::size_t two_percent = vertex_count / 50;
+  return std::min(std::max(two_percent, std::min<std::size_t>(vertex_count, 100)), std::size_t{5000});
+}
+
+namespace {
+
+std::size_t target_of(const PreprocessOptions& options, std::size_t n) {
+  if (options.base_vertices && options.ratio) throw std::invalid_argument("give either a base vertex count or a ratio, not both");
+  if (options.base_vertices) {
+    if (*options.base_vertices < 4) throw std::invalid_argument("base vertex count must be at least 4");
+    return *options.base_vertices;
+  }
+  if (options.ratio) {
+    if (!(*options.ratio > 0.0 && *options.ratio <= 1.0)) throw std::invalid_argument("ratio must be in (0, 1]");
+    return std::max<std::size_t>(4, static_cast<std::size_t>(std::llround(*options.ratio * static_cast<double>(n))));
+  }
+  return default_base_vertices(n);
+}
+
+}  // namespace
+
+Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const ValidationReport report = validate_mesh(mesh);
+  // repair_mesh words the precise reason for an unusable mesh; use it.
+  if (report.fatal()) repair_mesh(mesh, {}, nullptr);
+  if (report.fatal() || report.repairable())
+    throw InvalidMeshError("mesh must be repaired before preprocessing (repair_mesh):\n" + report.to_string());
+  const std::size_t target = target_of(options, mesh.vertex_count());
+
+  Hierarchy h;
+  h.rest_positions = mesh.positions;
+  h.original_face_count = static_cast<Index>(mesh.faces.size());
+  h.mesh_hash = hash_mesh(mesh);
+
+  const CotangentLaplacian laplacian = cotangent_laplacian(mesh);
+  h.laplacian = laplacian.apply(mesh.positions);
+
+  // Boundary vertices: an edge used by one face.
+  std::vector<bool> boundary(mesh.vertex_count(), false);
+  {
+    std::vector<std::pair<Index, Index>> edges;
+    edges.reserve(mesh.faces.size() * 3);
+    for (const Triangle& f : mesh.faces)
+      for (int c = 0; c < 3; ++c) edges.emplace_back(std::minmax(f[c], f[(c + 1) % 3]));
+    std::sort(edges.begin(), edges.end());
+    for (std::size_t i = 0; i < edges.size();) {
+      std::size_t j = i;
+      while (j < edges.size() && edges[j] == edges[i]) ++j;
+      if (j - i == 1) boundary[edges[i].first] = boundary[edges[i].second] = true;
+      i = j;
+    }
+  }
+  const std::vector<double> curvature = mean_curvature(mesh, laplacian, boundary);
+  const std::vector<double> saliency = mesh_saliency(mesh, curvature, options.threads);
+
+  SimplifyOptions so = options.simplify;
+  so.target_vertices = target;
+  so.threads = options.threads;
+  so.progress = options.progress;
+  simplify(mesh, curvature, saliency, so, h);
+
+  h.build.requested_base_vertices = target;
+  h.build.threads = static_cast<std::uint32_t>(std::max(options.threads, 1));
+  h.build.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  validate_hierarchy(h);
+  return h;
+}
+
+}  // namespace filigree

@@ -1,0 +1,44 @@
+#pragma once
+// Simplification by vertex removal, building the dependency hierarchy, the
+// MAPS parameterisation and each node's ring coordinates as it goes
+// (thesis §3.1.1–3.1.2, DESIGN §2.1 steps 1–5).
+
+#include <functional>
+#include <vector>
+
+#include "mesh/tri_mesh.h"
+
+namespace filigree {
+
+struct Hierarchy;
+
+struct SimplifyOptions {
+  // Stop when this many vertices remain, or earlier when no removal is valid.
+  std::size_t target_vertices = 0;
+  // New triangles must reach this shape quality (triangle_quality), or at
+  // least the worst quality of the triangles they replace on poor meshes.
+  double min_triangle_quality = 0.15;
+  // Largest angle between a new triangle's normal and the removed fan's normal.
+  double max_normal_change_deg = 45.0;
+  // A boundary vertex may be removed only where the boundary turns by less
+  // than this, so boundary loops keep their shape and count.
+  double max_boundary_turn_deg = 20.0;
+  // Cost = (error + size_weight·spoke length) · (1 + saliency_weight·S) / (1 + curvature_weight·C).
+  double size_weight = 0.05;
+  double saliency_weight = 2.0;
+  double curvature_weight = 1.0;
+  int threads = 1;
+  // Called with the fraction done in [0, 1], at most ~200 times.
+  std::function<void(double)> progress;
+};
+
+// Simplifies `mesh` and fills `out`'s faces, nodes, dependency edges, base
+// mesh, MAPS parameterisation and vertex_node (everything but laplacian,
+// mesh_hash and build). `curvature` and `saliency` are per vertex.
+// Precondition: mesh is edge- and vertex-manifold, consistently oriented,
+// without degenerate/duplicate faces or unreferenced vertices
+// (validate_mesh reports nothing fatal or repairable).
+void simplify(const TriMesh& mesh, const std::vector<double>& curvature, const std::vector<double>& saliency,
+              const SimplifyOptions& options, Hierarchy& out);
+
+}  // namespace filigree

@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages Filigree builds and tests with.
+# Idempotent: only packages that are not installed yet are fetched, and apt's
+# package lists are refreshed only when something is missing.
+set -euo pipefail
+
+PACKAGES=(
+  cmake ninja-build g++ make pkg-config ccache
+  libeigen3-dev libopenmesh-dev libtinygltf-dev libdraco-dev libsuitesparse-dev
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -q
+$SUDO apt-get install -y -q --no-install-recommends "${missing[@]}"

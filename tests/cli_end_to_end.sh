@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# The `filigree` CLI end to end on a shipped mesh, and its errors on bad input.
+# Usage: cli_end_to_end.sh DATA_DIR OUT_DIR   (FILIGREE=path/to/filigree)
+set -euo pipefail
+DATA=$1
+OUT=$2
+rm -rf "$OUT" && mkdir -p "$OUT"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+# Preprocess, inspect, export.
+"$FILIGREE" preprocess "$DATA/bunny_small.obj" -o "$OUT/bunny.fgh" --base-vertices 150 --threads 2 > "$OUT/pre.txt"
+grep -q "base       150 vertices" "$OUT/pre.txt" || fail "preprocess summary: $(cat "$OUT/pre.txt")"
+grep -q "peak" "$OUT/pre.txt" || fail "no peak memory in summary"
+"$FILIGREE" inspect "$OUT/bunny.fgh" > "$OUT/inspect.txt"
+grep -q "original      1839 vertices, 3674 faces" "$OUT/inspect.txt" || fail "inspect: $(cat "$OUT/inspect.txt")"
+"$FILIGREE" export-base "$OUT/bunny.fgh" -o "$OUT/base.obj" --ids "$OUT/ids.txt" > /dev/null
+[ "$(wc -l < "$OUT/ids.txt")" -eq 150 ] || fail "ids file does not have 150 lines"
+[ "$(grep -c '^v ' "$OUT/base.obj")" -eq 150 ] || fail "base.obj does not have 150 vertices"
+"$FILIGREE" export-base "$OUT/bunny.fgh" -o "$OUT/base.glb" > /dev/null
+"$FILIGREE" export-base "$OUT/bunny.fgh" -o "$OUT/base.ply" > /dev/null
+"$FILIGREE" export-cut "$OUT/bunny.fgh" --recover 500 -o "$OUT/cut500.obj" > "$OUT/cut.txt"
+grep -q "650 vertices" "$OUT/cut.txt" || fail "cut of 500 nodes: $(cat "$OUT/cut.txt")"
+"$FILIGREE" export-cut "$OUT/bunny.fgh" --recover all -o "$OUT/full.obj" > /dev/null
+[ "$(grep -c '^f ' "$OUT/full.obj")" -eq 3674 ] || fail "full cut does not have the original 3674 faces"
+
+# Errors: a clear message and exit status 1, never a crash.
+expect_error() {  # expect_error PATTERN COMMAND...
+  local pattern=$1; shift
+  set +e
+  "$@" > "$OUT/err.out" 2> "$OUT/err.txt"
+  local status=$?
+  set -e
+  [ $status -eq 1 ] || fail "expected exit 1 from '$*', got $status: $(cat "$OUT/err.txt")"
+  grep -q "$pattern" "$OUT/err.txt" || fail "expected '$pattern' from '$*', got: $(cat "$OUT/err.txt")"
+}
+printf 'v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n' > "$OUT/nan.obj"
+expect_error "NaN" "$FILIGREE" preprocess "$OUT/nan.obj" -o "$OUT/x.fgh"
+printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n' > "$OUT/index.obj"
+expect_error "out of range" "$FILIGREE" preprocess "$OUT/index.obj" -o "$OUT/x.fgh"
+head -c 1000 "$OUT/bunny.fgh" > "$OUT/truncated.fgh"
+expect_error "truncated" "$FILIGREE" inspect "$OUT/truncated.fgh"
+expect_error "node count or 'all'" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover lots -o "$OUT/x.obj"
+expect_error "only" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover 999999 -o "$OUT/x.obj"
+printf 'not a mesh' > "$OUT/garbage.off"
+expect_error "garbage.off" "$FILIGREE" preprocess "$OUT/garbage.off" -o "$OUT/x.fgh"
+echo "cli end to end: ok"
