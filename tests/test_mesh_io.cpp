@@ -102,7 +102,7 @@ TEST_F(MeshIoTest, ReadFromMemoryMatchesFile) {
     const TriMesh from_file = read_mesh(file);
     expect_same_mesh(from_file, read_mesh_from_memory(read_bytes(file), "." + format), 0.0);
   }
-  EXPECT_EQ(read_mesh_from_memory("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "OBJ").face_count(), 1u);
+  EXPECT_EQ(read_mesh_from_memory("\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "OBJ").face_count(), 1u);
 }
 
 TEST_F(MeshIoTest, ReadsShippedFiles) {
@@ -399,6 +399,9 @@ TEST_F(MeshIoTest, GltfFromMemoryRefusesExternalFiles) {
   ASSERT_TRUE(fs::exists(path("scene.bin")));
   EXPECT_EQ(read_mesh(path("ext.gltf")).face_count(), 4u);  // from a file: resolved next to it
   EXPECT_THROW(read_mesh_from_memory(read_bytes(path("ext.gltf")), "gltf"), MeshIoError);
+  // Embedded (data URI) buffers need no file.
+  write_model(two_primitive_model(), path("embedded.gltf"));
+  EXPECT_EQ(read_mesh_from_memory(read_bytes(path("embedded.gltf")), "gltf").face_count(), 4u);
 }
 
 // --- malformed files ----------------------------------------------------------
@@ -432,9 +435,9 @@ TEST_F(MeshIoTest, TruncatedAndGarbageFilesAreErrors) {
   expect_io_error(path("t4.obj"), "points before the first vertex");
 
   const std::string head = read_bytes(kDataDir / "head_open.off");
-  write_bytes(path("half.off"), head.substr(0, head.size() / 2));
+  write_bytes(path("half.off"), head.substr(0, head.rfind('\n', head.size() / 2) + 1));  // whole lines
   expect_io_error(path("half.off"), "file ends after");
-  write_bytes(path("cut.off"), head.substr(0, head.size() - 3));  // last face loses an index
+  write_bytes(path("cut.off"), head.substr(0, head.size() - 6));  // "3 1459 1113 1145\n" -> "3 1459 1113"
   expect_io_error(path("cut.off"), "face lists fewer than 3 vertex indices");
   write_bytes(path("neg.off"), "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 -2\n");
   expect_io_error(path("neg.off"), "invalid vertex index '-2'");
@@ -495,6 +498,8 @@ TEST_F(MeshIoTest, UnsupportedAndMissingFiles) {
   EXPECT_THROW(read_mesh_from_memory("solid x", "stl"), MeshIoError);
   EXPECT_THROW(write_mesh(awkward_mesh(), path("mesh.off")), MeshIoError);
   expect_io_error(path("missing.obj"), "cannot open");
+  fs::create_directories(path("dir.obj"));
+  expect_io_error(path("dir.obj"), "is a directory");
   EXPECT_THROW(write_mesh(awkward_mesh(), path("no/such/dir/mesh.obj")), MeshIoError);
   EXPECT_THROW(write_mesh(awkward_mesh(), path("no/such/dir/mesh.glb")), MeshIoError);
   EXPECT_THROW(write_mesh(TriMesh{}, path("empty.glb")), MeshIoError);

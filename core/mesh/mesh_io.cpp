@@ -87,6 +87,12 @@ bool parse_int(std::string_view s, std::int64_t& out) {
   return error == std::errc() && end == s.data() + s.size();
 }
 
+// Some Windows tools start text files with a UTF-8 byte order mark.
+std::string_view without_bom(std::string_view text) {
+  if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
+  return text;
+}
+
 bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
 
 // Splits text into lines and lines into whitespace-separated tokens; `comment`
@@ -153,14 +159,13 @@ TriMesh parse_obj(std::string_view text, const std::string& name) {
   // Statements that carry nothing we keep. Anything else is an error, which is
   // how a binary or unrelated file gets rejected instead of read as empty.
   static constexpr std::string_view kIgnored[] = {
-      "vt",    "vn",   "vp",    "o",     "g",          "s",         "mg",    "usemtl",
-      "mtllib", "l",   "p",     "cstype", "deg",       "bmat",      "step",  "curv",
-      "curv2", "surf", "parm",  "trim",  "hole",       "scrv",      "sp",    "end",
-      "con",   "call", "csh",   "shadow_obj", "trace_obj", "ctech", "stech", "bevel",
-      "c_interp", "d_interp", "lod", "maplib", "usemap"};
+      "vt", "vn", "vp", "o", "g", "s", "mg", "usemtl", "mtllib", "l", "p", "cstype", "deg", "bmat",
+      "step", "curv", "curv2", "surf", "parm", "trim", "hole", "scrv", "sp", "end", "con", "call",
+      "csh", "shadow_obj", "trace_obj", "ctech", "stech", "bevel", "c_interp", "d_interp", "lod",
+      "maplib", "usemap"};
 
   TriMesh mesh;
-  LineReader lines(text, '#');
+  LineReader lines(without_bom(text), '#');
   std::vector<std::string_view> tokens;
   std::vector<Index> corners;
   while (lines.next(tokens)) {
@@ -207,7 +212,7 @@ TriMesh parse_obj(std::string_view text, const std::string& name) {
 // normal/colour/texture values ignored), faces as "n i0 ... i(n-1) [colour]".
 
 TriMesh parse_off(std::string_view text, const std::string& name) {
-  LineReader lines(text, '#');
+  LineReader lines(without_bom(text), '#');
   std::vector<std::string_view> tokens;
   if (!lines.next_nonempty(tokens)) fail(name, "empty file");
 
@@ -606,6 +611,8 @@ TriMesh read_mesh(const std::filesystem::path& path) {
   if (!is_readable(format)) fail_unsupported(name, format, kReadable);
   std::ifstream in(path, std::ios::binary);
   if (!in) fail(name, std::string("cannot open: ") + std::strerror(errno));
+  // A directory opens fine on Linux and then reads as empty.
+  if (std::filesystem::is_directory(path)) fail(name, "is a directory");
   std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) fail(name, "read failed");
   return parse(bytes, format, name, path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path());

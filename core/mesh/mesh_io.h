@@ -20,7 +20,9 @@ struct MeshIoError : std::runtime_error {
 // Reads a mesh as it is stored: no vertex is welded, no face dropped, polygons
 // with more than three corners are fan-triangulated. Indices are NOT checked
 // against the vertex count and coordinates are not checked for NaN: that is
-// validate_mesh()'s job, so that a bad file gets a precise report.
+// validate_mesh()'s job, so that a bad file gets a precise report. (glTF is
+// the exception: primitives are merged, so an index past its own primitive's
+// vertices would point into another one and is reported as a MeshIoError.)
 // glTF/GLB: every triangle primitive of every mesh instanced by the default
 // scene (or scene 0, or every root node if there is no scene) is merged, with
 // node transforms applied. Primitives in point or line modes, or without a
