@@ -314,7 +314,7 @@ TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name
                                                base_dir.string())
                 : loader.LoadASCIIFromString(&model, &error, &warning, bytes.data(), size, base_dir.string());
   } catch (const std::bad_alloc&) {
-    throw;
+    throw;  // mesh_io reports it as running out of memory, not as a bad file
   } catch (const std::exception& e) {
     // tinygltf's JSON layer may throw on malformed input.
     error = e.what();
