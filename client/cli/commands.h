@@ -10,5 +10,6 @@ namespace filigree::cli {
 void add_preprocess_command(CLI::App& app);
 void add_inspect_command(CLI::App& app);
 void add_export_commands(CLI::App& app);  // export-base, export-cut
+void add_compare_command(CLI::App& app);
 
 }  // namespace filigree::cli

@@ -38,7 +38,7 @@ class CutState {
   TriMesh mesh(std::vector<Index>* original_ids = nullptr) const;
 
  private:
-  const Hierarchy& h_;
+  const Hierarchy* h_;
   std::vector<bool> recovered_;
   std::vector<Index> missing_parents_;     // parents not yet recovered
   std::vector<Index> recovered_children_;  // children currently recovered

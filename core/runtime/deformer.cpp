@@ -1,0 +1,154 @@
+#include "runtime/deformer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/SVD>
+
+#include "geometry/cotangent_laplacian.h"
+#include "geometry/ring_frame.h"
+#include "hierarchy/hierarchy.h"
+#include "runtime/cut.h"
+#include "runtime/regions.h"
+#include "runtime/rotation_interpolation.h"
+#include "util/parallel_for.h"
+
+namespace filigree {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+}  // namespace
+
+struct Deformer::State {
+  CotangentLaplacian laplacian;
+  BaseRotations rotations;
+  std::vector<std::array<Index, 3>> maps_corners;  // per vertex: base-local corners of its MAPS face
+  std::vector<std::vector<NodeId>> levels;         // nodes by depth below the roots: parents first
+  AdaptiveCut cut;
+  RegionSolver solver;
+  std::vector<Vec3> positions;  // the last frame's result (rest before the first)
+  std::vector<Eigen::Quaterniond> base_q;
+
+  State(const Hierarchy& h, const DeformerOptions& o)
+      : laplacian(cotangent_laplacian(h.original_mesh())), rotations(h.base_mesh(), o.rotation), cut(h, laplacian),
+        solver(laplacian, h.laplacian), positions(h.rest_positions) {
+    std::vector<Index> base_local(h.vertex_count(), kNone);
+    for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
+    maps_corners.resize(h.vertex_count());
+    for (Index v = 0; v < h.vertex_count(); ++v) {
+      const Triangle& t = h.faces[h.base_faces[h.maps_face[v]]];
+      maps_corners[v] = {base_local[t[0]], base_local[t[1]], base_local[t[2]]};
+    }
+    // A node's ring vertices are base vertices or vertices of its ancestors,
+    // so recovering level by level (roots first) always finds them placed.
+    std::vector<std::size_t> level(h.node_count(), 0);
+    std::size_t depth = 0;
+    for (std::size_t k = h.node_count(); k-- > 0;) {
+      for (NodeId p : h.parents_of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
+      depth = std::max(depth, level[k] + 1);
+    }
+    levels.resize(depth);
+    for (std::size_t k = h.node_count(); k-- > 0;) levels[level[k]].push_back(static_cast<NodeId>(k));
+    cut.reset(o.threshold);
+  }
+};
+
+Deformer::Deformer(const Hierarchy& h, const DeformerOptions& options) : h_(h), options_(options) {
+  if (std::isnan(options.threshold) || options.threshold < 0.0)
+    throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
+  if (options.threads < 1) throw std::invalid_argument("threads must be ≥ 1");
+  if (options.local_global_iterations < 0) throw std::invalid_argument("local-global iterations must be ≥ 0");
+  s_ = std::make_unique<State>(h, options_);
+}
+
+Deformer::~Deformer() = default;
+
+std::size_t Deformer::base_vertex_count() const { return h_.base_vertices.size(); }
+
+const std::vector<Index>& Deformer::region_of_vertex() const { return s_->cut.regions().region_of; }
+
+void Deformer::set_threshold(double threshold) {
+  if (std::isnan(threshold) || threshold < 0.0) throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
+  options_.threshold = threshold;
+  s_->cut.set_threshold(threshold);
+}
+
+DeformResult Deformer::deform(const Pose& pose) {
+  validate_pose(pose, h_.base_vertices.size());
+  const auto start = Clock::now();
+  State& s = *s_;
+  FrameStats stats;
+  stats.threshold = options_.threshold;
+
+  // 1. Rotations of the base vertices.
+  auto t = Clock::now();
+  s.rotations.compute(pose.positions, s.base_q);
+  stats.rotations_ms = ms_since(t);
+
+  // 2. Move the cut where the last frame deformed acutely (thesis §3.3).
+  t = Clock::now();
+  if (options_.update_cut) {
+    const std::size_t nodes = h_.node_count();
+    const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(4096, nodes / 8);
+    const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(256, nodes / 64);
+    stats.cut_moves = s.cut.update(s.positions, eval, moves);
+  }
+  stats.cut_update_ms = ms_since(t);
+
+  // 3. Direct recovery of the cut, parents first (thesis eq. 3.10).
+  t = Clock::now();
+  std::vector<Vec3>& x = s.positions;
+  for (Index i = 0; i < h_.base_vertices.size(); ++i) x[h_.base_vertices[i]] = pose.positions[i];
+  const CutState& cut = s.cut.state();
+  for (const std::vector<NodeId>& level : s.levels) {
+    parallel_for(level.size(), options_.threads, [&](std::size_t i) {
+      const NodeId k = level[i];
+      if (!cut.recovered(k)) return;
+      const RingFrame frame = ring_frame(h_.ring(k), h_.weights(k), x, h_.node_closed[k] != 0);
+      x[h_.node_vertex[k]] = frame.from_local(h_.node_offset[k]);
+    });
+  }
+  stats.recover_ms = ms_since(t);
+
+  // 4. Regions: Dirichlet solves with rotated differential coordinates.
+  t = Clock::now();
+  const Regions& regions = s.cut.regions();
+  auto interpolated = [&](Index v) {
+    const auto& c = s.maps_corners[v];
+    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h_.maps_bary[v]).toRotationMatrix();
+  };
+  stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
+  for (int it = 0; it < options_.local_global_iterations; ++it) {
+    // Local step: the best-fit rotation of each region vertex's 1-ring on the
+    // current result; global step: solve again (factorisations are cached).
+    auto refit = [&](Index v) {
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (Index k = s.laplacian.offsets[v]; k < s.laplacian.offsets[v + 1]; ++k) {
+        const Index j = s.laplacian.neighbors[k];
+        cov += s.laplacian.weights[k] * (h_.rest_positions[j] - h_.rest_positions[v]) * (x[j] - x[v]).transpose();
+      }
+      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+      d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+      return Eigen::Matrix3d(svd.matrixV() * d * svd.matrixU().transpose());
+    };
+    stats.factorizations += s.solver.solve(regions, x, options_.threads, refit);
+  }
+  stats.regions_ms = ms_since(t);
+
+  stats.cut_nodes = cut.recovered_count();
+  stats.cut_vertices = h_.base_vertices.size() + stats.cut_nodes;
+  stats.regions = regions.count();
+  for (std::size_t r = 0; r < regions.count(); ++r) stats.region_sizes.push_back(regions.size(r));
+  std::sort(stats.region_sizes.rbegin(), stats.region_sizes.rend());
+  stats.region_vertices = regions.vertices.size();
+  stats.performance_estimate = regions.performance_estimate();
+  stats.total_ms = ms_since(start);
+  return {x, std::move(stats)};
+}
+
+}  // namespace filigree

@@ -1,0 +1,291 @@
+// The runtime: properties every build keeps (DESIGN §2.2), T = ∞ against an
+// independent whole-mesh solve, the cut and its regions, bad poses.
+
+#include <cmath>
+#include <map>
+#include <set>
+
+#include <Eigen/Geometry>
+#include <Eigen/SVD>
+#include <Eigen/SparseCholesky>
+#include <gtest/gtest.h>
+
+#include "hierarchy/hierarchy.h"
+#include "preprocess/preprocess.h"
+#include "runtime/deformer.h"
+#include "runtime/procedural_motion.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+constexpr double kInf = DeformerOptions::kInfinity;
+
+class DeformerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    mesh_ = new TriMesh(test::shipped_mesh("bunny_small.obj"));
+    PreprocessOptions options;
+    options.base_vertices = 150;
+    h_ = new Hierarchy(preprocess(*mesh_, options));
+    diag_ = bounding_box_diagonal(mesh_->positions);
+  }
+  static void TearDownTestSuite() {
+    delete h_;
+    delete mesh_;
+  }
+  static Pose rest_pose() { return procedural_pose(h_->base_mesh().positions, Motion::kBend, 0.0); }
+  static Pose bend(double phase = 1.0) { return procedural_pose(h_->base_mesh().positions, Motion::kBend, phase); }
+  static double max_distance(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    double d = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) d = std::max(d, (a[i] - b[i]).norm());
+    return d;
+  }
+  static double rms_distance(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    double s = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) s += (a[i] - b[i]).squaredNorm();
+    return std::sqrt(s / static_cast<double>(a.size()));
+  }
+  // Runs frames of the same pose until the cut stops moving.
+  static DeformResult settle(Deformer& d, const Pose& pose) {
+    DeformResult r = d.deform(pose);
+    for (int i = 0; i < 200 && r.stats.cut_moves > 0; ++i) r = d.deform(pose);
+    return r;
+  }
+  static inline TriMesh* mesh_ = nullptr;
+  static inline Hierarchy* h_ = nullptr;
+  static inline double diag_ = 1.0;
+};
+
+TEST_F(DeformerTest, IdentityPoseGivesTheRestMesh) {
+  for (double t : {0.0, 500.0, DeformerOptions::kDefaultThreshold, kInf}) {
+    DeformerOptions o;
+    o.threshold = t;
+    Deformer d(*h_, o);
+    for (int frame = 0; frame < 3; ++frame) {
+      const DeformResult r = d.deform(rest_pose());
+      EXPECT_LE(max_distance(r.positions, mesh_->positions), 1e-9 * diag_) << "T = " << t << " frame " << frame;
+    }
+  }
+}
+
+TEST_F(DeformerTest, RigidMotionOfThePoseMovesTheMeshRigidly) {
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(1.1, Vec3(0.3, -1.0, 0.5).normalized()).toRotationMatrix();
+  const Vec3 shift(0.7, -2.0, 3.5);
+  Pose moved = rest_pose();
+  for (Vec3& p : moved.positions) p = rot * p + shift;
+  for (double t : {0.0, 500.0, DeformerOptions::kDefaultThreshold, kInf}) {
+    for (RotationMethod m : {RotationMethod::kBestFit, RotationMethod::kLocalFrame}) {
+      DeformerOptions o;
+      o.threshold = t;
+      o.rotation = m;
+      Deformer d(*h_, o);
+      const DeformResult r = settle(d, moved);
+      double err = 0.0;
+      for (std::size_t i = 0; i < r.positions.size(); ++i)
+        err = std::max(err, (r.positions[i] - (rot * mesh_->positions[i] + shift)).norm());
+      EXPECT_LE(err, 1e-6 * diag_) << "T = " << t << ", " << to_string(m) << ", cut " << r.stats.cut_nodes << " regions " << r.stats.regions;
+    }
+  }
+}
+
+TEST_F(DeformerTest, SameInputAndThreadsGiveBitIdenticalOutput) {
+  for (int threads : {1, 2}) {
+    DeformerOptions o;
+    o.threads = threads;
+    o.threshold = 2000.0;
+    Deformer a(*h_, o), b(*h_, o);
+    for (int frame = 0; frame < 6; ++frame) {
+      const Pose p = bend(frame / 5.0);
+      const DeformResult ra = a.deform(p), rb = b.deform(p);
+      ASSERT_EQ(ra.positions, rb.positions) << "threads " << threads << " frame " << frame;
+    }
+  }
+}
+
+// The T = ∞ result against the Dirichlet problem written out here: per base
+// vertex a Kabsch rotation of its ring, quaternions blended over each vertex's
+// MAPS triangle, δ = L·rest with clamped cotangent weights, and
+// L_FF x_F = R δ_F − L_FB x_B solved with Eigen's own sparse LDLᵀ.
+TEST_F(DeformerTest, InfiniteThresholdIsTheWholeMeshDirichletSolve) {
+  const TriMesh& m = *mesh_;
+  const std::size_t n = m.vertex_count();
+  const Pose pose = bend();
+  std::vector<Vec3> x(n, Vec3::Zero());
+  std::vector<int> base_local(n, -1);
+  for (std::size_t i = 0; i < h_->base_vertices.size(); ++i) {
+    base_local[h_->base_vertices[i]] = static_cast<int>(i);
+    x[h_->base_vertices[i]] = pose.positions[i];
+  }
+
+  // Cotangent weights, clamped to [1e-4, 1e4] per edge, as documented.
+  std::vector<std::map<Index, double>> w(n);
+  for (const Triangle& f : m.faces)
+    for (int c = 0; c < 3; ++c) {
+      const Vec3 &o = m.positions[f[c]], &p = m.positions[f[(c + 1) % 3]], &q = m.positions[f[(c + 2) % 3]];
+      const double cot = (p - o).dot(q - o) / (p - o).cross(q - o).norm();
+      w[f[(c + 1) % 3]][f[(c + 2) % 3]] += cot / 2;
+      w[f[(c + 2) % 3]][f[(c + 1) % 3]] += cot / 2;
+    }
+  for (auto& row : w)
+    for (auto& [j, v] : row) v = std::clamp(v, 1e-4, 1e4);
+
+  // Base rotations (Kabsch over the base mesh's 1-rings).
+  const TriMesh base = h_->base_mesh();
+  std::vector<std::set<Index>> ring(base.vertex_count());
+  for (const Triangle& f : base.faces)
+    for (int c = 0; c < 3; ++c) ring[f[c]].insert({f[(c + 1) % 3], f[(c + 2) % 3]});
+  std::vector<Eigen::Quaterniond> q(base.vertex_count());
+  for (std::size_t v = 0; v < base.vertex_count(); ++v) {
+    Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
+    for (Index j : ring[v]) s += (base.positions[j] - base.positions[v]) * (pose.positions[j] - pose.positions[v]).transpose();
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(s, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+    d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1 : 1;
+    q[v] = Eigen::Quaterniond(Eigen::Matrix3d(svd.matrixV() * d * svd.matrixU().transpose()));
+  }
+
+  std::vector<int> free_index(n, -1);
+  int free_count = 0;
+  for (std::size_t v = 0; v < n; ++v)
+    if (base_local[v] < 0) free_index[v] = free_count++;
+  std::vector<Eigen::Triplet<double>> entries;
+  Eigen::MatrixX3d rhs = Eigen::MatrixX3d::Zero(free_count, 3);
+  for (std::size_t v = 0; v < n; ++v) {
+    if (free_index[v] < 0) continue;
+    const int i = free_index[v];
+    Vec3 delta = Vec3::Zero();
+    double diagonal = 0.0;
+    for (const auto& [j, wij] : w[v]) {
+      delta += wij * (m.positions[v] - m.positions[j]);
+      diagonal += wij;
+      if (free_index[j] >= 0) {
+        entries.emplace_back(i, free_index[j], -wij);
+      } else {
+        rhs.row(i) += wij * x[j].transpose();
+      }
+    }
+    entries.emplace_back(i, i, diagonal);
+    const Triangle& t = h_->faces[h_->base_faces[h_->maps_face[v]]];
+    const Vec3& bary = h_->maps_bary[v];
+    int lead = 0;
+    bary.maxCoeff(&lead);
+    Eigen::Vector4d blend = Eigen::Vector4d::Zero();
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector4d qc = q[base_local[t[c]]].coeffs();
+      blend += bary[c] * (qc.dot(q[base_local[t[lead]]].coeffs()) < 0 ? -qc : qc);
+    }
+    Eigen::Quaterniond r;
+    r.coeffs() = blend.normalized();
+    rhs.row(i) += (r.toRotationMatrix() * delta).transpose();
+  }
+  Eigen::SparseMatrix<double> a(free_count, free_count);
+  a.setFromTriplets(entries.begin(), entries.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(a);
+  ASSERT_EQ(solver.info(), Eigen::Success);
+  const Eigen::MatrixX3d sol = solver.solve(rhs);
+  for (std::size_t v = 0; v < n; ++v)
+    if (free_index[v] >= 0) x[v] = sol.row(free_index[v]).transpose();
+
+  DeformerOptions o;
+  o.threshold = kInf;
+  Deformer d(*h_, o);
+  const DeformResult r = d.deform(pose);
+  EXPECT_EQ(r.stats.cut_nodes, 0u);
+  EXPECT_LE(max_distance(r.positions, x), 1e-9 * diag_);
+  // And the deformation is real: far from the rest mesh.
+  EXPECT_GT(max_distance(r.positions, m.positions), 0.05 * diag_);
+}
+
+TEST_F(DeformerTest, RegionsAreClosedUnderMeshNeighbours) {
+  DeformerOptions o;
+  o.threshold = 3000.0;
+  Deformer d(*h_, o);
+  const DeformResult r = settle(d, bend());
+  ASSERT_GT(r.stats.regions, 1u);
+  const std::vector<Index>& region = d.region_of_vertex();
+  std::vector<std::set<Index>> nbr(mesh_->vertex_count());
+  for (const Triangle& f : mesh_->faces)
+    for (int c = 0; c < 3; ++c) nbr[f[c]].insert({f[(c + 1) % 3], f[(c + 2) % 3]});
+  std::size_t in_regions = 0;
+  for (Index v = 0; v < mesh_->vertex_count(); ++v) {
+    if (region[v] == kNone) continue;
+    ++in_regions;
+    EXPECT_EQ(h_->vertex_node[v] == kNone, false) << "base vertex " << v << " is in a region";
+    for (Index j : nbr[v]) EXPECT_TRUE(region[j] == region[v] || region[j] == kNone) << v << " ~ " << j;
+  }
+  EXPECT_EQ(in_regions, r.stats.region_vertices);
+  EXPECT_LE(r.stats.performance_estimate, o.threshold);
+  EXPECT_EQ(r.stats.cut_vertices + r.stats.region_vertices, mesh_->vertex_count());
+}
+
+TEST_F(DeformerTest, UnchangedCutPerformsNoFactorization) {
+  DeformerOptions inf;
+  inf.threshold = kInf;
+  Deformer whole(*h_, inf);
+  EXPECT_GT(whole.deform(bend(0.5)).stats.factorizations, 0u);
+  EXPECT_EQ(whole.deform(bend(1.0)).stats.factorizations, 0u);
+
+  DeformerOptions finite;
+  finite.threshold = 3000.0;
+  Deformer d(*h_, finite);
+  std::size_t frames_with_unchanged_cut = 0;
+  for (int frame = 0; frame < 40; ++frame) {
+    const DeformResult r = d.deform(bend(std::min(1.0, frame / 10.0)));
+    if (frame > 0 && r.stats.cut_moves == 0) {
+      ++frames_with_unchanged_cut;
+      EXPECT_EQ(r.stats.factorizations, 0u) << "frame " << frame;
+    }
+  }
+  EXPECT_GT(frames_with_unchanged_cut, 0u);
+}
+
+TEST_F(DeformerTest, ErrorToTheWholeMeshResultShrinksAsTGrows) {
+  DeformerOptions reference;
+  reference.threshold = kInf;
+  Deformer whole(*h_, reference);
+  const std::vector<Vec3> best = whole.deform(bend()).positions;
+  double previous = std::numeric_limits<double>::infinity(), direct_only = 0.0;
+  std::printf("[ quality  ] T: rms / max distance to T=inf (fraction of diagonal)\n");
+  for (double t : {0.0, 1e3, 2e4, 3e5, 1e7}) {
+    DeformerOptions o;
+    o.threshold = t;
+    Deformer d(*h_, o);
+    const DeformResult r = settle(d, bend());
+    const double rms = rms_distance(r.positions, best) / diag_;
+    std::printf("[ quality  ] %g: %.5f / %.5f, %zu regions, %zu vertices optimised\n", t, rms,
+                max_distance(r.positions, best) / diag_, r.stats.regions, r.stats.region_vertices);
+    EXPECT_LE(rms, previous * 1.02 + 1e-12) << "T = " << t;
+    if (t == 0.0) direct_only = rms;
+    previous = rms;
+  }
+  // A threshold above n² lets the cut empty out: the whole-mesh result.
+  EXPECT_LT(previous, 0.01 * direct_only);
+}
+
+TEST_F(DeformerTest, BadPosesAreRejectedAndTheDeformerKeepsWorking) {
+  Deformer d(*h_);
+  Pose short_pose = rest_pose();
+  short_pose.positions.pop_back();
+  try {
+    d.deform(short_pose);
+    FAIL();
+  } catch (const PoseError& e) {
+    EXPECT_NE(std::string(e.what()).find("149 positions, the base mesh has 150"), std::string::npos) << e.what();
+  }
+  Pose nan_pose = rest_pose();
+  nan_pose.positions[17].y() = std::nan("");
+  try {
+    d.deform(nan_pose);
+    FAIL();
+  } catch (const PoseError& e) {
+    EXPECT_NE(std::string(e.what()).find("position 17"), std::string::npos) << e.what();
+  }
+  EXPECT_LE(max_distance(d.deform(rest_pose()).positions, mesh_->positions), 1e-9 * diag_);
+  DeformerOptions bad;
+  bad.threshold = -1.0;
+  EXPECT_THROW(Deformer(*h_, bad), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace filigree
