@@ -4,6 +4,8 @@
 
 #include <Eigen/SVD>
 
+#include "util/parallel_for.h"
+
 namespace filigree {
 
 const char* to_string(RotationMethod m) { return m == RotationMethod::kBestFit ? "best-fit" : "local-frame"; }
@@ -69,10 +71,11 @@ Eigen::Matrix3d BaseRotations::local_frame(const std::vector<Vec3>& x, Index v) 
   return frame;
 }
 
-void BaseRotations::compute(const std::vector<Vec3>& posed, std::vector<Eigen::Quaterniond>& out) const {
+void BaseRotations::compute(const std::vector<Vec3>& posed, std::vector<Eigen::Quaterniond>& out, int threads) const {
   const std::size_t m = rest_.size();
   out.resize(m);
-  for (Index v = 0; v < m; ++v) {
+  parallel_for(m, threads, [&](std::size_t i) {
+    const Index v = static_cast<Index>(i);
     Eigen::Matrix3d r;
     if (method_ == RotationMethod::kLocalFrame) {
       r = local_frame(posed, v) * rest_frames_[v].transpose();
@@ -90,7 +93,7 @@ void BaseRotations::compute(const std::vector<Vec3>& posed, std::vector<Eigen::Q
     }
     out[v] = Eigen::Quaterniond(r).normalized();
     if (!out[v].coeffs().allFinite()) out[v] = Eigen::Quaterniond::Identity();  // degenerate ring
-  }
+  });
 }
 
 }  // namespace filigree

@@ -27,8 +27,9 @@ class BaseRotations {
   // `base` is the base mesh in base order (Hierarchy::base_mesh()).
   BaseRotations(const TriMesh& base, RotationMethod method);
 
-  // One unit quaternion per base vertex, mapping rest ring directions to posed.
-  void compute(const std::vector<Vec3>& posed, std::vector<Eigen::Quaterniond>& out) const;
+  // One unit quaternion per base vertex, mapping rest ring directions to
+  // posed; computed on `threads` threads, the result does not depend on it.
+  void compute(const std::vector<Vec3>& posed, std::vector<Eigen::Quaterniond>& out, int threads = 1) const;
 
  private:
   Eigen::Matrix3d local_frame(const std::vector<Vec3>& x, Index v) const;

@@ -40,6 +40,8 @@ double dihedral(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
 
 // A swap must improve the acuteness handed to optimisation by this factor.
 constexpr double kSwapGain = 1.5;
+// Weight of the fraction of a node's mesh neighbours that are optimised.
+constexpr double kGrowthBonus = 4.0;
 
 }  // namespace
 
@@ -103,7 +105,16 @@ double AdaptiveCut::evaluate(NodeId k, const std::vector<Vec3>& x) const {
       }
     }
   }
-  return (area_sum > 0.0 ? stretch_sum / area_sum : 0.0) + (edge_sum > 0.0 ? bend / edge_sum : 0.0);
+  const double acuteness = (area_sum > 0.0 ? stretch_sum / area_sum : 0.0) + (edge_sum > 0.0 ? bend / edge_sum : 0.0);
+  // Favour nodes next to optimised vertices, in both queues: un-recovering
+  // them grows regions instead of scattering one-vertex regions that the cut
+  // pins in place (percolation, DESIGN §2.2.4); recovering isolated ones
+  // first removes exactly those useless islands.
+  const Index v = h_.node_vertex[k];
+  double free_neighbours = 0.0;
+  const double degree = static_cast<double>(laplacian_.offsets[v + 1] - laplacian_.offsets[v]);
+  for (Index i = laplacian_.offsets[v]; i < laplacian_.offsets[v + 1]; ++i) free_neighbours += in_cut_[laplacian_.neighbors[i]] ? 0.0 : 1.0;
+  return acuteness * (1.0 + kGrowthBonus * free_neighbours / std::max(degree, 1.0));
 }
 
 void AdaptiveCut::enqueue(NodeId k) {

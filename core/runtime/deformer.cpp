@@ -8,12 +8,11 @@
 #include <Eigen/SVD>
 
 #include "geometry/cotangent_laplacian.h"
-#include "geometry/ring_frame.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/cut.h"
+#include "runtime/direct_recovery.h"
 #include "runtime/regions.h"
 #include "runtime/rotation_interpolation.h"
-#include "util/parallel_for.h"
 
 namespace filigree {
 namespace {
@@ -27,14 +26,14 @@ struct Deformer::State {
   CotangentLaplacian laplacian;
   BaseRotations rotations;
   std::vector<std::array<Index, 3>> maps_corners;  // per vertex: base-local corners of its MAPS face
-  std::vector<std::vector<NodeId>> levels;         // nodes by depth below the roots: parents first
+  DirectRecovery recovery;
   AdaptiveCut cut;
   RegionSolver solver;
   std::vector<Vec3> positions;  // the last frame's result (rest before the first)
   std::vector<Eigen::Quaterniond> base_q;
 
   State(const Hierarchy& h, const DeformerOptions& o)
-      : laplacian(cotangent_laplacian(h.original_mesh())), rotations(h.base_mesh(), o.rotation), cut(h, laplacian),
+      : laplacian(cotangent_laplacian(h.original_mesh())), rotations(h.base_mesh(), o.rotation), recovery(h), cut(h, laplacian),
         solver(laplacian, h.laplacian), positions(h.rest_positions) {
     std::vector<Index> base_local(h.vertex_count(), kNone);
     for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
@@ -43,16 +42,6 @@ struct Deformer::State {
       const Triangle& t = h.faces[h.base_faces[h.maps_face[v]]];
       maps_corners[v] = {base_local[t[0]], base_local[t[1]], base_local[t[2]]};
     }
-    // A node's ring vertices are base vertices or vertices of its ancestors,
-    // so recovering level by level (roots first) always finds them placed.
-    std::vector<std::size_t> level(h.node_count(), 0);
-    std::size_t depth = 0;
-    for (std::size_t k = h.node_count(); k-- > 0;) {
-      for (NodeId p : h.parents_of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
-      depth = std::max(depth, level[k] + 1);
-    }
-    levels.resize(depth);
-    for (std::size_t k = h.node_count(); k-- > 0;) levels[level[k]].push_back(static_cast<NodeId>(k));
     cut.reset(o.threshold);
   }
 };
@@ -86,15 +75,15 @@ DeformResult Deformer::deform(const Pose& pose) {
 
   // 1. Rotations of the base vertices.
   auto t = Clock::now();
-  s.rotations.compute(pose.positions, s.base_q);
+  s.rotations.compute(pose.positions, s.base_q, options_.threads);
   stats.rotations_ms = ms_since(t);
 
   // 2. Move the cut where the last frame deformed acutely (thesis §3.3).
   t = Clock::now();
   if (options_.update_cut) {
     const std::size_t nodes = h_.node_count();
-    const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(4096, nodes / 8);
-    const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(256, nodes / 64);
+    const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(2048, nodes / 32);
+    const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(128, nodes / 256);
     stats.cut_moves = s.cut.update(s.positions, eval, moves);
   }
   stats.cut_update_ms = ms_since(t);
@@ -104,14 +93,7 @@ DeformResult Deformer::deform(const Pose& pose) {
   std::vector<Vec3>& x = s.positions;
   for (Index i = 0; i < h_.base_vertices.size(); ++i) x[h_.base_vertices[i]] = pose.positions[i];
   const CutState& cut = s.cut.state();
-  for (const std::vector<NodeId>& level : s.levels) {
-    parallel_for(level.size(), options_.threads, [&](std::size_t i) {
-      const NodeId k = level[i];
-      if (!cut.recovered(k)) return;
-      const RingFrame frame = ring_frame(h_.ring(k), h_.weights(k), x, h_.node_closed[k] != 0);
-      x[h_.node_vertex[k]] = frame.from_local(h_.node_offset[k]);
-    });
-  }
+  s.recovery.recover(cut, x, options_.threads);
   stats.recover_ms = ms_since(t);
 
   // 4. Regions: Dirichlet solves with rotated differential coordinates.

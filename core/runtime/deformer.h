@@ -26,7 +26,7 @@ struct DeformerOptions {
   // Let the cut follow the deformation between frames (thesis §3.3); off pins it.
   bool update_cut = true;
   // Per-frame work of the cut update: nodes rescored and nodes moved; 0 picks
-  // max(4096, nodes/8) and max(256, nodes/64).
+  // max(2048, nodes/32) and max(128, nodes/256).
   std::size_t cut_eval_budget = 0;
   std::size_t cut_move_budget = 0;
 

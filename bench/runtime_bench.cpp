@@ -1,0 +1,140 @@
+// Runtime benchmark (issue 3): one markdown table per mesh × motion with, for
+// each threshold T, per-stage and total frame time, the prefactored
+// whole-mesh solve on the same pose, and the distance to the T = ∞ result.
+//
+// Every T runs the same animation: the motion ramps in over 8 frames, then
+// 12 timed frames oscillate around full strength, so the cut update works as
+// it does in use. Quality is measured on the last timed frame.
+//
+// Usage: filigree_bench_runtime [--quick] [--threads N]
+//   --quick: only the shipped Armadillo (for a fast look).
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bench/subdivide.h"
+#include "hierarchy/hierarchy.h"
+#include "metrics/mesh_metrics.h"
+#include "mesh/mesh_io.h"
+#include "mesh/mesh_validation.h"
+#include "preprocess/preprocess.h"
+#include "runtime/deformer.h"
+#include "runtime/procedural_motion.h"
+
+namespace filigree::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+constexpr int kRampFrames = 8;
+constexpr int kTimedFrames = 12;
+
+double phase_of(int frame) {
+  if (frame < kRampFrames) return static_cast<double>(frame + 1) / kRampFrames;
+  return 0.9 + 0.1 * std::cos(0.7 * (frame - kRampFrames));
+}
+
+TriMesh load_clean(const std::string& path) {
+  RepairReport report;
+  return repair_mesh(read_mesh(path), {}, &report);
+}
+
+struct Timing {
+  double rotations = 0, cut = 0, recover = 0, regions = 0, total = 0;
+  std::size_t regions_count = 0, region_vertices = 0, factorizations = 0;
+};
+
+void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
+  PreprocessOptions pre;
+  pre.threads = threads;
+  const auto t0 = Clock::now();
+  const Hierarchy h = preprocess(mesh, pre);
+  std::printf("\n## %s: %zu vertices, base %zu (preprocessed in %.1f s)\n", name.c_str(), h.vertex_count(),
+              h.base_vertices.size(), ms_since(t0) / 1000.0);
+  const std::vector<Vec3> base_rest = h.base_mesh().positions;
+
+  for (Motion motion : {Motion::kBend, Motion::kTwist, Motion::kBump}) {
+    auto pose_at = [&](int frame) { return procedural_pose(base_rest, motion, phase_of(frame)); };
+    // The reference: whole-mesh optimisation, factorised on the first frame.
+    DeformerOptions ref_options;
+    ref_options.threshold = DeformerOptions::kInfinity;
+    ref_options.threads = threads;
+    Deformer reference(h, ref_options);
+    auto t = Clock::now();
+    reference.deform(pose_at(0));
+    const double factor_ms = ms_since(t);
+    double whole_ms = 0.0;
+    std::vector<Vec3> best;
+    for (int f = kRampFrames; f < kRampFrames + kTimedFrames; ++f) {
+      t = Clock::now();
+      best = reference.deform(pose_at(f)).positions;
+      whole_ms += ms_since(t) / kTimedFrames;
+    }
+
+    std::printf("\n### %s, %s (whole-mesh solve %.1f ms per frame prefactored; factorisation + first solve %.0f ms)\n\n",
+                name.c_str(), to_string(motion), whole_ms, factor_ms);
+    std::printf("| T | rotations ms | cut update ms | recover ms | regions ms | total ms | vs whole | regions | optimised vertices | RMS dist | max dist | normal dev (deg) |\n");
+    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    const std::vector<double> thresholds = {0.0, 2e4, DeformerOptions::kDefaultThreshold, 2e6, DeformerOptions::kInfinity};
+    for (double threshold : thresholds) {
+      DeformerOptions o;
+      o.threshold = threshold;
+      o.threads = threads;
+      Deformer d(h, o);
+      for (int f = 0; f < kRampFrames; ++f) d.deform(pose_at(f));
+      Timing tm;
+      DeformResult last;
+      for (int f = kRampFrames; f < kRampFrames + kTimedFrames; ++f) {
+        last = d.deform(pose_at(f));
+        const FrameStats& s = last.stats;
+        tm.rotations += s.rotations_ms / kTimedFrames;
+        tm.cut += s.cut_update_ms / kTimedFrames;
+        tm.recover += s.recover_ms / kTimedFrames;
+        tm.regions += s.regions_ms / kTimedFrames;
+        tm.total += s.total_ms / kTimedFrames;
+      }
+      TriMesh a, b;
+      a.positions = last.positions;
+      b.positions = best;
+      b.faces = mesh.faces;
+      const MeshComparison q = compare_meshes(a, b);
+      const std::string label = threshold == DeformerOptions::kInfinity ? "∞"
+                                : threshold == DeformerOptions::kDefaultThreshold ? "default (" + std::to_string(static_cast<long>(threshold)) + ")"
+                                                                                 : std::to_string(static_cast<long>(threshold));
+      std::printf("| %s | %.2f | %.2f | %.2f | %.2f | %.2f | %.1fx | %zu | %zu | %.3f%% | %.3f%% | %.2f |\n", label.c_str(),
+                  tm.rotations, tm.cut, tm.recover, tm.regions, tm.total, whole_ms / tm.total, last.stats.regions,
+                  last.stats.region_vertices, 100.0 * q.rms_distance, 100.0 * q.max_distance, q.mean_normal_deviation_deg);
+      std::fflush(stdout);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace filigree::bench
+
+int main(int argc, char** argv) {
+  using namespace filigree;
+  bool quick = false;
+  int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--quick")) quick = true;
+    if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+  }
+  const std::string shared = FILIGREE_SHARED_DATA_DIR, repo = FILIGREE_REPO_DATA_DIR;
+  std::printf("# Filigree runtime benchmark (%d threads; distances as %% of the bbox diagonal, to the T = ∞ result)\n", threads);
+  if (!quick && std::filesystem::exists(shared + "/camel.off"))
+    bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads);
+  bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads);
+  if (quick) return 0;
+  if (std::filesystem::exists(shared + "/dragon.ply"))
+    bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads);
+  bench::run_mesh("armadillo Loop x2 + sqrt3", bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1), threads);
+  return 0;
+}
