@@ -5,7 +5,7 @@
 set -euo pipefail
 
 PACKAGES=(
-  cmake ninja-build g++ make pkg-config ccache
+  cmake ninja-build g++ make pkg-config ccache python3
   libeigen3-dev libopenmesh-dev libtinygltf-dev libdraco-dev libsuitesparse-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev

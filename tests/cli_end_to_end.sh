@@ -23,6 +23,22 @@ grep -q "650 vertices" "$OUT/cut.txt" || fail "cut of 500 nodes: $(cat "$OUT/cut
 "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover all -o "$OUT/full.obj" > /dev/null
 [ "$(grep -c '^f ' "$OUT/full.obj")" -eq 3674 ] || fail "full cut does not have the original 3674 faces"
 
+# Deform: the rest pose (the exported base mesh) gives back the rest mesh.
+"$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.obj" -o "$OUT/rest.obj" --stats > "$OUT/stats.json"
+grep -q '"cut_nodes"' "$OUT/stats.json" || fail "deform --stats: $(cat "$OUT/stats.json")"
+"$FILIGREE" compare "$OUT/rest.obj" "$OUT/full.obj" > "$OUT/compare.json"
+python3 - "$OUT/compare.json" <<'PY' || fail "rest pose did not give the rest mesh: $(cat "$OUT/compare.json")"
+import json, sys
+m = json.load(open(sys.argv[1]))
+sys.exit(0 if m["max_distance"] < 1e-6 and m["vertex_count"] == 1839 else 1)
+PY
+# A bent pose, whole-mesh optimisation vs direct recovery: both valid, different.
+"$FILIGREE" animate "$OUT/bunny.fgh" --motion bend --frames 3 -o "$OUT/bend.obj" --threshold inf > /dev/null
+[ -f "$OUT/bend_0002.obj" ] || fail "animate did not write a file per frame"
+"$FILIGREE" animate "$OUT/bunny.fgh" --motion twist --frames 4 -o "$OUT/twist.glb" > "$OUT/animate.txt"
+grep -q "4 frames of 'twist'" "$OUT/animate.txt" || fail "animate: $(cat "$OUT/animate.txt")"
+"$FILIGREE" compare "$OUT/twist.glb" "$OUT/full.obj" > /dev/null || fail "the animated GLB does not read back"
+
 # Errors: a clear message and exit status 1, never a crash.
 expect_error() {  # expect_error PATTERN COMMAND...
   local pattern=$1; shift
@@ -41,6 +57,10 @@ head -c 1000 "$OUT/bunny.fgh" > "$OUT/truncated.fgh"
 expect_error "truncated" "$FILIGREE" inspect "$OUT/truncated.fgh"
 expect_error "node count or 'all'" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover lots -o "$OUT/x.obj"
 expect_error "only" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover 999999 -o "$OUT/x.obj"
+head -c 100 /dev/zero > "$OUT/short.pose"
+expect_error "needs 12" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/short.pose" -o "$OUT/x.obj"
+expect_error "threshold" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.obj" --threshold fast -o "$OUT/x.obj"
+expect_error "motion" "$FILIGREE" animate "$OUT/bunny.fgh" --motion dance -o "$OUT/x.glb"
 printf 'not a mesh' > "$OUT/garbage.off"
 expect_error "garbage.off" "$FILIGREE" preprocess "$OUT/garbage.off" -o "$OUT/x.fgh"
 echo "cli end to end: ok"

@@ -11,5 +11,6 @@ void add_preprocess_command(CLI::App& app);
 void add_inspect_command(CLI::App& app);
 void add_export_commands(CLI::App& app);  // export-base, export-cut
 void add_compare_command(CLI::App& app);
+void add_deform_commands(CLI::App& app);  // deform, animate
 
 }  // namespace filigree::cli

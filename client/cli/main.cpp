@@ -1,4 +1,4 @@
-// `filigree`: the command-line tool (preprocess, inspect, export-base, export-cut, compare).
+// `filigree`: the command-line tool (preprocess, inspect, export-base, export-cut, deform, animate, compare).
 
 #include <cstdio>
 #include <exception>
@@ -13,6 +13,7 @@ int main(int argc, char** argv) {
   filigree::cli::add_preprocess_command(app);
   filigree::cli::add_inspect_command(app);
   filigree::cli::add_export_commands(app);
+  filigree::cli::add_deform_commands(app);
   filigree::cli::add_compare_command(app);
   try {
     app.parse(argc, argv);

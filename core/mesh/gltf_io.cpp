@@ -327,75 +327,131 @@ TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name
   return GltfReader(model, name_for_errors).read();
 }
 
-void write_glb(const TriMesh& mesh, const std::filesystem::path& path) {
+void write_glb(const TriMesh& mesh, const std::filesystem::path& path) { write_glb_animation(mesh, {}, 0.0, path); }
+
+void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3>>& frames, double fps,
+                         const std::filesystem::path& path) {
   const std::string name = path.string();
   // glTF accessors and bufferViews must not be empty.
   if (mesh.positions.empty() || mesh.faces.empty()) throw MeshIoError(name + ": cannot write an empty mesh as GLB");
+  if (!frames.empty() && !(fps > 0.0)) throw MeshIoError(name + ": an animation needs a positive frame rate");
+  for (const auto& f : frames)
+    if (f.size() != mesh.positions.size()) throw MeshIoError(name + ": an animation frame has the wrong vertex count");
 
-  const std::size_t position_bytes = mesh.positions.size() * 3 * sizeof(float);
+  const std::size_t n = mesh.positions.size(), frame_count = frames.size();
+  const std::size_t position_bytes = n * 3 * sizeof(float);
   const std::size_t index_bytes = mesh.faces.size() * 3 * sizeof(Index);
+  const std::size_t time_bytes = frame_count * sizeof(float);
+  const std::size_t weight_bytes = frame_count * frame_count * sizeof(float);
   tinygltf::Buffer buffer;
-  buffer.data.resize(position_bytes + index_bytes);
-  std::vector<double> lo(3, std::numeric_limits<double>::infinity());
-  std::vector<double> hi(3, -std::numeric_limits<double>::infinity());
+  buffer.data.resize(position_bytes * (1 + frame_count) + index_bytes + time_bytes + weight_bytes);
   unsigned char* out = buffer.data.data();
-  for (const Vec3& p : mesh.positions) {
-    const float xyz[3] = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
-    for (int k = 0; k < 3; ++k) {
-      // min/max are mandatory for POSITION, and JSON cannot hold NaN or Inf.
-      if (!std::isfinite(xyz[k])) throw MeshIoError(name + ": cannot write a non-finite position as GLB");
-      lo[k] = std::min(lo[k], static_cast<double>(xyz[k]));
-      hi[k] = std::max(hi[k], static_cast<double>(xyz[k]));
+
+  // Writes float32 vectors (positions, or morph deltas) with their min/max,
+  // which glTF requires for POSITION accessors and JSON cannot hold as NaN/Inf.
+  auto put_vectors = [&](auto&& value_of, std::vector<double>& lo, std::vector<double>& hi) {
+    lo.assign(3, std::numeric_limits<double>::infinity());
+    hi.assign(3, -std::numeric_limits<double>::infinity());
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec3 p = value_of(i);
+      const float xyz[3] = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
+      for (int k = 0; k < 3; ++k) {
+        if (!std::isfinite(xyz[k])) throw MeshIoError(name + ": cannot write a non-finite position as GLB");
+        lo[k] = std::min(lo[k], static_cast<double>(xyz[k]));
+        hi[k] = std::max(hi[k], static_cast<double>(xyz[k]));
+      }
+      std::memcpy(out, xyz, sizeof xyz);
+      out += sizeof xyz;
     }
-    std::memcpy(out, xyz, sizeof xyz);
-    out += sizeof xyz;
-  }
+  };
+  tinygltf::Model model;
+  model.asset.version = "2.0";
+  model.asset.generator = "filigree";
+  auto add_view = [&](std::size_t offset, std::size_t length, int target) {
+    tinygltf::BufferView view;
+    view.buffer = 0;
+    view.byteOffset = offset;
+    view.byteLength = length;
+    view.target = target;
+    model.bufferViews.push_back(view);
+    return static_cast<int>(model.bufferViews.size() - 1);
+  };
+  auto add_accessor = [&](int view, int component, int type, std::size_t count, std::vector<double> lo = {},
+                          std::vector<double> hi = {}) {
+    tinygltf::Accessor a;
+    a.bufferView = view;
+    a.componentType = component;
+    a.type = type;
+    a.count = count;
+    a.minValues = std::move(lo);
+    a.maxValues = std::move(hi);
+    model.accessors.push_back(a);
+    return static_cast<int>(model.accessors.size() - 1);
+  };
+
+  std::vector<double> lo, hi;
+  put_vectors([&](std::size_t i) { return mesh.positions[i]; }, lo, hi);
+  const int positions = add_accessor(add_view(0, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER),
+                                     TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, lo, hi);
   for (const Triangle& f : mesh.faces) {
     std::memcpy(out, f.data(), 3 * sizeof(Index));
     out += 3 * sizeof(Index);
   }
-
-  tinygltf::Model model;
-  model.asset.version = "2.0";
-  model.asset.generator = "filigree";
-  model.buffers.push_back(std::move(buffer));
-
-  tinygltf::BufferView positions_view;
-  positions_view.buffer = 0;
-  positions_view.byteOffset = 0;
-  positions_view.byteLength = position_bytes;
-  positions_view.target = TINYGLTF_TARGET_ARRAY_BUFFER;
-  tinygltf::BufferView indices_view;
-  indices_view.buffer = 0;
-  indices_view.byteOffset = position_bytes;
-  indices_view.byteLength = index_bytes;
-  indices_view.target = TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER;
-  model.bufferViews = {positions_view, indices_view};
-
-  tinygltf::Accessor positions;
-  positions.bufferView = 0;
-  positions.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-  positions.type = TINYGLTF_TYPE_VEC3;
-  positions.count = mesh.positions.size();
-  positions.minValues = lo;
-  positions.maxValues = hi;
-  tinygltf::Accessor indices;
-  indices.bufferView = 1;
-  indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
-  indices.type = TINYGLTF_TYPE_SCALAR;
-  indices.count = mesh.faces.size() * 3;
-  model.accessors = {positions, indices};
+  const int indices = add_accessor(add_view(position_bytes, index_bytes, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
+                                   TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, mesh.faces.size() * 3);
 
   tinygltf::Primitive primitive;
-  primitive.attributes["POSITION"] = 0;
-  primitive.indices = 1;
+  primitive.attributes["POSITION"] = positions;
+  primitive.indices = indices;
   primitive.mode = TINYGLTF_MODE_TRIANGLES;
   tinygltf::Mesh gltf_mesh;
+  // One morph target per frame (POSITION deltas from the rest mesh), and an
+  // animation that shows frame i alone at time i/fps (STEP weights).
+  std::size_t offset = position_bytes + index_bytes;
+  for (const auto& frame : frames) {
+    put_vectors([&](std::size_t i) { return Vec3(frame[i] - mesh.positions[i]); }, lo, hi);
+    const int target = add_accessor(add_view(offset, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER),
+                                    TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, lo, hi);
+    primitive.targets.push_back({{"POSITION", target}});
+    gltf_mesh.weights.push_back(0.0);
+    offset += position_bytes;
+  }
   gltf_mesh.primitives.push_back(primitive);
   model.meshes.push_back(gltf_mesh);
   tinygltf::Node node;
   node.mesh = 0;
   model.nodes.push_back(node);
+  if (frame_count > 0) {
+    for (std::size_t i = 0; i < frame_count; ++i) {
+      const float t = static_cast<float>(static_cast<double>(i) / fps);
+      std::memcpy(out, &t, sizeof t);
+      out += sizeof t;
+    }
+    for (std::size_t i = 0; i < frame_count; ++i)
+      for (std::size_t j = 0; j < frame_count; ++j) {
+        const float w = i == j ? 1.0f : 0.0f;
+        std::memcpy(out, &w, sizeof w);
+        out += sizeof w;
+      }
+    const int times = add_accessor(add_view(offset, time_bytes, 0), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR,
+                                   frame_count, {0.0}, {static_cast<double>(frame_count - 1) / fps});
+    const int weights = add_accessor(add_view(offset + time_bytes, weight_bytes, 0), TINYGLTF_COMPONENT_TYPE_FLOAT,
+                                     TINYGLTF_TYPE_SCALAR, frame_count * frame_count);
+    tinygltf::AnimationSampler sampler;
+    sampler.input = times;
+    sampler.output = weights;
+    sampler.interpolation = "STEP";
+    tinygltf::AnimationChannel channel;
+    channel.sampler = 0;
+    channel.target_node = 0;
+    channel.target_path = "weights";
+    tinygltf::Animation animation;
+    animation.name = "filigree";
+    animation.samplers.push_back(sampler);
+    animation.channels.push_back(channel);
+    model.animations.push_back(animation);
+  }
+  model.buffers.push_back(std::move(buffer));
   tinygltf::Scene scene;
   scene.nodes.push_back(0);
   model.scenes.push_back(scene);

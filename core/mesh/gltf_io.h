@@ -1,8 +1,9 @@
 #pragma once
-// glTF 2.0 / GLB support behind mesh_io.h; only mesh_io.cpp (and tests) use it.
+// glTF 2.0 / GLB support behind mesh_io.h, and animated GLB output.
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "mesh/tri_mesh.h"
 
@@ -19,5 +20,11 @@ TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name
 // Writes one mesh / primitive / node / scene with float32 positions and uint32
 // indices in a single binary buffer. Throws MeshIoError on failure.
 void write_glb(const TriMesh& mesh, const std::filesystem::path& path);
+
+// The same with an animation: one morph target per frame (POSITION deltas
+// from `mesh`), played by an animation channel that shows frame i alone at
+// time i / fps. Every frame must have one position per vertex.
+void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3>>& frames, double fps,
+                         const std::filesystem::path& path);
 
 }  // namespace filigree

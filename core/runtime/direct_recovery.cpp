@@ -60,6 +60,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h) {
 }
 
 void DirectRecovery::recover(const CutState& cut, std::vector<Vec3>& x, int threads) const {
+  if (cut.recovered_count() == 0) return;  // whole-mesh optimisation: nothing to place
   const int t = std::max(1, threads);
   const std::size_t m = base_vertices_.size();
   for (std::size_t i = 0; i < m; ++i) work_[i] = x[base_vertices_[i]];
@@ -73,9 +74,9 @@ void DirectRecovery::recover(const CutState& cut, std::vector<Vec3>& x, int thre
       for (std::size_t i = from; i < to; ++i) {
         // Ring positions are scattered: prefetch a few nodes ahead so their
         // loads overlap instead of stalling one by one.
-        if (i + kPrefetchDistance < to)
-          for (Index j = ring_offsets_[i + kPrefetchDistance]; j < ring_offsets_[i + kPrefetchDistance + 1]; ++j)
-            __builtin_prefetch(&work_[ring_[j]]);
+        const std::size_t ahead = i + kPrefetchDistance;
+        if (ahead < to && cut.recovered(node_[ahead]))
+          for (Index j = ring_offsets_[ahead]; j < ring_offsets_[ahead + 1]; ++j) __builtin_prefetch(&work_[ring_[j]]);
         if (!cut.recovered(node_[i])) continue;
         const std::span<const Index> ring(ring_.data() + ring_offsets_[i], ring_offsets_[i + 1] - ring_offsets_[i]);
         const std::span<const double> w(weights_.data() + ring_offsets_[i], ring.size());

@@ -1,0 +1,154 @@
+// `filigree deform` (one pose) and `filigree animate` (a procedural motion).
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <thread>
+
+#include <CLI/CLI.hpp>
+
+#include "cli/commands.h"
+#include "hierarchy/hierarchy.h"
+#include "hierarchy/hierarchy_file.h"
+#include "mesh/gltf_io.h"
+#include "mesh/mesh_io.h"
+#include "runtime/deformer.h"
+#include "runtime/pose_io.h"
+#include "runtime/procedural_motion.h"
+
+namespace filigree::cli {
+namespace {
+
+// A cut that adapts over frames needs a few frames of the same pose to settle.
+constexpr int kSettleFrames = 100;
+
+struct RuntimeArgs {
+  std::string hierarchy, output, threshold = "default", rotation = "best-fit";
+  int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int iterations = 0;
+};
+
+struct DeformArgs : RuntimeArgs {
+  std::string pose;
+  bool stats = false;
+};
+
+struct AnimateArgs : RuntimeArgs {
+  std::string motion = "bend";
+  int frames = 30;
+  double fps = 30.0;
+};
+
+DeformerOptions options_of(const RuntimeArgs& a) {
+  DeformerOptions o;
+  if (a.threshold == "inf" || a.threshold == "infinity") {
+    o.threshold = DeformerOptions::kInfinity;
+  } else if (a.threshold != "default") {
+    std::size_t used = 0;
+    try {
+      o.threshold = std::stod(a.threshold, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != a.threshold.size() || !(o.threshold >= 0.0))
+      throw std::invalid_argument("--threshold takes a number ≥ 0, 'inf' or 'default', not '" + a.threshold + "'");
+  }
+  if (a.rotation == "best-fit") {
+    o.rotation = RotationMethod::kBestFit;
+  } else if (a.rotation == "local-frame") {
+    o.rotation = RotationMethod::kLocalFrame;
+  } else {
+    throw std::invalid_argument("--rotation takes best-fit or local-frame, not '" + a.rotation + "'");
+  }
+  o.threads = a.threads;
+  o.local_global_iterations = a.iterations;
+  return o;
+}
+
+void print_stats(const FrameStats& s, int frames) {
+  std::printf("{\"frames_run\": %d, \"cut_nodes\": %zu, \"cut_vertices\": %zu, \"regions\": %zu, \"largest_region\": %zu, "
+              "\"region_vertices\": %zu, \"threshold\": %.9g, \"performance_estimate\": %.9g, \"factorizations\": %zu, "
+              "\"rotations_ms\": %.3f, \"cut_update_ms\": %.3f, \"recover_ms\": %.3f, \"regions_ms\": %.3f, \"total_ms\": %.3f}\n",
+              frames, s.cut_nodes, s.cut_vertices, s.regions, s.region_sizes.empty() ? 0 : s.region_sizes.front(),
+              s.region_vertices, std::isinf(s.threshold) ? 1e308 : s.threshold, s.performance_estimate, s.factorizations,
+              s.rotations_ms, s.cut_update_ms, s.recover_ms, s.regions_ms, s.total_ms);
+}
+
+void add_runtime_options(CLI::App* cmd, RuntimeArgs& a) {
+  cmd->add_option("hierarchy", a.hierarchy, "Hierarchy file (.fgh)")->required()->check(CLI::ExistingFile);
+  cmd->add_option("-o,--output", a.output, "Output mesh")->required();
+  cmd->add_option("--threshold", a.threshold, "Performance threshold T: a number, 0 (direct recovery only) or inf (whole-mesh optimisation)");
+  cmd->add_option("--rotation", a.rotation, "Base rotations: best-fit (default) or local-frame");
+  cmd->add_option("--iterations", a.iterations, "Local-global iterations")->check(CLI::Range(0, 100));
+  cmd->add_option("--threads", a.threads, "Worker threads")->check(CLI::Range(1, 256));
+}
+
+void deform(const DeformArgs& a) {
+  const Hierarchy h = load_hierarchy(a.hierarchy);
+  const Pose pose = read_pose(a.pose, h.base_vertices.size());
+  Deformer deformer(h, options_of(a));
+  DeformResult r = deformer.deform(pose);
+  int frames = 1;
+  while (r.stats.cut_moves > 0 && frames < kSettleFrames) r = deformer.deform(pose), ++frames;
+  TriMesh out = h.original_mesh();
+  out.positions = std::move(r.positions);
+  write_mesh(out, a.output);
+  std::fprintf(stderr, "wrote %s: %zu vertices, %zu faces (input vertex and face order)\n", a.output.c_str(),
+               out.vertex_count(), out.face_count());
+  if (a.stats) print_stats(r.stats, frames);
+}
+
+void animate(const AnimateArgs& a) {
+  const auto motion = parse_motion(a.motion);
+  if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave or bump, not '" + a.motion + "'");
+  const Hierarchy h = load_hierarchy(a.hierarchy);
+  const std::vector<Vec3> base_rest = h.base_mesh().positions;
+  Deformer deformer(h, options_of(a));
+  std::vector<std::vector<Vec3>> frames;
+  double total_ms = 0.0;
+  const std::filesystem::path out(a.output);
+  const bool glb = out.extension() == ".glb";
+  for (int f = 0; f < a.frames; ++f) {
+    // One back-and-forth of the motion over the requested frames.
+    const double phase = a.frames > 1 ? std::sin(M_PI * f / (a.frames - 1)) : 1.0;
+    DeformResult r = deformer.deform(procedural_pose(base_rest, *motion, phase));
+    total_ms += r.stats.total_ms;
+    if (glb) {
+      frames.push_back(std::move(r.positions));
+    } else {
+      // Any other extension: a sequence of files name_0000.ext, name_0001.ext, …
+      char suffix[16];
+      std::snprintf(suffix, sizeof suffix, "_%04d", f);
+      TriMesh frame = h.original_mesh();
+      frame.positions = std::move(r.positions);
+      write_mesh(frame, out.parent_path() / (out.stem().string() + suffix + out.extension().string()));
+    }
+  }
+  if (glb) write_glb_animation(h.original_mesh(), frames, a.fps, out);
+  std::printf("%s: %d frames of '%s', %.2f ms per frame on average (%zu vertices)\n", a.output.c_str(), a.frames,
+              a.motion.c_str(), total_ms / std::max(a.frames, 1), h.vertex_count());
+}
+
+}  // namespace
+
+void add_deform_commands(CLI::App& app) {
+  auto d = std::make_shared<DeformArgs>();
+  CLI::App* deform_cmd = app.add_subcommand("deform", "Deform the detailed mesh from a pose of the base mesh");
+  add_runtime_options(deform_cmd, *d);
+  deform_cmd->add_option("--pose", d->pose, "Pose: .pose (float32 m×3, base order) or a posed base mesh (.obj …)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  deform_cmd->add_flag("--stats", d->stats, "Print the frame statistics as JSON on stdout");
+  deform_cmd->callback([d] { deform(*d); });
+
+  auto an = std::make_shared<AnimateArgs>();
+  CLI::App* animate_cmd = app.add_subcommand("animate", "Deform along a procedural base motion; .glb: one morph target per frame, else a file per frame");
+  add_runtime_options(animate_cmd, *an);
+  animate_cmd->add_option("--motion", an->motion, "bend, twist, wave or bump");
+  animate_cmd->add_option("--frames", an->frames, "Number of frames")->check(CLI::Range(1, 100000));
+  animate_cmd->add_option("--fps", an->fps, "Frame rate of the glTF animation")->check(CLI::PositiveNumber);
+  animate_cmd->callback([an] { animate(*an); });
+}
+
+}  // namespace filigree::cli
