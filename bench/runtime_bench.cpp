@@ -10,6 +10,7 @@
 //   --quick: only the shipped Armadillo (for a fast look).
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -51,6 +52,45 @@ struct Timing {
   std::size_t regions_count = 0, region_vertices = 0, factorizations = 0;
 };
 
+// Mean relative change of edge lengths: how much of the rest shape's local
+// detail a result keeps (0 for a rigid motion of the rest mesh).
+double edge_distortion(const TriMesh& mesh, const std::vector<Vec3>& x) {
+  double sum = 0.0;
+  std::size_t count = 0;
+  for (const Triangle& f : mesh.faces)
+    for (int c = 0; c < 3; ++c) {
+      const Index a = f[c], b = f[(c + 1) % 3];
+      const double rest = (mesh.positions[a] - mesh.positions[b]).norm();
+      if (rest > 0.0) sum += std::abs((x[a] - x[b]).norm() - rest) / rest, ++count;
+    }
+  return count ? sum / static_cast<double>(count) : 0.0;
+}
+
+// The two rotation methods (DESIGN §2.2.1) on the full motion, whole-mesh
+// optimisation and direct recovery.
+void compare_rotation_methods(const Hierarchy& h, const TriMesh& mesh, const std::vector<Vec3>& base_rest, int threads) {
+  std::printf("\n### rotation methods (full-strength pose; edge distortion = mean relative edge length change)\n\n");
+  std::printf("| motion | method | rotations ms | edge distortion T=∞ | edge distortion T=0 |\n|---|---|---:|---:|---:|\n");
+  for (Motion motion : {Motion::kBend, Motion::kTwist, Motion::kBump}) {
+    const Pose pose = procedural_pose(base_rest, motion, 1.0);
+    for (RotationMethod method : {RotationMethod::kBestFit, RotationMethod::kLocalFrame}) {
+      double distortion[2] = {0, 0}, rotations_ms = 0;
+      for (int i = 0; i < 2; ++i) {
+        DeformerOptions o;
+        o.threshold = i == 0 ? DeformerOptions::kInfinity : 0.0;
+        o.rotation = method;
+        o.threads = threads;
+        Deformer d(h, o);
+        const DeformResult r = d.deform(pose);
+        distortion[i] = edge_distortion(mesh, r.positions);
+        rotations_ms = r.stats.rotations_ms;
+      }
+      std::printf("| %s | %s | %.2f | %.3f%% | %.3f%% |\n", to_string(motion), to_string(method), rotations_ms,
+                  100 * distortion[0], 100 * distortion[1]);
+    }
+  }
+}
+
 void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
   PreprocessOptions pre;
   pre.threads = threads;
@@ -59,6 +99,7 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
   std::printf("\n## %s: %zu vertices, base %zu (preprocessed in %.1f s)\n", name.c_str(), h.vertex_count(),
               h.base_vertices.size(), ms_since(t0) / 1000.0);
   const std::vector<Vec3> base_rest = h.base_mesh().positions;
+  compare_rotation_methods(h, mesh, base_rest, threads);
 
   for (Motion motion : {Motion::kBend, Motion::kTwist, Motion::kBump}) {
     auto pose_at = [&](int frame) { return procedural_pose(base_rest, motion, phase_of(frame)); };

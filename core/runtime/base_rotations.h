@@ -10,10 +10,11 @@
 namespace filigree {
 
 enum class RotationMethod {
-  // Best-fit rotation of the whole 1-ring (SVD of the weighted edge
-  // covariance, as in ARAP). The default: it uses every ring edge, so one
-  // noisy edge or a flat-ish fan does not swing the frame, and it is exact for
-  // rigid motions. Measured against kLocalFrame in bench/runtime_bench.
+  // Best-fit rotation of the whole 1-ring (SVD of the edge covariance, as in
+  // ARAP). The default: it uses every ring edge, so one noisy edge does not
+  // swing the frame. Measured (bench/runtime_bench, Armadillo, whole-mesh
+  // optimisation): mean edge-length distortion 11.55% vs 12.18% (bend),
+  // 6.92% vs 7.18% (twist) for the local frame, for 0.45 vs 0.06 ms per frame.
   kBestFit,
   // The thesis' local frame (eq. 3.1): normal, the ring edge closest to it,
   // and their cross product; R = L2 · L1ᵀ.

@@ -73,13 +73,8 @@ DeformResult Deformer::deform(const Pose& pose) {
   FrameStats stats;
   stats.threshold = options_.threshold;
 
-  // 1. Rotations of the base vertices.
+  // 1. Move the cut where the last frame deformed acutely (thesis §3.3).
   auto t = Clock::now();
-  s.rotations.compute(pose.positions, s.base_q, options_.threads);
-  stats.rotations_ms = ms_since(t);
-
-  // 2. Move the cut where the last frame deformed acutely (thesis §3.3).
-  t = Clock::now();
   if (options_.update_cut) {
     const std::size_t nodes = h_.node_count();
     const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(2048, nodes / 32);
@@ -88,7 +83,7 @@ DeformResult Deformer::deform(const Pose& pose) {
   }
   stats.cut_update_ms = ms_since(t);
 
-  // 3. Direct recovery of the cut, parents first (thesis eq. 3.10).
+  // 2. Direct recovery of the cut, parents first (thesis eq. 3.10).
   t = Clock::now();
   std::vector<Vec3>& x = s.positions;
   for (Index i = 0; i < h_.base_vertices.size(); ++i) x[h_.base_vertices[i]] = pose.positions[i];
@@ -96,9 +91,15 @@ DeformResult Deformer::deform(const Pose& pose) {
   s.recovery.recover(cut, x, options_.threads);
   stats.recover_ms = ms_since(t);
 
+  // 3. Rotations of the base vertices; only regions use them, direct
+  // recovery carries its own frames.
+  const Regions& regions = s.cut.regions();
+  t = Clock::now();
+  if (regions.count() > 0) s.rotations.compute(pose.positions, s.base_q, options_.threads);
+  stats.rotations_ms = ms_since(t);
+
   // 4. Regions: Dirichlet solves with rotated differential coordinates.
   t = Clock::now();
-  const Regions& regions = s.cut.regions();
   auto interpolated = [&](Index v) {
     const auto& c = s.maps_corners[v];
     return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h_.maps_bary[v]).toRotationMatrix();

@@ -10,6 +10,7 @@
 namespace filigree {
 namespace {
 constexpr std::size_t kPrefetchDistance = 8;
+constexpr std::size_t kNodesPerThread = 100000;
 }  // namespace
 
 DirectRecovery::DirectRecovery(const Hierarchy& h) {
@@ -61,7 +62,9 @@ DirectRecovery::DirectRecovery(const Hierarchy& h) {
 
 void DirectRecovery::recover(const CutState& cut, std::vector<Vec3>& x, int threads) const {
   if (cut.recovered_count() == 0) return;  // whole-mesh optimisation: nothing to place
-  const int t = std::max(1, threads);
+  // A barrier per level costs tens of microseconds on a busy machine: below
+  // ~100k nodes per thread one thread is faster.
+  const int t = std::clamp(static_cast<int>(node_.size() / kNodesPerThread), 1, std::max(1, threads));
   const std::size_t m = base_vertices_.size();
   for (std::size_t i = 0; i < m; ++i) work_[i] = x[base_vertices_[i]];
   // One team for all levels, a barrier between levels: spawning threads per

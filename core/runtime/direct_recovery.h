@@ -19,7 +19,7 @@ class DirectRecovery {
   // must already be in `x`. Nodes are grouped by depth below the roots: a
   // node's ring vertices are base vertices or vertices of its ancestors, so
   // one depth level only reads levels above it and its nodes run in parallel.
-  // The result does not depend on `threads`.
+  // Uses at most `threads` threads; the result does not depend on how many.
   void recover(const CutState& cut, std::vector<Vec3>& x, int threads) const;
 
   std::size_t levels() const { return level_offsets_.size() - 1; }
