@@ -27,6 +27,7 @@ demo: build
 
 bench: build
 	$(BUILD)/bench/filigree_bench_preprocess
+	$(BUILD)/bench/filigree_bench_runtime
 
 clean:
 	rm -rf $(BUILD) out

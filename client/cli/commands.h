@@ -12,5 +12,6 @@ void add_inspect_command(CLI::App& app);
 void add_export_commands(CLI::App& app);  // export-base, export-cut
 void add_compare_command(CLI::App& app);
 void add_deform_commands(CLI::App& app);  // deform, animate
+void add_service_commands(CLI::App& app);  // upload, drive, watch, sessions: clients of filigree-server
 
 }  // namespace filigree::cli

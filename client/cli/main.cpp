@@ -1,4 +1,5 @@
-// `filigree`: the command-line tool (preprocess, inspect, export-base, export-cut, deform, animate, compare).
+// `filigree`: the command-line tool (preprocess, inspect, export-base, export-cut, deform,
+// animate, compare; upload, drive, watch, sessions as a client of filigree-server).
 
 #include <cstdio>
 #include <exception>
@@ -15,6 +16,7 @@ int main(int argc, char** argv) {
   filigree::cli::add_export_commands(app);
   filigree::cli::add_deform_commands(app);
   filigree::cli::add_compare_command(app);
+  filigree::cli::add_service_commands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -13,7 +13,7 @@ ProgressBar::~ProgressBar() { finish(); }
 
 void ProgressBar::update(double fraction) {
   const int percent = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * 100.0);
-  if (percent == last_percent_ || (!tty_ && percent / 10 == last_percent_ / 10)) return;
+  if (percent == last_percent_ || (!tty_ && last_percent_ >= 0 && percent / 10 == last_percent_ / 10)) return;
   last_percent_ = percent;
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
   if (tty_) {

@@ -2,8 +2,7 @@
 
 #include <algorithm>
 
-#include <Eigen/SVD>
-
+#include "geometry/best_fit_rotation.h"
 #include "util/parallel_for.h"
 
 namespace filigree {
@@ -80,16 +79,12 @@ void BaseRotations::compute(const std::vector<Vec3>& posed, std::vector<Eigen::Q
     if (method_ == RotationMethod::kLocalFrame) {
       r = local_frame(posed, v) * rest_frames_[v].transpose();
     } else {
-      // Kabsch: S = Σ e_rest e_posedᵀ, R = V · diag(1, 1, det) · Uᵀ.
       Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
       for (Index k = offsets_[v]; k < offsets_[v + 1]; ++k) {
         const Index j = neighbors_[k];
         s += (rest_[j] - rest_[v]) * (posed[j] - posed[v]).transpose();
       }
-      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(s, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
-      d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-      r = svd.matrixV() * d * svd.matrixU().transpose();
+      r = best_fit_rotation(s);
     }
     out[v] = Eigen::Quaterniond(r).normalized();
     if (!out[v].coeffs().allFinite()) out[v] = Eigen::Quaterniond::Identity();  // degenerate ring

@@ -34,8 +34,9 @@ class AdaptiveCut {
   // Rescores up to `eval_budget` nodes (round robin) on `positions`, the last
   // frame's result, then moves up to `move_budget` nodes: while the estimate
   // exceeds T it recovers the mildest nodes (without limit: T is a bound);
-  // then it un-recovers the most acute node while it fits, or swaps it for a
-  // milder recovered... (pair move) when that improves quality at equal cost.
+  // then it un-recovers the most acute node while it fits, or, when it does
+  // not, pairs that with recovering the mildest node (the thesis' pair move)
+  // if the swap fits and clearly improves the acuteness optimised.
   // Regions are recomputed when anything moved. Returns the nodes moved.
   std::size_t update(const std::vector<Vec3>& positions, std::size_t eval_budget, std::size_t move_budget);
 

@@ -5,8 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
-#include <Eigen/SVD>
-
+#include "geometry/best_fit_rotation.h"
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/cut.h"
@@ -114,10 +113,7 @@ DeformResult Deformer::deform(const Pose& pose) {
         const Index j = s.laplacian.neighbors[k];
         cov += s.laplacian.weights[k] * (h_.rest_positions[j] - h_.rest_positions[v]) * (x[j] - x[v]).transpose();
       }
-      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(cov, Eigen::ComputeFullU | Eigen::ComputeFullV);
-      Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
-      d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
-      return Eigen::Matrix3d(svd.matrixV() * d * svd.matrixU().transpose());
+      return best_fit_rotation(cov);
     };
     stats.factorizations += s.solver.solve(regions, x, options_.threads, refit);
   }

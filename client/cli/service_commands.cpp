@@ -1,0 +1,345 @@
+// `filigree upload`, `drive`, `watch`, `sessions`: the CLI as a client of
+// filigree-server (through the client library, filigree::client).
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "cli/progress_bar.h"
+#include "filigree/client.h"
+#include "mesh/gltf_io.h"
+#include "mesh/mesh_io.h"
+#include "runtime/pose_io.h"
+#include "runtime/procedural_motion.h"
+
+namespace filigree::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr const char* kDefaultServer = "127.0.0.1:50051";
+
+struct UploadArgs {
+  std::string mesh, server = kDefaultServer, name = "filigree-cli";
+  unsigned base_vertices = 0, bits = 0;
+  double threshold = 0.0;
+  bool whole_mesh = false;
+};
+
+struct SessionArgs {
+  std::string session, token, server = kDefaultServer, output;
+  int frames = 0;
+};
+
+struct DriveArgs : SessionArgs {
+  std::string motion, name = "filigree-cli";
+  std::vector<std::string> poses;
+  double rate = 60.0;
+};
+
+struct WatchArgs : SessionArgs {
+  std::uint64_t after = 0;
+  double fps = 30.0;
+};
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot read " + path);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+std::string format_of(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  if (!ext.empty()) ext.erase(0, 1);
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+std::vector<Vec3> to_vec3(const std::vector<float>& xyz) {
+  std::vector<Vec3> out(xyz.size() / 3);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+  return out;
+}
+
+std::vector<float> to_floats(const std::vector<Vec3>& v) {
+  std::vector<float> out(3 * v.size());
+  for (std::size_t i = 0; i < v.size(); ++i)
+    for (int c = 0; c < 3; ++c) out[3 * i + c] = static_cast<float>(v[i][c]);
+  return out;
+}
+
+TriMesh rest_mesh(const SessionMesh& m) {
+  TriMesh mesh;
+  mesh.positions = to_vec3(m.rest_positions);
+  mesh.faces.resize(m.rest_faces.size() / 3);
+  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    mesh.faces[f] = {m.rest_faces[3 * f], m.rest_faces[3 * f + 1], m.rest_faces[3 * f + 2]};
+  return mesh;
+}
+
+// .glb: every frame as a morph-target animation; any other format: the last frame.
+void write_frames(const SessionMesh& session, const std::vector<std::vector<Vec3>>& frames, double fps,
+                  const std::string& path) {
+  if (frames.empty()) throw std::runtime_error("no frames received: nothing to write to " + path);
+  TriMesh mesh = rest_mesh(session);
+  if (format_of(path) == "glb") {
+    write_glb_animation(mesh, frames, fps, path);
+    std::fprintf(stderr, "wrote %s: %zu frames of %zu vertices\n", path.c_str(), frames.size(), mesh.vertex_count());
+  } else {
+    mesh.positions = frames.back();
+    write_mesh(mesh, path);
+    std::fprintf(stderr, "wrote %s: the last of %zu frames\n", path.c_str(), frames.size());
+  }
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(std::lround(p * static_cast<double>(v.size() - 1)))];
+}
+
+// ---------------------------------------------------------------- upload
+
+void upload(const UploadArgs& a) {
+  v1::SessionOptions options;
+  options.set_base_vertices(a.base_vertices);
+  options.set_threshold(a.threshold);
+  options.set_whole_mesh(a.whole_mesh);
+  options.set_quantization_bits(a.bits);
+  const std::string bytes = read_file(a.mesh);
+
+  Client client(a.server);
+  std::string stage;
+  std::unique_ptr<ProgressBar> bar;  // one bar per stage
+  const SessionHandle s = client.create_session(bytes, format_of(a.mesh), options, a.name,
+                                                [&](const std::string& next, double fraction) {
+                                                  if (next != stage || !bar) {
+                                                    bar = std::make_unique<ProgressBar>(next);
+                                                    stage = next;
+                                                  }
+                                                  bar->update(fraction);
+                                                });
+  bar.reset();
+  std::printf("session_id: %s\neditor_token: %s\nviewer_token: %s\n", s.session_id.c_str(), s.editor_token.c_str(),
+              s.viewer_token.c_str());
+  std::printf("cached: %s\nvertices: %zu\nbase_vertices: %zu\n", s.cached ? "yes" : "no", s.mesh.vertex_count(),
+              s.mesh.base_vertex_count());
+}
+
+// ---------------------------------------------------------------- drive
+
+// The poses to send, in base order as floats: a procedural motion run back
+// and forth over `frames` poses, or pose files cycled.
+std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh& session) {
+  std::vector<std::vector<float>> out;
+  if (!a.motion.empty()) {
+    const auto motion = parse_motion(a.motion);
+    if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave or bump, not '" + a.motion + "'");
+    const std::vector<Vec3> rest = to_vec3(session.base_positions);
+    const int n = a.frames > 0 ? a.frames : 120;
+    for (int f = 0; f < n; ++f) {
+      const double phase = n > 1 ? std::sin(M_PI * f / (n - 1)) : 1.0;
+      out.push_back(to_floats(procedural_pose(rest, *motion, phase).positions));
+    }
+  } else {
+    std::vector<std::vector<float>> files;
+    for (const auto& p : a.poses) files.push_back(to_floats(read_pose(p, session.base_vertex_count()).positions));
+    const int n = a.frames > 0 ? a.frames : static_cast<int>(files.size());
+    for (int f = 0; f < n; ++f) out.push_back(files[f % files.size()]);
+  }
+  return out;
+}
+
+void drive(const DriveArgs& a) {
+  Client client(a.server);
+  const SessionMesh session = client.join(a.session, a.token);
+  const std::vector<std::vector<float>> poses = make_poses(a, session);
+  const FrameDecoder decoder(session.rest_positions);
+  auto driver = client.drive(a.session, a.token, a.name);
+
+  std::vector<Clock::time_point> sent_at(poses.size() + 1);  // by pose_id
+  std::mutex mutex;
+  std::condition_variable answered;
+  std::uint64_t newest_answered = 0;
+  bool reader_done = false;
+  std::vector<double> latency_ms;
+  std::vector<std::vector<Vec3>> frames;
+  std::size_t frame_count = 0, bytes = 0;
+  std::exception_ptr reader_error;
+
+  std::thread reader([&] {
+    try {
+      while (auto frame = driver->read()) {
+        const auto received = Clock::now();
+        DecodedFrame d = decoder.decode(*frame);
+        std::vector<Vec3> positions;
+        if (!a.output.empty()) positions = to_vec3(d.positions);
+        std::lock_guard lock(mutex);
+        ++frame_count;
+        bytes += d.encoded_bytes;
+        // Latency of each pose once: from its send to the first frame including it.
+        if (d.pose_id > newest_answered && d.pose_id < sent_at.size()) {
+          latency_ms.push_back(std::chrono::duration<double, std::milli>(received - sent_at[d.pose_id]).count());
+          newest_answered = d.pose_id;
+          answered.notify_all();
+        }
+        if (!a.output.empty()) frames.push_back(std::move(positions));
+      }
+    } catch (...) {
+      reader_error = std::current_exception();
+      driver->cancel();
+    }
+    std::lock_guard lock(mutex);
+    reader_done = true;
+    answered.notify_all();
+  });
+
+  const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / a.rate));
+  const auto start = Clock::now();
+  std::uint64_t sent = 0;
+  for (std::uint64_t id = 1; id <= poses.size(); ++id) {
+    std::this_thread::sleep_until(start + period * (id - 1));
+    {
+      std::lock_guard lock(mutex);
+      sent_at[id] = Clock::now();
+    }
+    if (!driver->send(id, poses[id - 1])) break;  // the stream ended; finish() says why
+    sent = id;
+  }
+  {
+    // Coalescing may skip poses, but the last one is always answered.
+    std::unique_lock lock(mutex);
+    answered.wait_for(lock, std::chrono::seconds(10), [&] { return reader_done || newest_answered >= sent; });
+  }
+  driver->writes_done();
+  reader.join();
+  if (reader_error) std::rethrow_exception(reader_error);
+  throw_if_error(driver->finish());
+
+  const double raw = 12.0 * static_cast<double>(session.vertex_count());
+  const double mean = frame_count ? static_cast<double>(bytes) / static_cast<double>(frame_count) : 0.0;
+  std::printf("poses_sent: %llu\nframes_received: %zu\nposes_answered: %zu\n", static_cast<unsigned long long>(sent),
+              frame_count, latency_ms.size());
+  std::printf("latency_p50_ms: %.2f\nlatency_p99_ms: %.2f\n", percentile(latency_ms, 0.50), percentile(latency_ms, 0.99));
+  std::printf("bytes_per_frame: %.0f\nraw_bytes_per_frame: %.0f\ncompression: %.1fx\n", mean, raw,
+              mean > 0.0 ? raw / mean : 0.0);
+  if (!a.output.empty()) write_frames(session, frames, a.rate, a.output);
+}
+
+// ---------------------------------------------------------------- watch
+
+void watch(const WatchArgs& a) {
+  Client client(a.server);
+  const SessionMesh session = client.join(a.session, a.token);
+  const FrameDecoder decoder(session.rest_positions);
+  auto watcher = client.watch(a.session, a.token, a.after);
+  std::vector<std::vector<Vec3>> frames;
+  int count = 0;
+  while (auto frame = watcher->read()) {
+    const DecodedFrame d = decoder.decode(*frame);
+    std::string changes;
+    for (const auto& c : d.changes)
+      changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
+                 std::to_string(c.vertex_count());
+    std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
+                static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
+                changes.empty() ? "-" : changes.c_str());
+    std::fflush(stdout);
+    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+    if (a.frames > 0 && ++count >= a.frames) {
+      watcher->cancel();  // enough: the CANCELLED status below is ours
+      break;
+    }
+  }
+  const grpc::Status status = watcher->finish();
+  if (!(a.frames > 0 && count >= a.frames)) {
+    throw_if_error(status);
+    std::fprintf(stderr, "the session was closed\n");
+  }
+  if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
+}
+
+// ---------------------------------------------------------------- sessions
+
+void sessions(const std::string& server) {
+  Client client(server);
+  const auto entries = client.list();
+  if (entries.empty()) {
+    std::printf("no sessions\n");
+    return;
+  }
+  std::printf("%-24s %-16s %10s %6s %10s %7s %8s\n", "SESSION", "MESH", "VERTICES", "BASE", "VERSION", "DRIVERS",
+              "WATCHERS");
+  for (const auto& e : entries)
+    std::printf("%-24s %-16s %10u %6u %10llu %7u %8u\n", e.session_id().c_str(), e.mesh_hash().c_str(),
+                e.vertex_count(), e.base_vertex_count(), static_cast<unsigned long long>(e.version()), e.drivers(),
+                e.watchers());
+}
+
+void add_session_options(CLI::App* cmd, SessionArgs& a, const char* output_help) {
+  cmd->add_option("--session", a.session, "Session id")->required();
+  cmd->add_option("--token", a.token, "Session token (drive: the editor token)")->required();
+  cmd->add_option("--server", a.server, "Server address HOST:PORT");
+  cmd->add_option("-o,--output", a.output, output_help);
+}
+
+}  // namespace
+
+void add_service_commands(CLI::App& app) {
+  auto u = std::make_shared<UploadArgs>();
+  CLI::App* up = app.add_subcommand("upload", "Upload a mesh to filigree-server and start a session");
+  up->add_option("mesh", u->mesh, "Mesh file (.obj .ply .off .gltf .glb)")->required()->check(CLI::ExistingFile);
+  up->add_option("--server", u->server, "Server address HOST:PORT");
+  up->add_option("--base-vertices", u->base_vertices, "Base mesh size (default: the server's, 2% of the vertices)");
+  auto* t = up->add_option("--threshold", u->threshold, "Performance threshold T of the cut (0: direct recovery only)")
+                ->check(CLI::NonNegativeNumber);
+  up->add_flag("--whole-mesh", u->whole_mesh, "Whole-mesh optimisation (T = infinity)")->excludes(t);
+  up->add_option("--bits", u->bits, "Quantization bits of frame deltas (8-24, default 14)")->check(CLI::Range(8, 24));
+  up->add_option("--name", u->name, "Client name shown to other participants");
+  up->callback([u] { upload(*u); });
+
+  auto d = std::make_shared<DriveArgs>();
+  CLI::App* dr = app.add_subcommand("drive", "Drive a session with poses and report latency and frame size");
+  add_session_options(dr, *d, "Write the received frames: .glb animation, other formats the last frame");
+  auto* m = dr->add_option("--motion", d->motion, "Procedural motion: bend, twist, wave or bump");
+  auto* p = dr->add_option("--poses", d->poses, "Pose files (.pose or a posed base mesh), sent in turn")
+                ->check(CLI::ExistingFile)
+                ->excludes(m);
+  dr->add_option("--rate", d->rate, "Poses per second")->check(CLI::PositiveNumber);
+  dr->add_option("--frames", d->frames, "Poses to send (default: 120 for a motion, one per pose file)")
+      ->check(CLI::Range(1, 1000000));
+  dr->add_option("--name", d->name, "Client name shown to other participants");
+  dr->callback([d, m, p] {
+    if (m->count() == 0 && p->count() == 0) throw CLI::RequiredError("--motion or --poses");
+    drive(*d);
+  });
+
+  auto w = std::make_shared<WatchArgs>();
+  CLI::App* wa = app.add_subcommand("watch", "Print (and optionally record) a session's frames as they come");
+  add_session_options(wa, *w, "Write the received frames: .glb animation, other formats the last frame");
+  wa->add_option("--frames", w->frames, "Stop after N frames (default: until the session closes)")
+      ->check(CLI::Range(1, 1000000));
+  wa->add_option("--after", w->after, "Skip frames up to this version");
+  wa->add_option("--fps", w->fps, "Frame rate of the .glb animation")->check(CLI::PositiveNumber);
+  wa->callback([w] { watch(*w); });
+
+  auto server = std::make_shared<std::string>(kDefaultServer);
+  CLI::App* ls = app.add_subcommand("sessions", "List the server's sessions");
+  ls->add_option("--server", *server, "Server address HOST:PORT");
+  ls->callback([server] { sessions(*server); });
+}
+
+}  // namespace filigree::cli

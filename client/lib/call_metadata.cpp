@@ -1,0 +1,11 @@
+#include "filigree/call_metadata.h"
+
+namespace filigree {
+
+void set_session_metadata(grpc::ClientContext& context, const std::string& session_id, const std::string& token) {
+  // gRPC requires lower-case metadata keys.
+  if (!token.empty()) context.AddMetadata("x-filigree-token", token);
+  if (!session_id.empty()) context.AddMetadata("x-session-id", session_id);
+}
+
+}  // namespace filigree

@@ -1,0 +1,134 @@
+#include "filigree/client.h"
+
+#include <algorithm>
+#include <optional>
+
+namespace filigree {
+namespace {
+
+constexpr std::size_t kChunkBytes = 1 << 20;  // upload chunk: well under any message limit
+
+std::shared_ptr<grpc::Channel> make_channel(const std::string& target) {
+  grpc::ChannelArguments args;
+  // A SessionInfo carries the whole rest mesh: 1M vertices ≈ 36 MiB, over
+  // gRPC's 4 MiB default.
+  args.SetMaxReceiveMessageSize(-1);
+  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+}
+
+}  // namespace
+
+Client::Client(const std::string& target) : Client(make_channel(target)) {}
+
+Client::Client(std::shared_ptr<grpc::Channel> channel)
+    : channel_(std::move(channel)), stub_(v1::Filigree::NewStub(channel_)) {}
+
+SessionHandle Client::create_session(const std::string& mesh_bytes, const std::string& format,
+                                     const v1::SessionOptions& options, const std::string& client_name,
+                                     const ProgressCallback& progress) {
+  grpc::ClientContext context;
+  auto stream = stub_->CreateSession(&context);
+  // If a progress callback throws, the call is cancelled and drained first:
+  // gRPC wants Finish() before the stream goes away.
+  struct FinishOnUnwind {
+    grpc::ClientContext& context;
+    grpc::ClientReaderWriter<v1::CreateSessionRequest, v1::CreateSessionResponse>& stream;
+    bool finished = false;
+    ~FinishOnUnwind() {
+      if (finished) return;
+      context.TryCancel();
+      for (v1::CreateSessionResponse r; stream.Read(&r);) {
+      }
+      stream.Finish();
+    }
+  } guard{context, *stream};
+
+  v1::CreateSessionRequest request;
+  auto* begin = request.mutable_begin();
+  begin->set_format(format);
+  begin->set_total_bytes(mesh_bytes.size());
+  *begin->mutable_options() = options;
+  begin->set_client_name(client_name);
+  bool writing = stream->Write(request);
+  // The server reads the whole file before it answers; a refusal (too large)
+  // makes Write fail, and Finish below reports why.
+  for (std::size_t at = 0; writing && at < mesh_bytes.size(); at += kChunkBytes) {
+    const std::size_t n = std::min(kChunkBytes, mesh_bytes.size() - at);
+    request.set_chunk(mesh_bytes.data() + at, n);
+    writing = stream->Write(request);
+    if (writing && progress) progress("uploading", double(at + n) / double(mesh_bytes.size()));
+  }
+  if (writing) stream->WritesDone();
+
+  std::optional<v1::CreateSessionResponse::Created> created;
+  v1::CreateSessionResponse response;
+  while (stream->Read(&response)) {
+    if (response.has_progress() && progress) progress(response.progress().stage(), response.progress().fraction());
+    if (response.has_created()) created = std::move(*response.mutable_created());
+  }
+  guard.finished = true;
+  throw_if_error(stream->Finish());
+  if (!created) throw ClientError(grpc::StatusCode::DATA_LOSS, "the server ended the upload without creating a session");
+  return SessionHandle{created->info().session_id(), created->editor_token(), created->viewer_token(),
+                       created->cached(), to_session_mesh(created->info())};
+}
+
+SessionMesh Client::join(const std::string& session_id, const std::string& token) {
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token);
+  v1::JoinSessionRequest request;
+  request.set_session_id(session_id);
+  v1::SessionInfo info;
+  throw_if_error(stub_->JoinSession(&context, request, &info));
+  return to_session_mesh(info);
+}
+
+v1::SessionState Client::state(const std::string& session_id, const std::string& token) {
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token);
+  v1::GetStateRequest request;
+  request.set_session_id(session_id);
+  v1::SessionState state;
+  throw_if_error(stub_->GetState(&context, request, &state));
+  return state;
+}
+
+void Client::set_threshold(const std::string& session_id, const std::string& token, double threshold,
+                           bool whole_mesh) {
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token);
+  v1::SetOptionsRequest request;
+  request.set_session_id(session_id);
+  request.set_threshold(threshold);
+  request.set_whole_mesh(whole_mesh);
+  v1::SessionInfo info;
+  throw_if_error(stub_->SetOptions(&context, request, &info));
+}
+
+void Client::close(const std::string& session_id, const std::string& token) {
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token);
+  v1::CloseSessionRequest request;
+  request.set_session_id(session_id);
+  v1::CloseSessionResponse response;
+  throw_if_error(stub_->CloseSession(&context, request, &response));
+}
+
+std::vector<v1::ListSessionsResponse::Entry> Client::list() {
+  grpc::ClientContext context;
+  v1::ListSessionsResponse response;
+  throw_if_error(stub_->ListSessions(&context, v1::ListSessionsRequest(), &response));
+  return {response.sessions().begin(), response.sessions().end()};
+}
+
+std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,
+                                      const std::string& client_name) {
+  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name));
+}
+
+std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
+                                       std::uint64_t after_version) {
+  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version));
+}
+
+}  // namespace filigree

@@ -1,0 +1,94 @@
+#pragma once
+// The Filigree C++ client: what a game engine links (CMake: filigree::client).
+//
+// Every call is blocking (gRPC's synchronous API): call them from your own
+// threads. Failed calls throw ClientError carrying the gRPC status code.
+// Typical use:
+//
+//   filigree::Client client("127.0.0.1:50051");
+//   auto session = client.create_session(bytes, "obj", {}, "my-engine");
+//   filigree::FrameDecoder decoder(session.mesh.rest_positions);
+//   auto driver = client.drive(session.session_id, session.editor_token, "my-engine");
+//   driver->send(1, pose);                       // writer thread, every tick
+//   while (auto frame = driver->read())          // reader thread
+//     upload_to_gpu(decoder.decode(*frame).positions);
+//   driver->writes_done(); /* join reader */ driver->finish();
+//
+// The generated types (filigree::v1::…, "filigree/v1/filigree.pb.h") are the
+// contract; stub() gives the raw gRPC stub for anything not wrapped here.
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+
+#include "filigree/call_metadata.h"
+#include "filigree/client_error.h"
+#include "filigree/driver.h"
+#include "filigree/frame_decoder.h"
+#include "filigree/session_mesh.h"
+#include "filigree/v1/filigree.grpc.pb.h"
+#include "filigree/watcher.h"
+
+namespace filigree {
+
+// A session made by create_session(). The editor token may drive, close and
+// change options; the viewer token may join, watch and read state.
+struct SessionHandle {
+  std::string session_id;
+  std::string editor_token;
+  std::string viewer_token;
+  bool cached = false;  // the server had preprocessed this mesh before
+  SessionMesh mesh;     // what join() would return, without a second request
+};
+
+// Upload progress: stage "uploading" (bytes sent), then the server's stages
+// ("validating", "simplifying", "starting"); fraction is 0…1 within a stage.
+using ProgressCallback = std::function<void(const std::string& stage, double fraction)>;
+
+class Client {
+ public:
+  // An insecure channel to `target` ("127.0.0.1:50051", "dns:///host:port")
+  // with no limit on received message size (a SessionInfo of a large mesh is
+  // tens of MiB). Connects lazily: a server that is down makes the first
+  // call fail with UNAVAILABLE.
+  explicit Client(const std::string& target);
+  // Any channel (TLS, custom arguments).
+  explicit Client(std::shared_ptr<grpc::Channel> channel);
+
+  // Uploads `mesh_bytes` (a file of `format`: "obj", "ply", "off", "gltf",
+  // "glb") in 1 MiB chunks and waits while the server preprocesses it.
+  SessionHandle create_session(const std::string& mesh_bytes, const std::string& format,
+                               const v1::SessionOptions& options, const std::string& client_name,
+                               const ProgressCallback& progress = {});
+
+  // The session's base and rest mesh (editor or viewer token).
+  SessionMesh join(const std::string& session_id, const std::string& token);
+  // The merged pose and the current frame.
+  v1::SessionState state(const std::string& session_id, const std::string& token);
+  // Changes the cut threshold (editor token); whole_mesh means T = ∞.
+  void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh);
+  // Ends the session for everyone (editor token).
+  void close(const std::string& session_id, const std::string& token);
+  // The server's sessions (no token needed).
+  std::vector<v1::ListSessionsResponse::Entry> list();
+
+  // Opens a Drive stream (editor token). `client_name` is shown to others in
+  // Frame.changes. The stream's failures show in send()/read()/finish().
+  std::unique_ptr<Driver> drive(const std::string& session_id, const std::string& token,
+                                const std::string& client_name);
+  // Opens a Watch stream (either token): frames newer than after_version.
+  std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token,
+                                 std::uint64_t after_version = 0);
+
+  v1::Filigree::Stub& stub() { return *stub_; }
+
+ private:
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Filigree::Stub> stub_;
+};
+
+}  // namespace filigree

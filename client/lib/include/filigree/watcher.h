@@ -1,0 +1,49 @@
+#pragma once
+// One Watch stream: the session's frames as they are computed.
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include <grpcpp/grpcpp.h>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+
+namespace filigree {
+
+// Made by Client::watch(). A slow reader skips frames (it always gets the
+// newest) and never slows the session. cancel() may be called from any
+// thread, e.g. to wake a thread blocked in read(); finish() once no other
+// thread is inside read().
+class Watcher {
+ public:
+  Watcher(const Watcher&) = delete;
+  Watcher& operator=(const Watcher&) = delete;
+  // Cancels the stream if finish() was not called.
+  ~Watcher();
+
+  // Blocks for the next frame; nullopt once the stream has ended (session
+  // closed, cancelled, error: finish() says which).
+  std::optional<v1::Frame> read();
+
+  // Ends the stream at once (thread-safe, any time).
+  void cancel();
+
+  // Discards unread frames until the stream ends and returns the call's
+  // status: OK when the session was closed, CANCELLED after cancel(). On a
+  // live stream it blocks until the session closes: cancel() first to stop
+  // watching now. Later calls return the same.
+  grpc::Status finish();
+
+ private:
+  friend class Client;
+  Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::uint64_t after_version);
+
+  grpc::ClientContext context_;  // declared before stream_: must outlive it
+  std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;
+  bool reads_ended_ = false;
+  std::optional<grpc::Status> status_;
+};
+
+}  // namespace filigree

@@ -1,0 +1,254 @@
+// Frame deltas as a Draco point cloud (DESIGN §3, TOOLCHAIN "Draco").
+//
+// Encoding: one float32×3 GENERIC attribute, one value per point in vertex
+// order; PointCloudBuilder::Finalize(false) so no point is merged, and
+// POINT_CLOUD_SEQUENTIAL_ENCODING so point i stays point i (Draco's default
+// for point clouds is the kd-tree, which reorders). Sequential point clouds use
+// difference prediction from the previous point, so the size depends on how
+// spatially coherent the vertex order is.
+//
+// Quantization is explicit, over the deltas' own range with one range for all
+// three axes: origin = min over all components, range = max − min, and Draco's
+// step is range / (2^bits − 1). Draco quantizes and dequantizes in float, so
+// the error is step/2 plus a few float roundings; we measure the real figure
+// by decoding the buffer once and report it as max_error (rounded up).
+//
+// Decoding trusts nothing in the buffer. Before Draco sees it, the header is
+// checked against what encode_deltas writes (a sequential point cloud without
+// metadata) and the point count in it against `count`, so a corrupt count
+// cannot make Draco allocate for billions of points; after decoding, the
+// attribute's type, size and mapping are checked before any value is read.
+//
+// Every call builds its own Draco encoder/decoder: nothing is shared between
+// threads.
+
+#include "codec/delta_codec.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <utility>
+
+#include <draco/attributes/geometry_attribute.h>
+#include <draco/attributes/point_attribute.h>
+#include <draco/compression/config/compression_shared.h>
+#include <draco/compression/decode.h>
+#include <draco/compression/expert_encode.h>
+#include <draco/core/decoder_buffer.h>
+#include <draco/core/draco_types.h>
+#include <draco/core/encoder_buffer.h>
+#include <draco/point_cloud/point_cloud.h>
+#include <draco/point_cloud/point_cloud_builder.h>
+
+namespace filigree {
+namespace {
+
+constexpr std::uint32_t kMinBits = 8;
+constexpr std::uint32_t kMaxBits = 24;
+
+// Largest |delta| we encode. Far beyond any mesh, and small enough that min,
+// max, range and min + range all stay finite in float32.
+constexpr double kMaxMagnitude = 1e30;
+
+// Smallest quantization range handed to Draco. Its quantizer multiplies by
+// (2^bits − 1) / range in float: a range below ~1e-31 makes that infinite and
+// 0 · inf a NaN, which Draco then casts to int (undefined behaviour). A range
+// of 0 (every delta equal) or a denormal one is therefore raised to this; every
+// value then quantizes to 0 and decodes to exactly `min`.
+constexpr float kMinRange = 1e-20f;
+
+// The fixed part of a Draco header (draco/compression/point_cloud/
+// point_cloud_decoder.cc, DecodeHeader): "DRACO", major, minor, encoder type,
+// encoder method, uint16 flags. A sequential point cloud then starts with its
+// int32 point count (point_cloud_sequential_decoder.cc, DecodeGeometryData).
+constexpr std::size_t kHeaderSize = 11;
+constexpr std::size_t kEncoderTypeOffset = 7;
+constexpr std::size_t kEncoderMethodOffset = 8;
+constexpr std::size_t kFlagsOffset = 9;
+constexpr std::size_t kNumPointsOffset = kHeaderSize;
+
+// Reads what decode would read, without Draco, and rejects anything that
+// encode_deltas cannot have written.
+void check_header(const std::string& bytes, std::uint32_t count) {
+  if (bytes.size() < kNumPointsOffset + 4) {
+    throw DeltaCodecError("delta buffer truncated: " + std::to_string(bytes.size()) +
+                          " bytes is shorter than a Draco point cloud header");
+  }
+  if (std::memcmp(bytes.data(), "DRACO", 5) != 0) {
+    throw DeltaCodecError("delta buffer is not a Draco buffer (no DRACO magic)");
+  }
+  const auto byte_at = [&](std::size_t i) { return static_cast<unsigned char>(bytes[i]); };
+  if (byte_at(kEncoderTypeOffset) != draco::POINT_CLOUD) {
+    throw DeltaCodecError("delta buffer holds a Draco mesh, not a point cloud");
+  }
+  if (byte_at(kEncoderMethodOffset) != draco::POINT_CLOUD_SEQUENTIAL_ENCODING) {
+    throw DeltaCodecError("delta buffer is not sequentially encoded (vertex order not preserved)");
+  }
+  if (byte_at(kFlagsOffset) != 0 || byte_at(kFlagsOffset + 1) != 0) {
+    throw DeltaCodecError("delta buffer has unexpected Draco header flags (metadata?)");
+  }
+  // Little-endian int32, assembled byte by byte (no alignment or endianness
+  // assumption).
+  std::uint32_t stored = 0;
+  for (std::size_t i = 0; i < 4; ++i) {
+    stored |= static_cast<std::uint32_t>(byte_at(kNumPointsOffset + i)) << (8 * i);
+  }
+  if (stored != count) {
+    throw DeltaCodecError("delta buffer holds " + std::to_string(stored) + " points, the frame says " +
+                          std::to_string(count));
+  }
+}
+
+// Decodes a non-empty buffer of `count` points; every check is fatal.
+std::vector<Vec3> decode_draco(const std::string& bytes, std::uint32_t count) {
+  check_header(bytes, count);
+
+  draco::DecoderBuffer buffer;
+  buffer.Init(bytes.data(), bytes.size());
+  draco::Decoder decoder;
+  auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
+  if (!decoded.ok()) {
+    throw DeltaCodecError("Draco could not decode the delta buffer: " +
+                          decoded.status().error_msg_string());
+  }
+  const std::unique_ptr<draco::PointCloud> cloud = std::move(decoded).value();
+  if (!cloud) throw DeltaCodecError("Draco returned no point cloud for the delta buffer");
+  if (cloud->num_points() != count) {
+    throw DeltaCodecError("delta buffer decoded to " + std::to_string(cloud->num_points()) +
+                          " points, the frame says " + std::to_string(count));
+  }
+  if (cloud->num_attributes() != 1) {
+    throw DeltaCodecError("delta buffer has " + std::to_string(cloud->num_attributes()) +
+                          " attributes, expected 1");
+  }
+  const draco::PointAttribute* att = cloud->attribute(0);
+  if (att == nullptr || att->buffer() == nullptr) {
+    throw DeltaCodecError("delta buffer has no attribute data");
+  }
+  if (att->num_components() != 3 || att->data_type() != draco::DT_FLOAT32) {
+    throw DeltaCodecError("delta attribute is not float32×3 (" + std::to_string(att->num_components()) +
+                          " components of Draco type " + std::to_string(att->data_type()) + ")");
+  }
+  // Every value index we will read must lie inside the attribute's storage.
+  const std::size_t entries = att->size();
+  const std::int64_t stride = att->byte_stride();
+  const std::int64_t offset = att->byte_offset();
+  if (stride < static_cast<std::int64_t>(3 * sizeof(float)) || offset < 0 ||
+      static_cast<std::uint64_t>(offset) + static_cast<std::uint64_t>(stride) * entries >
+          static_cast<std::uint64_t>(att->buffer()->data_size())) {
+    throw DeltaCodecError("delta attribute storage is inconsistent with its size");
+  }
+  if (!att->is_mapping_identity() && att->indices_map_size() < count) {
+    throw DeltaCodecError("delta attribute maps fewer points than the buffer holds");
+  }
+
+  std::vector<Vec3> out(count);
+  double value[3];
+  for (std::uint32_t i = 0; i < count; ++i) {
+    const draco::AttributeValueIndex avi = att->mapped_index(draco::PointIndex(i));
+    if (avi.value() >= entries || !att->ConvertValue<double>(avi, 3, value)) {
+      throw DeltaCodecError("delta attribute has no value for point " + std::to_string(i));
+    }
+    // encode_deltas never writes a non-finite value: this buffer is corrupt.
+    if (!std::isfinite(value[0]) || !std::isfinite(value[1]) || !std::isfinite(value[2])) {
+      throw DeltaCodecError("delta buffer decodes to a non-finite value at point " + std::to_string(i));
+    }
+    out[i] = Vec3(value[0], value[1], value[2]);
+  }
+  return out;
+}
+
+// The smallest float ≥ x (x finite, within float range).
+float float_at_least(double x) {
+  float f = static_cast<float>(x);
+  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+}  // namespace
+
+EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits) {
+  if (bits < kMinBits || bits > kMaxBits) {
+    throw DeltaCodecError("quantization bits must be in " + std::to_string(kMinBits) + "…" +
+                          std::to_string(kMaxBits) + ", got " + std::to_string(bits));
+  }
+  // Draco counts points in int32.
+  if (deltas.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())) {
+    throw DeltaCodecError("too many deltas for one Draco buffer: " + std::to_string(deltas.size()));
+  }
+  const auto n = static_cast<std::uint32_t>(deltas.size());
+
+  // Validate, convert to float32 (what Draco stores) and find the range.
+  std::vector<float> values(3 * static_cast<std::size_t>(n));
+  bool all_zero = true;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      const double d = deltas[i][c];
+      if (!std::isfinite(d)) {
+        throw DeltaCodecError("delta " + std::to_string(i) + " is not finite");
+      }
+      if (std::abs(d) > kMaxMagnitude) {
+        throw DeltaCodecError("delta " + std::to_string(i) + " is implausibly large (|" + std::to_string(d) +
+                              "| > 1e30)");
+      }
+      if (d != 0.0) all_zero = false;
+      values[3 * static_cast<std::size_t>(i) + c] = static_cast<float>(d);
+    }
+  }
+
+  EncodedDeltas result;
+  result.count = n;
+  result.bits = bits;
+  if (all_zero) return result;  // empty bytes, min = range = max_error = 0
+
+  const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+  const float min = *lo;
+  // Rounded up so that min + range covers the largest value: a value above
+  // the range would quantize past 2^bits − 1.
+  const float range = std::max(float_at_least(static_cast<double>(*hi) - static_cast<double>(min)), kMinRange);
+
+  draco::PointCloudBuilder builder;
+  builder.Start(n);
+  const int att_id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 3, draco::DT_FLOAT32);
+  // Point i gets values[3i … 3i+2]: the same as SetAttributeValueForPoint for
+  // each i in order, in one pass.
+  builder.SetAttributeValuesForAllPoints(att_id, values.data(), 3 * sizeof(float));
+  const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(/*deduplicate_points=*/false);
+  if (!cloud || cloud->num_points() != n) {
+    throw DeltaCodecError("Draco could not build the delta point cloud");
+  }
+
+  draco::ExpertEncoder encoder(*cloud);
+  encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
+  const float origin[3] = {min, min, min};
+  encoder.SetAttributeExplicitQuantization(att_id, static_cast<int>(bits), 3, origin, range);
+  draco::EncoderBuffer out;
+  const draco::Status status = encoder.EncodeToBuffer(&out);
+  if (!status.ok()) {
+    throw DeltaCodecError("Draco could not encode the deltas: " + status.error_msg_string());
+  }
+
+  result.bytes.assign(out.data(), out.size());
+  result.min = min;
+  result.range = range;
+
+  // Measure, do not assume: decode what we send and compare with the input
+  // (the doubles, so the float32 conversion counts as error too).
+  const std::vector<Vec3> decoded = decode_draco(result.bytes, n);
+  double max_error = 0.0;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    max_error = std::max(max_error, (decoded[i] - deltas[i]).cwiseAbs().maxCoeff());
+  }
+  result.max_error = float_at_least(max_error);  // reported ≥ actual
+  return result;
+}
+
+std::vector<Vec3> decode_deltas(const EncodedDeltas& encoded) {
+  if (encoded.bytes.empty()) return std::vector<Vec3>(encoded.count, Vec3::Zero());
+  return decode_draco(encoded.bytes, encoded.count);
+}
+
+}  // namespace filigree

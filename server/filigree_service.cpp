@@ -1,0 +1,364 @@
+#include "server/filigree_service.h"
+
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <thread>
+
+#include <spdlog/spdlog.h>
+
+#include "mesh/mesh_io.h"
+#include "mesh/mesh_validation.h"
+#include "preprocess/preprocess.h"
+#include "runtime/pose.h"
+#include "server/stream_writer.h"
+
+namespace filigree::server {
+namespace {
+
+std::string metadata(const grpc::CallbackServerContext& context, const char* key) {
+  const auto& md = context.client_metadata();
+  const auto it = md.find(key);
+  return it == md.end() ? std::string() : std::string(it->second.data(), it->second.size());
+}
+
+grpc::ServerUnaryReactor* finish_unary(grpc::CallbackServerContext* context, const grpc::Status& status) {
+  auto* reactor = context->DefaultReactor();
+  reactor->Finish(status);
+  return reactor;
+}
+
+}  // namespace
+
+grpc::Status authorize(SessionRegistry& registry, const grpc::CallbackServerContext& context, const std::string& id,
+                       Role needed, std::shared_ptr<Session>* session) {
+  const std::string session_id = id.empty() ? metadata(context, "x-session-id") : id;
+  if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "no session id (field session_id or x-session-id metadata)"};
+  *session = registry.find(session_id);
+  if (!*session) return {grpc::StatusCode::NOT_FOUND, "no session '" + session_id + "'"};
+  const std::string token = metadata(context, "x-filigree-token");
+  if (token.empty()) return {grpc::StatusCode::UNAUTHENTICATED, "missing x-filigree-token metadata"};
+  const Role role = (*session)->authorize(token);
+  if (role == Role::kNone) return {grpc::StatusCode::PERMISSION_DENIED, "the token is not valid for session " + session_id};
+  if (needed == Role::kEditor && role != Role::kEditor)
+    return {grpc::StatusCode::PERMISSION_DENIED, "a viewer token cannot change session " + session_id};
+  return grpc::Status::OK;
+}
+
+FiligreeService::FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits)
+    : registry_(registry), cache_(cache), limits_(limits) {}
+
+FiligreeService::~FiligreeService() { drain(); }
+
+bool FiligreeService::begin_job() {
+  std::lock_guard lock(jobs_mutex_);
+  if (draining_) return false;
+  ++jobs_;
+  return true;
+}
+
+void FiligreeService::end_job() {
+  std::lock_guard lock(jobs_mutex_);
+  if (--jobs_ == 0) jobs_done_.notify_all();
+}
+
+void FiligreeService::drain() {
+  std::unique_lock lock(jobs_mutex_);
+  draining_ = true;
+  jobs_done_.wait(lock, [&] { return jobs_ == 0; });
+}
+
+// ------------------------------------------------------------ CreateSession
+
+namespace {
+
+class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse> {
+ public:
+  CreateReactor(FiligreeService& service) : service_(service), writer_(this) { StartRead(&request_); }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {  // the client half-closed: the upload is complete
+      if (!begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the upload sent no 'begin' message"});
+      return start_processing();
+    }
+    if (request_.has_begin()) {
+      if (begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "'begin' sent twice"});
+      begin_ = request_.begin();
+      begun_ = true;
+      if (begin_.total_bytes() > service_.limits().max_mesh_bytes)
+        return writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, too_large(begin_.total_bytes())});
+      bytes_.reserve(begin_.total_bytes());
+    } else {
+      if (!begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the first message must be 'begin'"});
+      bytes_ += request_.chunk();
+      if (bytes_.size() > service_.limits().max_mesh_bytes)
+        return writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, too_large(bytes_.size())});
+    }
+    StartRead(&request_);
+  }
+
+  void OnWriteDone(bool ok) override { writer_.on_write_done(ok); }
+  void OnCancel() override { writer_.finish(grpc::Status::CANCELLED); }
+  void OnDone() override {
+    if (job_.joinable()) job_.join();
+    delete this;
+  }
+
+ private:
+  std::string too_large(std::uint64_t n) const {
+    return "mesh of " + std::to_string(n) + " bytes is over the server's limit of " +
+           std::to_string(service_.limits().max_mesh_bytes) + " bytes (--max-mesh-bytes)";
+  }
+
+  void progress(const char* stage, double fraction) {
+    v1::CreateSessionResponse r;
+    r.mutable_progress()->set_stage(stage);
+    r.mutable_progress()->set_fraction(fraction);
+    writer_.send(std::move(r), /*droppable=*/true);
+  }
+
+  // Parsing and preprocessing can take seconds: never on a gRPC thread.
+  void start_processing() {
+    if (!service_.begin_job()) return writer_.finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+    job_ = std::thread([this] {
+      writer_.finish(process());
+      service_.end_job();
+    });
+  }
+
+  grpc::Status process() {
+    try {
+      progress("validating", 0.0);
+      const TriMesh input = read_mesh_from_memory(bytes_, begin_.format());
+      if (input.vertex_count() > service_.limits().max_vertices)
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED, "mesh has " + std::to_string(input.vertex_count()) +
+                                                          " vertices, over the server's limit of " +
+                                                          std::to_string(service_.limits().max_vertices)};
+      RepairReport repair;
+      const TriMesh mesh = repair_mesh(input, {}, &repair);
+      std::vector<Index> uploaded_ids;
+      if (repair.removed_unreferenced_vertices > 0 || repair.welded_vertices > 0) uploaded_ids = repair.new_to_old_vertex;
+
+      const v1::SessionOptions& o = begin_.options();
+      PreprocessOptions pre;
+      if (o.base_vertices() > 0) pre.base_vertices = o.base_vertices();
+      if (o.base_ratio() > 0.0) pre.ratio = o.base_ratio();
+      pre.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+      pre.progress = [this](double f) { progress("simplifying", f); };
+      if (o.quantization_bits() != 0 && (o.quantization_bits() < 8 || o.quantization_bits() > 24))
+        return {grpc::StatusCode::INVALID_ARGUMENT, "quantization_bits must be between 8 and 24"};
+      if (!(o.threshold() >= 0.0) || std::isinf(o.threshold()))
+        return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+
+      std::string key;
+      bool built = false;
+      auto h = service_.cache().get_or_build(mesh, pre, &key, &built);
+      progress("starting", 1.0);
+      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids));
+      v1::CreateSessionResponse r;
+      auto* created = r.mutable_created();
+      *created->mutable_info() = session->info();
+      const SessionRecord record = session->record();
+      created->set_editor_token(record.editor_token);
+      created->set_viewer_token(record.viewer_token);
+      created->set_cached(!built);
+      writer_.send(std::move(r), /*droppable=*/false);
+      spdlog::info("event=upload_done session={} bytes={} vertices={} cached={}", session->id(), bytes_.size(),
+                   mesh.vertex_count(), !built);
+      return grpc::Status::OK;
+    } catch (const MeshIoError& e) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    } catch (const InvalidMeshError& e) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    } catch (const std::invalid_argument& e) {
+      return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    } catch (const TooManySessions& e) {
+      return {grpc::StatusCode::RESOURCE_EXHAUSTED, e.what()};
+    } catch (const std::exception& e) {
+      spdlog::error("event=upload_failed error=\"{}\"", e.what());
+      return {grpc::StatusCode::INTERNAL, e.what()};
+    }
+  }
+
+  FiligreeService& service_;
+  StreamWriter<CreateReactor, v1::CreateSessionResponse> writer_;
+  v1::CreateSessionRequest request_;
+  v1::CreateSessionRequest::Begin begin_;
+  bool begun_ = false;
+  std::string bytes_;
+  std::thread job_;
+};
+
+// ------------------------------------------------------------ Drive, Watch
+
+// A stream of frames with a mailbox of one: offer() replaces what is waiting,
+// so a slow client skips frames, and never blocks the session.
+template <class Reactor>
+class FrameStream : public FrameSink {
+ public:
+  FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {}
+
+  void offer(std::shared_ptr<const PublishedFrame> frame) override {
+    v1::Frame out = frame->frame;
+    if (driver_) {
+      const auto it = frame->pose_of_driver.find(driver_);
+      out.set_pose_id(it == frame->pose_of_driver.end() ? 0 : it->second);
+    }
+    writer_.send(std::move(out), /*droppable=*/true);
+  }
+  void close(bool session_closed) override {
+    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+  }
+  StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
+
+ private:
+  StreamWriter<Reactor, v1::Frame> writer_;
+  const std::uint64_t driver_;
+};
+
+class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {
+ public:
+  DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
+      : service_(service), context_(context), driver_(service.next_driver_id()),
+        stream_(std::make_shared<FrameStream<DriveReactor>>(this, driver_)) {
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) return stream_->writer().finish(grpc::Status::OK);  // the client is done driving
+    if (!session_) {
+      const grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
+      if (!status.ok()) {
+        session_.reset();
+        return stream_->writer().finish(status);
+      }
+      session_->subscribe(stream_, session_->version());
+    }
+    try {
+      session_->submit(driver_, request_.client_name(), request_.pose_id(),
+                       {request_.indices().data(), static_cast<std::size_t>(request_.indices().size())},
+                       {request_.positions().data(), static_cast<std::size_t>(request_.positions().size())});
+    } catch (const PoseError& e) {
+      return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
+    }
+    StartRead(&request_);
+  }
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
+  void OnDone() override {
+    if (session_) {
+      session_->unsubscribe(stream_.get());
+      session_->driver_left(driver_);
+    }
+    stream_->writer().detach();
+    delete this;
+  }
+
+ private:
+  FiligreeService& service_;
+  grpc::CallbackServerContext* context_;
+  const std::uint64_t driver_;
+  std::shared_ptr<FrameStream<DriveReactor>> stream_;
+  std::shared_ptr<Session> session_;
+  v1::DriveRequest request_;
+};
+
+class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
+ public:
+  WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const v1::WatchRequest& request)
+      : stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
+    const grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
+    if (!status.ok()) {
+      session_.reset();
+      stream_->writer().finish(status);
+      return;
+    }
+    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
+    session_->subscribe(stream_, request.after_version() == 0 ? std::nullopt
+                                                              : std::optional<std::uint64_t>(request.after_version()));
+  }
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
+  void OnDone() override {
+    if (session_) session_->unsubscribe(stream_.get());
+    stream_->writer().detach();
+    delete this;
+  }
+
+ private:
+  std::shared_ptr<FrameStream<WatchReactor>> stream_;
+  std::shared_ptr<Session> session_;
+};
+
+}  // namespace
+
+grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* FiligreeService::CreateSession(
+    grpc::CallbackServerContext*) {
+  return new CreateReactor(*this);
+}
+
+grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* FiligreeService::Drive(grpc::CallbackServerContext* context) {
+  return new DriveReactor(*this, context);
+}
+
+grpc::ServerWriteReactor<v1::Frame>* FiligreeService::Watch(grpc::CallbackServerContext* context,
+                                                            const v1::WatchRequest* request) {
+  return new WatchReactor(*this, context, *request);
+}
+
+// ------------------------------------------------------------ unary calls
+
+grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context,
+                                                       const v1::JoinSessionRequest* request, v1::SessionInfo* response) {
+  std::shared_ptr<Session> s;
+  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
+  if (status.ok()) *response = s->info();
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context,
+                                                    const v1::GetStateRequest* request, v1::SessionState* response) {
+  std::shared_ptr<Session> s;
+  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
+  if (status.ok()) *response = s->state();
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context,
+                                                      const v1::SetOptionsRequest* request, v1::SessionInfo* response) {
+  std::shared_ptr<Session> s;
+  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
+  if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
+    status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+  if (status.ok()) {
+    s->set_threshold(request->threshold(), request->whole_mesh());
+    *response = s->info();
+  }
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerContext* context,
+                                                        const v1::CloseSessionRequest* request, v1::CloseSessionResponse*) {
+  std::shared_ptr<Session> s;
+  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
+  if (status.ok()) registry_.close(s->id());
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::ListSessions(grpc::CallbackServerContext* context,
+                                                        const v1::ListSessionsRequest*, v1::ListSessionsResponse* response) {
+  for (const auto& s : registry_.loaded()) {
+    auto* e = response->add_sessions();
+    const v1::SessionInfo info = s->info();
+    e->set_session_id(info.session_id());
+    e->set_mesh_hash(info.mesh_hash());
+    e->set_vertex_count(info.rest().vertex_count());
+    e->set_base_vertex_count(static_cast<std::uint32_t>(info.base().original_ids_size()));
+    e->set_version(info.version());
+    e->set_drivers(static_cast<std::uint32_t>(s->drivers()));
+    e->set_watchers(static_cast<std::uint32_t>(s->subscriber_count()));
+  }
+  return finish_unary(context, grpc::Status::OK);
+}
+
+}  // namespace filigree::server

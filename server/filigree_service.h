@@ -1,0 +1,70 @@
+#pragma once
+// The filigree.v1.Filigree service on gRPC's callback API: every RPC is a
+// reactor; nothing blocks a gRPC thread (preprocessing runs on its own thread).
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+#include "server/hierarchy_cache.h"
+#include "server/session_registry.h"
+
+namespace filigree::server {
+
+struct ServiceLimits {
+  std::uint64_t max_mesh_bytes = 256ull << 20;
+  std::uint64_t max_vertices = 5'000'000;
+};
+
+class FiligreeService final : public v1::Filigree::CallbackService {
+ public:
+  FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits);
+  ~FiligreeService() override;
+
+  // Refuses new uploads and waits for running ones to finish.
+  void drain();
+
+  grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* CreateSession(
+      grpc::CallbackServerContext* context) override;
+  grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const v1::JoinSessionRequest* request,
+                                        v1::SessionInfo* response) override;
+  grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* Drive(grpc::CallbackServerContext* context) override;
+  grpc::ServerWriteReactor<v1::Frame>* Watch(grpc::CallbackServerContext* context,
+                                             const v1::WatchRequest* request) override;
+  grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,
+                                     v1::SessionState* response) override;
+  grpc::ServerUnaryReactor* SetOptions(grpc::CallbackServerContext* context, const v1::SetOptionsRequest* request,
+                                       v1::SessionInfo* response) override;
+  grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context, const v1::CloseSessionRequest* request,
+                                         v1::CloseSessionResponse* response) override;
+  grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context, const v1::ListSessionsRequest* request,
+                                         v1::ListSessionsResponse* response) override;
+
+  SessionRegistry& registry() { return registry_; }
+  HierarchyCache& cache() { return cache_; }
+  const ServiceLimits& limits() const { return limits_; }
+  // Background uploads: counted so drain() can wait for them.
+  bool begin_job();
+  void end_job();
+  std::uint64_t next_driver_id() { return ++driver_ids_; }
+
+ private:
+  SessionRegistry& registry_;
+  HierarchyCache& cache_;
+  const ServiceLimits limits_;
+  std::atomic<std::uint64_t> driver_ids_{0};
+  std::mutex jobs_mutex_;
+  std::condition_variable jobs_done_;
+  int jobs_ = 0;
+  bool draining_ = false;
+};
+
+// Looks up the session and checks the token in the call's metadata
+// (x-filigree-token) against `needed`. Returns OK and sets *session, or the
+// status to answer with: NOT_FOUND, UNAUTHENTICATED, PERMISSION_DENIED.
+grpc::Status authorize(SessionRegistry& registry, const grpc::CallbackServerContext& context, const std::string& id,
+                       Role needed, std::shared_ptr<Session>* session);
+
+}  // namespace filigree::server

@@ -1,0 +1,313 @@
+#include "server/session.h"
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include <spdlog/spdlog.h>
+
+#include "codec/delta_codec.h"
+#include "runtime/deformer.h"
+#include "runtime/pose.h"
+
+namespace filigree::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+DeformerOptions deformer_options(const v1::SessionOptions& o) {
+  DeformerOptions d;
+  d.threshold = o.whole_mesh() ? DeformerOptions::kInfinity : o.threshold();
+  // One compute thread per session: sessions run side by side.
+  d.threads = 1;
+  return d;
+}
+
+void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::FrameStats& out) {
+  out.set_cut_nodes(static_cast<std::uint32_t>(s.cut_nodes));
+  out.set_regions(static_cast<std::uint32_t>(s.regions));
+  out.set_largest_region(static_cast<std::uint32_t>(s.region_sizes.empty() ? 0 : s.region_sizes.front()));
+  out.set_region_vertices(static_cast<std::uint32_t>(s.region_vertices));
+  out.set_threshold(s.threshold);
+  out.set_performance_estimate(s.performance_estimate);
+  out.set_factorizations(static_cast<std::uint32_t>(s.factorizations));
+  out.set_rotations_ms(s.rotations_ms);
+  out.set_cut_update_ms(s.cut_update_ms);
+  out.set_recover_ms(s.recover_ms);
+  out.set_regions_ms(s.regions_ms);
+  out.set_compute_ms(s.total_ms);
+  out.set_encode_ms(encode_ms);
+  out.set_encoded_bytes(static_cast<std::uint32_t>(bytes));
+}
+
+}  // namespace
+
+Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy)
+    : hierarchy_(std::move(hierarchy)), record_(std::move(record)), last_activity_(Clock::now()) {
+  const Hierarchy& h = *hierarchy_;
+  const TriMesh base = h.base_mesh();
+  for (const Vec3& p : base.positions)
+    for (int k = 0; k < 3; ++k) base_.add_positions(static_cast<float>(p[k]));
+  for (const Triangle& f : base.faces)
+    for (Index v : f) base_.add_faces(v);
+  for (Index v : h.base_vertices) base_.add_original_ids(v);
+  rest_.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
+  for (const Vec3& p : h.rest_positions)
+    for (int k = 0; k < 3; ++k) rest_.add_positions(static_cast<float>(p[k]));
+  for (FaceId f = 0; f < h.original_face_count; ++f)
+    for (Index v : h.faces[f]) rest_.add_faces(v);
+  for (Index v : record_.uploaded_ids) rest_.add_uploaded_ids(v);
+  if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base_.positions().begin(), base_.positions().end());
+  if (record_.options.quantization_bits() == 0) record_.options.set_quantization_bits(14);
+
+  deformer_ = std::make_unique<Deformer>(h, deformer_options(record_.options));
+  // The current frame exists from the start: the rest mesh, or after a
+  // restart the latest pose, under the version it had.
+  compute_once(true);
+  worker_ = std::thread([this] { run(); });
+}
+
+Session::~Session() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (worker_.joinable()) worker_.join();
+}
+
+Role Session::authorize(const std::string& token) const {
+  if (token.empty()) return Role::kNone;
+  if (token == record_.editor_token) return Role::kEditor;
+  if (token == record_.viewer_token) return Role::kViewer;
+  return Role::kNone;
+}
+
+void Session::touch() { last_activity_ = Clock::now(); }
+
+void Session::submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
+                     std::span<const std::uint32_t> indices, std::span<const float> positions) {
+  const std::size_t m = hierarchy_->base_vertices.size();
+  const std::size_t count = indices.empty() ? m : indices.size();
+  if (positions.size() != 3 * count)
+    throw PoseError("pose has " + std::to_string(positions.size()) + " coordinates for " + std::to_string(count) +
+                    (indices.empty() ? " base vertices (a full pose)" : " indices") + "; expected " + std::to_string(3 * count));
+  for (std::size_t i = 0; i < indices.size(); ++i)
+    if (indices[i] >= m)
+      throw PoseError("pose index " + std::to_string(indices[i]) + " at position " + std::to_string(i) +
+                      " is out of range: the base mesh has " + std::to_string(m) + " vertices");
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!std::isfinite(positions[i])) throw PoseError("pose coordinate " + std::to_string(i) + " is not finite (NaN or Inf)");
+
+  {
+    std::lock_guard lock(mutex_);
+    if (closed_) return;
+    for (std::size_t i = 0; i < count; ++i) {
+      const std::size_t v = indices.empty() ? i : indices[i];
+      for (int k = 0; k < 3; ++k) record_.pose[3 * v + k] = positions[3 * i + k];
+    }
+    latest_pose_of_driver_[driver] = pose_id;
+    v1::Change& change = changes_[client_name];
+    change.set_client_name(client_name);
+    change.set_pose_id(pose_id);
+    change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
+    pending_ = true;
+    touch();
+  }
+  wake_.notify_one();
+}
+
+void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<std::uint64_t> after_version) {
+  std::shared_ptr<const PublishedFrame> now;
+  {
+    std::lock_guard lock(mutex_);
+    if (closed_) {
+      sink->close(true);
+      return;
+    }
+    sinks_.push_back(sink);
+    if (current_ && (!after_version || current_->frame.version() > *after_version)) now = current_;
+    touch();
+  }
+  if (now) sink->offer(now);
+}
+
+void Session::unsubscribe(const FrameSink* sink) {
+  std::lock_guard lock(mutex_);
+  std::erase_if(sinks_, [&](const std::weak_ptr<FrameSink>& w) {
+    const auto s = w.lock();
+    return !s || s.get() == sink;
+  });
+  touch();
+}
+
+void Session::driver_left(std::uint64_t driver) {
+  std::lock_guard lock(mutex_);
+  latest_pose_of_driver_.erase(driver);
+}
+
+void Session::set_threshold(double threshold, bool whole_mesh) {
+  {
+    std::lock_guard lock(mutex_);
+    record_.options.set_threshold(threshold);
+    record_.options.set_whole_mesh(whole_mesh);
+    pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
+    pending_ = true;
+    touch();
+  }
+  wake_.notify_one();
+}
+
+void Session::close() {
+  std::vector<std::shared_ptr<FrameSink>> sinks;
+  {
+    std::lock_guard lock(mutex_);
+    closed_ = true;
+    stopping_ = true;
+    for (const auto& w : sinks_)
+      if (auto s = w.lock()) sinks.push_back(s);
+    sinks_.clear();
+  }
+  wake_.notify_all();
+  for (const auto& s : sinks) s->close(true);
+}
+
+void Session::close_streams() {
+  std::vector<std::shared_ptr<FrameSink>> sinks;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& w : sinks_)
+      if (auto s = w.lock()) sinks.push_back(s);
+    sinks_.clear();
+  }
+  for (const auto& s : sinks) s->close(false);
+}
+
+void Session::run() {
+  while (true) {
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait(lock, [&] { return pending_ || stopping_; });
+      if (stopping_) return;
+    }
+    compute_once(false);
+  }
+}
+
+void Session::compute_once(bool keep_version) {
+  const Hierarchy& h = *hierarchy_;
+  const std::size_t m = h.base_vertices.size();
+  Pose pose;
+  pose.positions.resize(m);
+  std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+  std::map<std::string, v1::Change> changes;
+  std::optional<double> threshold;
+  std::uint32_t bits;
+  {
+    std::lock_guard lock(mutex_);
+    pending_ = false;
+    for (std::size_t i = 0; i < m; ++i)
+      pose.positions[i] = Vec3(record_.pose[3 * i], record_.pose[3 * i + 1], record_.pose[3 * i + 2]);
+    pose_of_driver = latest_pose_of_driver_;
+    changes.swap(changes_);
+    threshold.swap(pending_threshold_);
+    bits = record_.options.quantization_bits();
+  }
+  try {
+    if (threshold) deformer_->set_threshold(*threshold);
+    // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
+    bool at_rest = true;
+    for (std::size_t i = 0; i < m && at_rest; ++i)
+      for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == base_.positions(static_cast<int>(3 * i + k));
+    const DeformResult r = at_rest ? DeformResult{h.rest_positions, {}} : deformer_->deform(pose);
+    const auto t = Clock::now();
+    std::vector<Vec3> deltas(h.vertex_count());
+    for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] = r.positions[i] - h.rest_positions[i];
+    const EncodedDeltas enc = encode_deltas(deltas, bits);
+    const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+
+    auto published = std::make_shared<PublishedFrame>();
+    v1::Frame& f = published->frame;
+    f.set_deltas(enc.bytes);
+    f.set_vertex_count(enc.count);
+    f.set_quantization_bits(enc.bits);
+    f.set_delta_min(enc.min);
+    f.set_delta_range(enc.range);
+    f.set_max_error(enc.max_error);
+    for (auto& [name, change] : changes) *f.add_changes() = change;
+    fill_stats(r.stats, encode_ms, enc.bytes.size(), *f.mutable_stats());
+    published->pose_of_driver = std::move(pose_of_driver);
+
+    std::vector<std::shared_ptr<FrameSink>> sinks;
+    {
+      std::lock_guard lock(mutex_);
+      if (!keep_version) ++record_.version;
+      f.set_version(record_.version);
+      current_ = published;
+      touch();
+      std::erase_if(sinks_, [](const std::weak_ptr<FrameSink>& w) { return w.expired(); });
+      for (const auto& w : sinks_)
+        if (auto s = w.lock()) sinks.push_back(s);
+    }
+    for (const auto& s : sinks) s->offer(published);
+  } catch (const std::exception& e) {
+    // A compute failure must not take the server down; the session keeps
+    // its last frame and logs why.
+    spdlog::error("session={} event=compute_failed error=\"{}\"", record_.id, e.what());
+  }
+}
+
+v1::SessionInfo Session::info() const {
+  v1::SessionInfo info;
+  std::lock_guard lock(mutex_);
+  info.set_session_id(record_.id);
+  info.set_mesh_hash(record_.hierarchy_key.substr(0, 16));
+  *info.mutable_base() = base_;
+  *info.mutable_rest() = rest_;
+  *info.mutable_options() = record_.options;
+  info.set_version(record_.version);
+  return info;
+}
+
+v1::SessionState Session::state() const {
+  v1::SessionState s;
+  std::lock_guard lock(mutex_);
+  s.set_version(record_.version);
+  for (float c : record_.pose) s.add_pose(c);
+  if (current_) *s.mutable_frame() = current_->frame;
+  return s;
+}
+
+SessionRecord Session::record() const {
+  std::lock_guard lock(mutex_);
+  return record_;
+}
+
+std::shared_ptr<const PublishedFrame> Session::current_frame() const {
+  std::lock_guard lock(mutex_);
+  return current_;
+}
+
+std::size_t Session::subscriber_count() const {
+  std::lock_guard lock(mutex_);
+  std::size_t n = 0;
+  for (const auto& w : sinks_) n += w.expired() ? 0 : 1;
+  return n;
+}
+
+double Session::idle_seconds() const {
+  std::lock_guard lock(mutex_);
+  return std::chrono::duration<double>(Clock::now() - last_activity_).count();
+}
+
+std::uint64_t Session::version() const {
+  std::lock_guard lock(mutex_);
+  return record_.version;
+}
+
+std::size_t Session::drivers() const {
+  std::lock_guard lock(mutex_);
+  return latest_pose_of_driver_.size();
+}
+
+}  // namespace filigree::server

@@ -1,0 +1,127 @@
+#pragma once
+// One session: a hierarchy, its deformer, the merged pose of every driver, and
+// the frames fanned out to every subscriber (DESIGN §3).
+//
+// Threading: submit() and subscribe() are called from gRPC threads; one
+// worker thread per session computes, so there is one compute at a time per
+// session, and poses that arrive meanwhile are coalesced (newest write per base
+// vertex wins). Each subscriber has a mailbox of one, so a slow one skips
+// frames without delaying anyone.
+
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <span>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "filigree/v1/filigree.pb.h"
+#include "hierarchy/hierarchy.h"
+
+namespace filigree {
+class Deformer;
+}
+
+namespace filigree::server {
+
+enum class Role { kNone, kViewer, kEditor };
+
+// A frame as published: encoded once, shared by every subscriber. Drivers
+// learn which of their poses it includes from pose_of_driver.
+struct PublishedFrame {
+  v1::Frame frame;
+  std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+};
+
+// A subscriber's mailbox; implemented by the streaming reactors.
+class FrameSink {
+ public:
+  virtual ~FrameSink() = default;
+  // Called with every new frame, from the session's worker; must not block.
+  virtual void offer(std::shared_ptr<const PublishedFrame> frame) = 0;
+  // The session is closing: finish the stream.
+  virtual void close(bool session_closed) = 0;
+};
+
+// What is persisted of a session (DESIGN §3, issue: sessions survive restarts).
+struct SessionRecord {
+  std::string id;
+  std::string hierarchy_key;
+  v1::SessionOptions options;
+  std::string editor_token, viewer_token;
+  std::vector<float> pose;  // 3·m, base order
+  std::uint64_t version = 0;
+  std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
+};
+
+class Session {
+ public:
+  // Computes the current frame, then starts the worker.
+  Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy);
+  ~Session();
+  Session(const Session&) = delete;
+  Session& operator=(const Session&) = delete;
+
+  const std::string& id() const { return record_.id; }
+  Role authorize(const std::string& token) const;
+
+  // Merges a full (indices empty) or partial pose from `driver`. Throws
+  // PoseError (→ INVALID_ARGUMENT) for a wrong length, an index out of range or
+  // NaN/Inf, without changing anything.
+  void submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
+              std::span<const std::uint32_t> indices, std::span<const float> positions);
+
+  // Registers a subscriber; it is offered the current frame at once if its
+  // version is newer than `after_version` (always, when that is nullopt).
+  void subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<std::uint64_t> after_version);
+  void unsubscribe(const FrameSink* sink);
+  // A driver's stream ended: it no longer counts as a driver.
+  void driver_left(std::uint64_t driver);
+
+  void set_threshold(double threshold, bool whole_mesh);
+  // Finishes every stream; the session computes nothing more.
+  void close();
+  // Finishes every stream as the server shuts down (UNAVAILABLE); state stays.
+  void close_streams();
+
+  v1::SessionInfo info() const;
+  v1::SessionState state() const;
+  SessionRecord record() const;
+  std::shared_ptr<const PublishedFrame> current_frame() const;
+  std::size_t subscriber_count() const;
+  // Seconds since the last request or frame.
+  double idle_seconds() const;
+  std::uint64_t version() const;
+  std::size_t drivers() const;
+
+ private:
+  void run();
+  // Computes and publishes a frame of the current merged pose; the version
+  // grows by one unless `keep_version` (the frame made when (re)loading).
+  void compute_once(bool keep_version);
+  void touch();
+
+  const std::shared_ptr<const Hierarchy> hierarchy_;
+  std::unique_ptr<Deformer> deformer_;
+  v1::BaseMesh base_;
+  v1::RestMesh rest_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  SessionRecord record_;
+  bool pending_ = false, stopping_ = false, closed_ = false;
+  std::optional<double> pending_threshold_;
+  std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;
+  std::map<std::string, v1::Change> changes_;  // since the last frame, by client
+  std::vector<std::weak_ptr<FrameSink>> sinks_;
+  std::shared_ptr<const PublishedFrame> current_;
+  std::chrono::steady_clock::time_point last_activity_;
+  std::thread worker_;
+};
+
+}  // namespace filigree::server

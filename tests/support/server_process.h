@@ -1,0 +1,29 @@
+#pragma once
+// Runs filigree-server as a child process on 127.0.0.1 with an ephemeral
+// port, for end-to-end tests: started by the test, stopped by it.
+
+#include <string>
+#include <vector>
+
+namespace filigree::test {
+
+class ServerProcess {
+ public:
+  // Starts `binary --listen 127.0.0.1:0 <args>` and waits for its
+  // "listening on HOST:PORT" line. Throws std::runtime_error if it exits first.
+  ServerProcess(const std::string& binary, const std::vector<std::string>& args);
+  // Kills the server (SIGKILL) if it is still running.
+  ~ServerProcess();
+  ServerProcess(const ServerProcess&) = delete;
+  ServerProcess& operator=(const ServerProcess&) = delete;
+
+  const std::string& address() const { return address_; }
+  // Sends SIGTERM and waits; returns the exit status (0 for a clean drain).
+  int terminate();
+
+ private:
+  int pid_ = -1;
+  std::string address_;
+};
+
+}  // namespace filigree::test

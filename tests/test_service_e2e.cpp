@@ -1,0 +1,466 @@
+// filigree-server end to end, over gRPC on loopback, against the contract
+// alone (generated stubs): upload, drive, watch, merge, auth, errors, limits,
+// restart, the hierarchy cache.
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "codec/delta_codec.h"
+#include "filigree/v1/filigree.grpc.pb.h"
+#include "hierarchy/hierarchy.h"
+#include "mesh/mesh_io.h"
+#include "preprocess/preprocess.h"
+#include "runtime/deformer.h"
+#include "runtime/procedural_motion.h"
+#include "support/server_process.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+using test::ServerProcess;
+
+std::string file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+struct Created {
+  grpc::Status status;
+  v1::CreateSessionResponse::Created created;
+  int progress_messages = 0;
+};
+
+class ServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    data_dir_ = std::filesystem::path(::testing::TempDir()) /
+                ("filigree_e2e_" + std::to_string(::getpid()) + "_" + ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(data_dir_);
+    start({});
+  }
+  void TearDown() override {
+    server_.reset();
+    std::filesystem::remove_all(data_dir_);
+  }
+  void start(std::vector<std::string> extra) {
+    extra.insert(extra.end(), {"--data-dir", data_dir_.string()});
+    server_ = std::make_unique<ServerProcess>(FILIGREE_SERVER_BINARY, extra);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    stub_ = v1::Filigree::NewStub(channel_);
+  }
+
+  static std::unique_ptr<grpc::ClientContext> context(const std::string& session, const std::string& token) {
+    auto c = std::make_unique<grpc::ClientContext>();
+    if (!token.empty()) c->AddMetadata("x-filigree-token", token);
+    if (!session.empty()) c->AddMetadata("x-session-id", session);
+    return c;
+  }
+
+  Created upload(const std::string& bytes, const std::string& format, std::uint32_t base_vertices = 150) {
+    Created out;
+    grpc::ClientContext ctx;
+    auto stream = stub_->CreateSession(&ctx);
+    v1::CreateSessionRequest begin;
+    begin.mutable_begin()->set_format(format);
+    begin.mutable_begin()->set_total_bytes(bytes.size());
+    begin.mutable_begin()->mutable_options()->set_base_vertices(base_vertices);
+    begin.mutable_begin()->set_client_name("test");
+    stream->Write(begin);
+    // Small chunks so the upload really is streamed.
+    for (std::size_t at = 0; at < bytes.size(); at += 16384) {
+      v1::CreateSessionRequest chunk;
+      chunk.set_chunk(bytes.substr(at, 16384));
+      if (!stream->Write(chunk)) break;
+    }
+    stream->WritesDone();
+    v1::CreateSessionResponse r;
+    while (stream->Read(&r)) {
+      if (r.has_progress()) ++out.progress_messages;
+      if (r.has_created()) out.created = r.created();
+    }
+    out.status = stream->Finish();
+    return out;
+  }
+
+  // Preprocesses bunny_small the way the server does, for local references.
+  static const Hierarchy& local_hierarchy() {
+    static const Hierarchy h = [] {
+      PreprocessOptions o;
+      o.base_vertices = 150;
+      return preprocess(test::shipped_mesh("bunny_small.obj"), o);
+    }();
+    return h;
+  }
+
+  static std::vector<float> pose_floats(const Pose& p) {
+    std::vector<float> out;
+    for (const Vec3& v : p.positions) out.insert(out.end(), {float(v.x()), float(v.y()), float(v.z())});
+    return out;
+  }
+
+  static std::vector<Vec3> decode(const v1::Frame& f) {
+    EncodedDeltas e;
+    e.bytes = f.deltas();
+    e.count = f.vertex_count();
+    e.bits = f.quantization_bits();
+    e.min = f.delta_min();
+    e.range = f.delta_range();
+    return decode_deltas(e);
+  }
+
+  std::filesystem::path data_dir_;
+  std::unique_ptr<ServerProcess> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::Filigree::Stub> stub_;
+};
+
+const std::string kBunny = test::shipped_path("bunny_small.obj");
+
+TEST_F(ServiceTest, DrivenFramesDecodeToTheLocalDeformation) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok()) << c.status.error_message();
+  EXPECT_GT(c.progress_messages, 0);
+  EXPECT_FALSE(c.created.cached());
+  const v1::SessionInfo& info = c.created.info();
+  ASSERT_EQ(info.base().original_ids_size(), 150);
+  ASSERT_EQ(info.rest().vertex_count(), 1839u);
+
+  const Hierarchy& h = local_hierarchy();
+  ASSERT_EQ(std::vector<Index>(info.base().original_ids().begin(), info.base().original_ids().end()), h.base_vertices);
+  const Pose pose = procedural_pose(h.base_mesh().positions, Motion::kBend, 1.0);
+  // The server receives float32 positions: deform the same rounded pose here.
+  Pose rounded = pose;
+  for (Vec3& v : rounded.positions) v = v.cast<float>().cast<double>();
+  Deformer local(h);
+  const std::vector<Vec3> expected = local.deform(rounded).positions;
+
+  auto ctx = context(info.session_id(), c.created.editor_token());
+  auto drive = stub_->Drive(ctx.get());
+  v1::DriveRequest req;
+  req.set_session_id(info.session_id());
+  req.set_pose_id(7);
+  req.set_client_name("engine");
+  for (float x : pose_floats(pose)) req.add_positions(x);
+  ASSERT_TRUE(drive->Write(req));
+  v1::Frame frame;
+  do {
+    ASSERT_TRUE(drive->Read(&frame));
+  } while (frame.pose_id() != 7);
+  drive->WritesDone();
+  while (drive->Read(&frame)) {
+  }
+  ASSERT_TRUE(drive->Finish().ok());
+
+  EXPECT_GE(frame.version(), 1u);
+  ASSERT_EQ(frame.changes_size(), 1);
+  EXPECT_EQ(frame.changes(0).client_name(), "engine");
+  const std::vector<Vec3> deltas = decode(frame);
+  ASSERT_EQ(deltas.size(), expected.size());
+  double worst = 0.0;
+  for (std::size_t i = 0; i < deltas.size(); ++i) {
+    const Vec3 rest(info.rest().positions(3 * i), info.rest().positions(3 * i + 1), info.rest().positions(3 * i + 2));
+    worst = std::max(worst, (rest + deltas[i] - expected[i]).cwiseAbs().maxCoeff());
+  }
+  // Quantization error, plus float32 rounding of rest positions and deltas.
+  EXPECT_LE(worst, frame.max_error() + 1e-5 * bounding_box_diagonal(h.rest_positions)) << "max_error " << frame.max_error();
+  EXPECT_GT(frame.max_error(), 0.0f);
+}
+
+TEST_F(ServiceTest, TwoPartialDriversThreeWatchersOneOfThemStalled) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok()) << c.status.error_message();
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token(), viewer = c.created.viewer_token();
+  const std::size_t m = 150;
+
+  std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
+  std::vector<std::unique_ptr<grpc::ClientReader<v1::Frame>>> watchers;
+  for (int w = 0; w < 3; ++w) {
+    contexts.push_back(context(id, viewer));
+    v1::WatchRequest wr;
+    wr.set_session_id(id);
+    watchers.push_back(stub_->Watch(contexts.back().get(), wr));
+  }
+  // Every watcher gets the current (rest) frame first.
+  for (auto& w : watchers) {
+    v1::Frame f;
+    ASSERT_TRUE(w->Read(&f));
+    EXPECT_EQ(f.version(), 0u);
+  }
+
+  // Driver A moves the first half of the base vertices, B the second half.
+  const Pose rest = procedural_pose(local_hierarchy().base_mesh().positions, Motion::kBend, 0.0);
+  auto ctx_a = context(id, editor), ctx_b = context(id, editor);
+  auto a = stub_->Drive(ctx_a.get());
+  auto b = stub_->Drive(ctx_b.get());
+  const int kPoses = 20;
+  std::vector<float> expected = pose_floats(rest);
+  for (int p = 1; p <= kPoses; ++p) {
+    struct Part {
+      grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>* drv;
+      const char* name;
+      std::size_t lo, hi;
+    };
+    for (const Part& part : {Part{a.get(), "alice", 0, m / 2}, Part{b.get(), "bob", m / 2, m}}) {
+      auto* drv = part.drv;
+      const char* name = part.name;
+      const std::size_t lo = part.lo, hi = part.hi;
+      v1::DriveRequest r;
+      r.set_session_id(id);
+      r.set_pose_id(p);
+      r.set_client_name(name);
+      for (std::size_t v = lo; v < hi; ++v) {
+        r.add_indices(static_cast<std::uint32_t>(v));
+        const float offset = 0.01f * p * (name[0] == 'a' ? 1.0f : -1.0f);
+        for (int k = 0; k < 3; ++k) {
+          const float x = static_cast<float>(rest.positions[v][k]) + (k == 1 ? offset : 0.0f);
+          r.add_positions(x);
+          expected[3 * v + k] = x;
+        }
+      }
+      ASSERT_TRUE(drv->Write(r));
+    }
+  }
+  // Each driver reads until its last pose is answered.
+  for (auto* drv : {a.get(), b.get()}) {
+    v1::Frame f;
+    do {
+      ASSERT_TRUE(drv->Read(&f));
+    } while (f.pose_id() != kPoses);
+    drv->WritesDone();
+    while (drv->Read(&f)) {
+    }
+    ASSERT_TRUE(drv->Finish().ok());
+  }
+
+  // The merged pose: newest write per base vertex, from both drivers.
+  v1::SessionState state;
+  auto sctx = context(id, viewer);
+  v1::GetStateRequest gr;
+  gr.set_session_id(id);
+  ASSERT_TRUE(stub_->GetState(sctx.get(), gr, &state).ok());
+  ASSERT_EQ(state.pose_size(), static_cast<int>(3 * m));
+  for (std::size_t i = 0; i < 3 * m; ++i) ASSERT_EQ(state.pose(static_cast<int>(i)), expected[i]) << i;
+  const std::uint64_t final_version = state.version();
+  ASSERT_GE(final_version, 1u);
+
+  // Watchers 0 and 1 read on and reach the final version with strictly
+  // increasing versions, while watcher 2 has not read anything since the rest frame.
+  for (int w = 0; w < 2; ++w) {
+    v1::Frame f;
+    std::uint64_t last = 0;
+    do {
+      ASSERT_TRUE(watchers[w]->Read(&f));
+      EXPECT_GT(f.version(), last);
+      last = f.version();
+    } while (f.version() < final_version);
+    EXPECT_EQ(f.version(), final_version);
+  }
+  // The stalled watcher resumes: it skips (mailbox of one) and gets the newest.
+  {
+    v1::Frame f;
+    std::uint64_t last = 0;
+    int reads = 0;
+    do {
+      ASSERT_TRUE(watchers[2]->Read(&f));
+      EXPECT_GT(f.version(), last);
+      last = f.version();
+      ++reads;
+    } while (f.version() < final_version);
+    EXPECT_EQ(f.version(), final_version);
+  }
+  for (auto& c2 : contexts) c2->TryCancel();
+  for (auto& w : watchers) w->Finish();
+
+  // The frame names who changed what.
+  bool saw_alice = false, saw_bob = false;
+  for (const auto& ch : state.frame().changes()) {
+    saw_alice |= ch.client_name() == "alice";
+    saw_bob |= ch.client_name() == "bob";
+  }
+  EXPECT_TRUE(saw_alice || saw_bob);
+
+  // A late joiner gets the current state at once.
+  auto late_ctx = context(id, viewer);
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  auto late = stub_->Watch(late_ctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(late->Read(&f));
+  EXPECT_EQ(f.version(), final_version);
+  late_ctx->TryCancel();
+  late->Finish();
+}
+
+TEST_F(ServiceTest, TokensAreChecked) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id();
+  v1::JoinSessionRequest jr;
+  jr.set_session_id(id);
+  v1::SessionInfo info;
+  EXPECT_EQ(stub_->JoinSession(context(id, "").get(), jr, &info).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(stub_->JoinSession(context(id, "not-a-token").get(), jr, &info).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_TRUE(stub_->JoinSession(context(id, c.created.viewer_token()).get(), jr, &info).ok());
+  EXPECT_EQ(info.base().original_ids_size(), 150);
+
+  // A viewer may not drive.
+  auto ctx = context(id, c.created.viewer_token());
+  auto drive = stub_->Drive(ctx.get());
+  v1::DriveRequest r;
+  r.set_session_id(id);
+  drive->Write(r);
+  drive->WritesDone();
+  v1::Frame f;
+  while (drive->Read(&f)) {
+  }
+  EXPECT_EQ(drive->Finish().error_code(), grpc::StatusCode::PERMISSION_DENIED);
+
+  v1::CloseSessionRequest cr;
+  cr.set_session_id(id);
+  v1::CloseSessionResponse close_response;
+  EXPECT_EQ(stub_->CloseSession(context(id, c.created.viewer_token()).get(), cr, &close_response).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+}
+
+TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  auto try_pose = [&](const v1::DriveRequest& r) {
+    auto ctx = context(id, editor);
+    auto drive = stub_->Drive(ctx.get());
+    drive->Write(r);
+    drive->WritesDone();
+    v1::Frame f;
+    std::uint64_t answered = 0;
+    while (drive->Read(&f)) answered = std::max(answered, f.pose_id());
+    return std::make_pair(drive->Finish(), answered);
+  };
+  v1::DriveRequest short_pose;
+  short_pose.set_session_id(id);
+  short_pose.set_pose_id(1);
+  for (int i = 0; i < 30; ++i) short_pose.add_positions(0.0f);
+  auto [status, answered] = try_pose(short_pose);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("30 coordinates"), std::string::npos) << status.error_message();
+
+  v1::DriveRequest bad_index;
+  bad_index.set_session_id(id);
+  bad_index.add_indices(150);
+  bad_index.add_positions(0.0f), bad_index.add_positions(0.0f), bad_index.add_positions(0.0f);
+  EXPECT_EQ(try_pose(bad_index).first.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  v1::DriveRequest nan_pose;
+  nan_pose.set_session_id(id);
+  nan_pose.add_indices(3);
+  nan_pose.add_positions(std::nanf("")), nan_pose.add_positions(0.0f), nan_pose.add_positions(0.0f);
+  const auto nan_status = try_pose(nan_pose).first;
+  EXPECT_EQ(nan_status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(nan_status.error_message().find("not finite"), std::string::npos);
+
+  // A good pose still gets its frame.
+  v1::DriveRequest good;
+  good.set_session_id(id);
+  good.set_pose_id(42);
+  good.add_indices(3);
+  good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
+  auto ctx = context(id, editor);
+  auto drive = stub_->Drive(ctx.get());
+  ASSERT_TRUE(drive->Write(good));
+  v1::Frame f;
+  do {
+    ASSERT_TRUE(drive->Read(&f));
+  } while (f.pose_id() != 42);
+  drive->WritesDone();
+  while (drive->Read(&f)) {
+  }
+  EXPECT_TRUE(drive->Finish().ok());
+}
+
+TEST_F(ServiceTest, UnknownSessionIsNotFound) {
+  v1::GetStateRequest r;
+  r.set_session_id("0123456789abcdef0123");
+  v1::SessionState s;
+  const grpc::Status status = stub_->GetState(context("", "some-token").get(), r, &s);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_NE(status.error_message().find("0123456789abcdef0123"), std::string::npos);
+}
+
+TEST_F(ServiceTest, BadAndOversizedMeshesAreRefused) {
+  const Created garbage = upload("this is not an obj file\nf 1 2 9\n", "obj");
+  EXPECT_EQ(garbage.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  const Created nan = upload("v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n", "obj");
+  EXPECT_EQ(nan.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(nan.status.error_message().find("NaN"), std::string::npos) << nan.status.error_message();
+
+  server_->terminate();
+  start({"--max-mesh-bytes", "1000"});
+  const Created big = upload(file_bytes(kBunny), "obj");
+  EXPECT_EQ(big.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(big.status.error_message().find("--max-mesh-bytes"), std::string::npos);
+}
+
+TEST_F(ServiceTest, SameMeshTwiceIsPreprocessedOnce) {
+  const Created first = upload(file_bytes(kBunny), "obj");
+  const Created second = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(first.status.ok() && second.status.ok());
+  EXPECT_FALSE(first.created.cached());
+  EXPECT_TRUE(second.created.cached());
+  EXPECT_NE(first.created.info().session_id(), second.created.info().session_id());
+  EXPECT_EQ(first.created.info().mesh_hash(), second.created.info().mesh_hash());
+  std::size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(data_dir_ / "hierarchies")) files += e.path().extension() == ".fgh";
+  EXPECT_EQ(files, 1u);
+}
+
+TEST_F(ServiceTest, SessionsSurviveARestart) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  {
+    auto ctx = context(id, editor);
+    auto drive = stub_->Drive(ctx.get());
+    v1::DriveRequest r;
+    r.set_session_id(id);
+    r.set_pose_id(5);
+    r.add_indices(10);
+    r.add_positions(1.5f), r.add_positions(-2.0f), r.add_positions(0.25f);
+    ASSERT_TRUE(drive->Write(r));
+    v1::Frame f;
+    do {
+      ASSERT_TRUE(drive->Read(&f));
+    } while (f.pose_id() != 5);
+    drive->WritesDone();
+    while (drive->Read(&f)) {
+    }
+    ASSERT_TRUE(drive->Finish().ok());
+  }
+  v1::SessionState before;
+  v1::GetStateRequest gr;
+  gr.set_session_id(id);
+  ASSERT_TRUE(stub_->GetState(context(id, editor).get(), gr, &before).ok());
+  ASSERT_GE(before.version(), 1u);
+
+  EXPECT_EQ(server_->terminate(), 0) << "SIGTERM must drain and exit 0";
+  start({});
+  v1::SessionState after;
+  ASSERT_TRUE(stub_->GetState(context(id, editor).get(), gr, &after).ok());
+  EXPECT_EQ(after.version(), before.version());
+  ASSERT_EQ(after.pose_size(), before.pose_size());
+  for (int i = 0; i < after.pose_size(); ++i) ASSERT_EQ(after.pose(i), before.pose(i));
+  EXPECT_EQ(after.pose(30), 1.5f);
+  EXPECT_EQ(after.frame().version(), before.version());
+  EXPECT_EQ(after.frame().deltas(), before.frame().deltas());
+}
+
+}  // namespace
+}  // namespace filigree
