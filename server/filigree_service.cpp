@@ -9,6 +9,7 @@
 
 #include "mesh/mesh_io.h"
 #include "mesh/mesh_validation.h"
+#include "mesh/vertex_order.h"
 #include "preprocess/preprocess.h"
 #include "runtime/pose.h"
 #include "server/stream_writer.h"
@@ -135,9 +136,14 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
                                                           " vertices, over the server's limit of " +
                                                           std::to_string(service_.limits().max_vertices)};
       RepairReport repair;
-      const TriMesh mesh = repair_mesh(input, {}, &repair);
-      std::vector<Index> uploaded_ids;
-      if (repair.removed_unreferenced_vertices > 0 || repair.welded_vertices > 0) uploaded_ids = repair.new_to_old_vertex;
+      const TriMesh repaired = repair_mesh(input, {}, &repair);
+      // Sessions order vertices along a space-filling curve: frames then
+      // compress to about half the size, and recovery reads memory in order.
+      // SessionInfo.rest.uploaded_ids states the mapping to the upload.
+      const std::vector<Index> order = locality_order(repaired.positions);
+      const TriMesh mesh = permute_vertices(repaired, order);
+      std::vector<Index> uploaded_ids(order.size());
+      for (std::size_t i = 0; i < order.size(); ++i) uploaded_ids[i] = repair.new_to_old_vertex[order[i]];
 
       const v1::SessionOptions& o = begin_.options();
       PreprocessOptions pre;

@@ -40,6 +40,18 @@ void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::Fr
   out.set_encoded_bytes(static_cast<std::uint32_t>(bytes));
 }
 
+// The fewest bits (8…24) whose half quantization step over the deltas' range
+// stays within kAutomaticError of the diagonal (Frame.quantization_bits).
+constexpr double kAutomaticError = 5e-5;
+std::uint32_t automatic_bits(const std::vector<Vec3>& deltas, double diagonal) {
+  double lo = 0.0, hi = 0.0;
+  for (const Vec3& d : deltas) lo = std::min(lo, d.minCoeff()), hi = std::max(hi, d.maxCoeff());
+  const double steps = (hi - lo) / (2.0 * kAutomaticError * std::max(diagonal, 1e-300));
+  std::uint32_t bits = 8;
+  while (bits < 24 && static_cast<double>((1u << bits) - 1) < steps) ++bits;
+  return bits;
+}
+
 }  // namespace
 
 Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy)
@@ -58,7 +70,7 @@ Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarch
     for (Index v : h.faces[f]) rest_.add_faces(v);
   for (Index v : record_.uploaded_ids) rest_.add_uploaded_ids(v);
   if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base_.positions().begin(), base_.positions().end());
-  if (record_.options.quantization_bits() == 0) record_.options.set_quantization_bits(14);
+  rest_diagonal_ = bounding_box_diagonal(h.rest_positions);
 
   deformer_ = std::make_unique<Deformer>(h, deformer_options(record_.options));
   // The current frame exists from the start: the rest mesh, or after a
@@ -223,7 +235,7 @@ void Session::compute_once(bool keep_version) {
     const auto t = Clock::now();
     std::vector<Vec3> deltas(h.vertex_count());
     for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] = r.positions[i] - h.rest_positions[i];
-    const EncodedDeltas enc = encode_deltas(deltas, bits);
+    const EncodedDeltas enc = encode_deltas(deltas, bits ? bits : automatic_bits(deltas, rest_diagonal_));
     const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 
     auto published = std::make_shared<PublishedFrame>();

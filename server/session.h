@@ -110,6 +110,7 @@ class Session {
   std::unique_ptr<Deformer> deformer_;
   v1::BaseMesh base_;
   v1::RestMesh rest_;
+  double rest_diagonal_ = 1.0;
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;

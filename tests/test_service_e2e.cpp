@@ -15,6 +15,7 @@
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "hierarchy/hierarchy.h"
 #include "mesh/mesh_io.h"
+#include "mesh/vertex_order.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
 #include "runtime/procedural_motion.h"
@@ -92,11 +93,13 @@ class ServiceTest : public ::testing::Test {
   }
 
   // Preprocesses bunny_small the way the server does, for local references.
+  // Sessions order vertices along a space-filling curve (locality_order).
   static const Hierarchy& local_hierarchy() {
     static const Hierarchy h = [] {
+      const TriMesh uploaded = test::shipped_mesh("bunny_small.obj");
       PreprocessOptions o;
       o.base_vertices = 150;
-      return preprocess(test::shipped_mesh("bunny_small.obj"), o);
+      return preprocess(permute_vertices(uploaded, locality_order(uploaded.positions)), o);
     }();
     return h;
   }
@@ -134,6 +137,13 @@ TEST_F(ServiceTest, DrivenFramesDecodeToTheLocalDeformation) {
   ASSERT_EQ(info.base().original_ids_size(), 150);
   ASSERT_EQ(info.rest().vertex_count(), 1839u);
 
+  // The stated mapping leads back to the uploaded vertices.
+  const TriMesh uploaded = test::shipped_mesh("bunny_small.obj");
+  ASSERT_EQ(info.rest().uploaded_ids_size(), 1839);
+  for (int i = 0; i < 1839; ++i) {
+    const Vec3& p = uploaded.positions[info.rest().uploaded_ids(i)];
+    for (int k = 0; k < 3; ++k) ASSERT_EQ(info.rest().positions(3 * i + k), static_cast<float>(p[k]));
+  }
   const Hierarchy& h = local_hierarchy();
   ASSERT_EQ(std::vector<Index>(info.base().original_ids().begin(), info.base().original_ids().end()), h.base_vertices);
   const Pose pose = procedural_pose(h.base_mesh().positions, Motion::kBend, 1.0);

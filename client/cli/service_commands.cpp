@@ -307,7 +307,7 @@ void add_service_commands(CLI::App& app) {
   auto* t = up->add_option("--threshold", u->threshold, "Performance threshold T of the cut (0: direct recovery only)")
                 ->check(CLI::NonNegativeNumber);
   up->add_flag("--whole-mesh", u->whole_mesh, "Whole-mesh optimisation (T = infinity)")->excludes(t);
-  up->add_option("--bits", u->bits, "Quantization bits of frame deltas (8-24, default 14)")->check(CLI::Range(8, 24));
+  up->add_option("--bits", u->bits, "Quantization bits of frame deltas (8-24; default: per frame, the fewest that keep the error within 5e-5 of the diagonal)")->check(CLI::Range(8, 24));
   up->add_option("--name", u->name, "Client name shown to other participants");
   up->callback([u] { upload(*u); });
 

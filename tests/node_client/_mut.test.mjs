@@ -1,0 +1,426 @@
+// A Filigree client written against proto/filigree/v1/filigree.proto alone,
+// with another gRPC implementation (@grpc/grpc-js + @grpc/proto-loader) and
+// Draco's official WASM decoder (draco3d): uploads a mesh, drives a pose,
+// decodes the frame and checks the access rules and the health service.
+//
+// Environment:
+//   FILIGREE_SERVER  path of the filigree-server binary
+//   FILIGREE_ROOT    the repository root (for the proto and tests/data)
+//
+// Run with `node --test` (Node 18 or newer); run.sh installs the packages first.
+
+import { after, before, describe, it } from 'node:test';
+import assert from 'node:assert/strict';
+import { spawn } from 'node:child_process';
+import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join } from 'node:path';
+import { createInterface } from 'node:readline';
+
+import * as grpc from '@grpc/grpc-js';
+import * as protoLoader from '@grpc/proto-loader';
+import draco3d from 'draco3d';
+import healthCheck from 'grpc-health-check';
+
+const SERVER = process.env.FILIGREE_SERVER;
+const ROOT = process.env.FILIGREE_ROOT;
+const MESH = ROOT && join(ROOT, 'tests', 'data', 'bunny_small.obj');
+const CHUNK_BYTES = 16 * 1024;
+const BASE_VERTICES = 150;
+const REST_VERTICES = 1839;
+const LIFT = 0.1;  // the pose moves every base vertex by (0, LIFT, 0)
+
+// One set of loader options for every proto: field names as in the .proto,
+// 64-bit integers as decimal strings (sent as strings too), enums as names,
+// unset fields present with their defaults, `kind` naming the oneof member set.
+const LOADER_OPTIONS = { keepCase: true, longs: String, enums: String, defaults: true, oneofs: true };
+
+const HOOK_TIMEOUT_MS = 30_000;
+const TEST_TIMEOUT_MS = 60_000;
+const STOP_TIMEOUT_MS = 20_000;
+
+// ------------------------------------------------------------------ helpers
+
+// Starts filigree-server on a free loopback port; resolves with the address
+// once it prints "listening on HOST:PORT" on stdout, rejects if it exits first.
+function startServer(binary, dataDir) {
+  const child = spawn(binary, ['--listen', '127.0.0.1:0', '--data-dir', dataDir, '--log-level', 'warn'], {
+    stdio: ['ignore', 'pipe', 'pipe'],
+  });
+  let stderr = '';
+  child.stderr.on('data', (d) => { stderr += d; });
+  const exited = new Promise((resolve) => {
+    child.on('exit', (code, signal) => resolve({ code, signal }));
+    child.on('error', (error) => resolve({ code: null, signal: null, error }));
+  });
+  // Should this process die without running `after`, the server goes with it.
+  const killOnExit = () => child.kill('SIGKILL');
+  process.on('exit', killOnExit);
+  exited.then(() => process.off('exit', killOnExit));
+  const address = new Promise((resolve, reject) => {
+    const lines = createInterface({ input: child.stdout });
+    lines.on('line', (line) => {
+      const m = /^listening on (\S+:\d+)$/.exec(line);
+      if (m) resolve(m[1]);
+    });
+    child.on('error', reject);
+    exited.then(({ code, signal, error }) =>
+      reject(new Error(`filigree-server exited (code ${code}, signal ${signal}${error ? `, ${error.message}` : ''}) ` +
+                       `before listening: ${stderr}`)));
+  });
+  return { child, address, exited };
+}
+
+function metadata(entries) {
+  const md = new grpc.Metadata();
+  for (const [key, value] of Object.entries(entries)) md.set(key, value);
+  return md;
+}
+
+// Resolves with the status of a finished call, rejects with the call's error.
+function callStatus(call) {
+  return new Promise((resolve, reject) => {
+    call.on('error', reject);
+    call.on('status', (status) => { if (status.code === grpc.status.OK) resolve(status); });
+  });
+}
+
+// Reads a server stream to its end: resolves with every message once both the
+// end of the stream and an OK status are seen; rejects on an error status.
+function collect(call) {
+  const messages = [];
+  call.on('data', (m) => messages.push(m));
+  const ended = new Promise((resolve) => call.on('end', resolve));
+  return Promise.all([callStatus(call), ended]).then(() => messages);
+}
+
+// Resolves with the first message of a stream that satisfies `accept`;
+// rejects if the stream ends or fails first.
+function firstMessage(call, accept) {
+  return new Promise((resolve, reject) => {
+    call.on('data', (m) => { if (accept(m)) resolve(m); });
+    call.on('error', reject);
+    call.on('end', () => reject(new Error('the stream ended before the expected message')));
+  });
+}
+
+// Rejects unless the call fails with `code`; resolves with the error.
+function expectCode(promise, code) {
+  return promise.then(
+    () => assert.fail(`expected status ${code}, the call succeeded`),
+    (err) => {
+      assert.equal(err.code, code, `expected status ${code}, got ${err.code}: ${err.details}`);
+      return err;
+    });
+}
+
+function unary(client, method, request, md) {
+  return new Promise((resolve, reject) => {
+    client[method](request, md, (err, response) => (err ? reject(err) : resolve(response)));
+  });
+}
+
+// Writes with back-pressure: waits for 'drain' when the stream asks to.
+function write(call, message) {
+  return new Promise((resolve) => { if (call.write(message)) resolve(); else call.once('drain', resolve); });
+}
+
+// Opens a Drive stream, sends one full pose (pose_id 1), returns the first
+// frame that includes it, then half-closes and waits for the OK status.
+async function driveFullPose(client, md, sessionId, positions, openCalls) {
+  const call = client.Drive(md);
+  openCalls.push(call);
+  const frame = firstMessage(call, (f) => f.pose_id === '0');
+  const status = callStatus(call);
+  await write(call, { pose_id: '1', session_id: sessionId, indices: [], positions, client_name: 'node-e2e' });
+  const result = await frame;
+  call.end();
+  await status;
+  return result;
+}
+
+// Decodes Frame.deltas (a Draco point cloud, one float32×3 attribute) into a
+// Float32Array of 3·vertex_count values; an empty buffer means all zeros.
+function decodeDeltas(M, frame) {
+  const n = frame.vertex_count;
+  if (frame.deltas.length === 0) return new Float32Array(3 * n);
+  const bytes = new Int8Array(frame.deltas.buffer, frame.deltas.byteOffset, frame.deltas.byteLength);
+  // Draco header: "DRACO", major, minor, encoder type (0 point cloud), method
+  // (0 sequential: decoded point i is encoded point i, so vertex i).
+  assert.equal(Buffer.from(frame.deltas.subarray(0, 5)).toString('latin1'), 'DRACO');
+  assert.equal(frame.deltas[7], 0, 'geometry type is a point cloud');
+  assert.equal(frame.deltas[8], 0, 'point cloud encoding is sequential');
+  const decoder = new M.Decoder();
+  const cloud = new M.PointCloud();
+  const values = new M.DracoFloat32Array();
+  try {
+    const status = decoder.DecodeArrayToPointCloud
+      ? decoder.DecodeArrayToPointCloud(bytes, bytes.byteLength, cloud)
+      : (() => {  // older draco3d API
+          const buffer = new M.DecoderBuffer();
+          buffer.Init(bytes, bytes.byteLength);
+          try { return decoder.DecodeBufferToPointCloud(buffer, cloud); } finally { M.destroy(buffer); }
+        })();
+    assert.ok(status.ok(), `Draco decoding failed: ${status.error_msg()}`);
+    assert.equal(cloud.num_points(), n, 'one point per original vertex');
+    assert.equal(cloud.num_attributes(), 1, 'one attribute');
+    const attribute = decoder.GetAttribute(cloud, 0);
+    assert.equal(attribute.num_components(), 3, 'the attribute is float×3');
+    assert.ok(decoder.GetAttributeFloatForAllPoints(cloud, attribute, values), 'reading the attribute');
+    assert.equal(values.size(), 3 * n);
+    const out = new Float32Array(3 * n);
+    for (let i = 0; i < out.length; ++i) out[i] = values.GetValue(i);
+    return out;
+  } finally {
+    M.destroy(values);
+    M.destroy(cloud);
+    M.destroy(decoder);
+  }
+}
+
+// ------------------------------------------------------------------ tests
+
+describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS }, () => {
+  let server;       // { child, address, exited }
+  let dataDir;
+  let client;       // filigree.v1.Filigree
+  let health;       // grpc.health.v1.Health
+  let draco;        // the draco3d decoder module
+  const openCalls = [];  // streams to cancel in `after` if a test left them open
+  // Set by the tests in order; a later test fails at once if an earlier one did.
+  let created;      // CreateSessionResponse.Created
+  let drivenFrame;  // the Drive frame with pose_id 1
+
+  const sessionMd = (token) => metadata({ 'x-session-id': created.info.session_id, 'x-filigree-token': token });
+  const needSession = () => assert.ok(created, 'needs the session made by the CreateSession test');
+
+  before(async () => {
+    assert.ok(SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
+    assert.ok(ROOT, 'set FILIGREE_ROOT to the repository root');
+    dataDir = mkdtempSync(join(tmpdir(), 'filigree-node-e2e-'));
+    server = startServer(SERVER, dataDir);
+    const address = await server.address;
+
+    const filigree = grpc.loadPackageDefinition(protoLoader.loadSync('filigree/v1/filigree.proto', {
+      ...LOADER_OPTIONS, includeDirs: [join(ROOT, 'proto')],
+    }));
+    const healthPkg = grpc.loadPackageDefinition(protoLoader.loadSync(healthCheck.protoPath, LOADER_OPTIONS));
+    client = new filigree.filigree.v1.Filigree(address, grpc.credentials.createInsecure());
+    health = new healthPkg.grpc.health.v1.Health(address, grpc.credentials.createInsecure());
+    draco = await draco3d.createDecoderModule({});
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  after(async () => {
+    for (const call of openCalls) call.cancel();
+    client?.close();
+    health?.close();
+    if (server && server.child.pid !== undefined && server.child.exitCode === null && server.child.signalCode === null) {
+      server.child.kill('SIGTERM');
+      // Bounded: a server that does not stop on SIGTERM is killed and the hook fails.
+      let timer;
+      const stopped = await Promise.race([
+        server.exited,
+        new Promise((resolve) => { timer = setTimeout(() => resolve(null), STOP_TIMEOUT_MS); }),
+      ]);
+      clearTimeout(timer);
+      if (stopped === null) server.child.kill('SIGKILL');
+      rmSync(dataDir, { recursive: true, force: true });
+      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
+      assert.equal(stopped.signal, null, 'filigree-server was not killed by a signal');
+      assert.equal(stopped.code, 0, 'filigree-server exits 0 on SIGTERM');
+    }
+    if (dataDir) rmSync(dataDir, { recursive: true, force: true });
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  it('answers the standard health check with SERVING', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const response = await unary(health, 'Check', { service: '' }, new grpc.Metadata());
+    assert.equal(response.status, 'SERVING');
+  });
+
+  it('creates a session from an OBJ uploaded in 16 KiB chunks', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const bytes = readFileSync(MESH);
+    const call = client.CreateSession(new grpc.Metadata());
+    openCalls.push(call);
+    const responses = collect(call);
+    await write(call, {
+      begin: {
+        format: 'obj',
+        total_bytes: String(bytes.length),
+        options: { base_vertices: BASE_VERTICES },
+        client_name: 'node-e2e',
+      },
+    });
+    for (let offset = 0; offset < bytes.length; offset += CHUNK_BYTES) {
+      await write(call, { chunk: bytes.subarray(offset, offset + CHUNK_BYTES) });
+    }
+    call.end();
+    const messages = await responses;
+
+    const progress = messages.filter((m) => m.kind === 'progress');
+    const createdMessages = messages.filter((m) => m.kind === 'created');
+    assert.ok(progress.length > 0, 'Progress messages before Created');
+    for (const p of progress) {
+      assert.ok(p.progress.stage.length > 0, 'a progress stage is named');
+      assert.ok(p.progress.fraction >= 0 && p.progress.fraction <= 1, `fraction ${p.progress.fraction} in [0, 1]`);
+    }
+    assert.equal(createdMessages.length, 1, 'exactly one Created');
+    assert.equal(messages.at(-1).kind, 'created', 'Created is the last message');
+
+    const c = createdMessages[0].created;
+    assert.ok(c.editor_token.length > 0, 'an editor token');
+    assert.ok(c.viewer_token.length > 0, 'a viewer token');
+    assert.notEqual(c.editor_token, c.viewer_token);
+    assert.ok(c.info.session_id.length > 0, 'a session id');
+    assert.match(c.info.mesh_hash, /^[0-9a-f]{16}$/);
+    assert.equal(c.info.version, '0');
+    assert.equal(c.info.base.positions.length, 3 * BASE_VERTICES);
+    assert.equal(c.info.base.original_ids.length, BASE_VERTICES);
+    assert.ok(c.info.base.faces.length > 0 && c.info.base.faces.length % 3 === 0);
+    assert.equal(c.info.rest.vertex_count, REST_VERTICES);
+    assert.equal(c.info.rest.positions.length, 3 * REST_VERTICES);
+    // Base vertex i is original vertex original_ids[i], at the same rest position.
+    c.info.base.original_ids.forEach((id, i) => {
+      assert.ok(id < REST_VERTICES);
+      for (let k = 0; k < 3; ++k) assert.equal(c.info.base.positions[3 * i + k], c.info.rest.positions[3 * id + k]);
+    });
+    created = c;
+  });
+
+  it('joins the session with the viewer token', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    const info = await unary(client, 'JoinSession', { session_id: created.info.session_id },
+      sessionMd(created.viewer_token));
+    assert.equal(info.session_id, created.info.session_id);
+    assert.equal(info.mesh_hash, created.info.mesh_hash);
+    assert.equal(info.rest.vertex_count, REST_VERTICES);
+    assert.deepEqual(info.base.positions, created.info.base.positions);
+  });
+
+  it('drives a translated base and decodes a rigidly translated mesh', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    const positions = created.info.base.positions.map((v, i) => (i % 3 === 1 ? v + LIFT : v));
+    drivenFrame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
+      openCalls);
+
+    assert.equal(drivenFrame.vertex_count, REST_VERTICES);
+    assert.ok(BigInt(drivenFrame.version) >= 1n, `version ${drivenFrame.version} ≥ 1`);
+    assert.ok(drivenFrame.quantization_bits >= 8 && drivenFrame.quantization_bits <= 24);
+    assert.ok(drivenFrame.deltas.length > 0, 'a moved mesh has deltas');
+    const bound = drivenFrame.delta_range / (2 ** drivenFrame.quantization_bits - 1) / 2;
+    assert.ok(drivenFrame.max_error <= bound * (1 + 1e-6) + 1e-12,
+      `max_error ${drivenFrame.max_error} ≤ delta_range / (2^bits − 1) / 2 = ${bound}`);
+    const change = drivenFrame.changes.find((ch) => ch.client_name === 'node-e2e');
+    assert.ok(change, 'the frame names this client among the changes');
+    assert.equal(change.pose_id, '1');
+    assert.equal(change.vertex_count, BASE_VERTICES, 'a full pose moves every base vertex');
+
+    const deltas = decodeDeltas(draco, drivenFrame);
+    const tolerance = drivenFrame.max_error + 1e-5;
+    const expected = [0, LIFT, 0];
+    let worst = 0;
+    for (let i = 0; i < deltas.length; ++i) worst = Math.max(worst, Math.abs(deltas[i] - expected[i % 3]));
+    assert.ok(worst <= tolerance,
+      `every delta is (0, ${LIFT}, 0): worst coordinate error ${worst} > ${tolerance}`);
+  });
+
+  it('sends a late watcher with the viewer token the current frame at once', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    assert.ok(drivenFrame, 'needs the frame of the Drive test');
+    const call = client.Watch({ session_id: created.info.session_id, after_version: '0' },
+      sessionMd(created.viewer_token));
+    openCalls.push(call);
+    const frame = await firstMessage(call, () => true);
+    assert.equal(frame.version, drivenFrame.version, 'the current frame is the driven one');
+    assert.equal(frame.vertex_count, REST_VERTICES);
+    assert.deepEqual(Buffer.from(frame.deltas), Buffer.from(drivenFrame.deltas));
+    const cancelled = expectCode(new Promise((resolve, reject) => {
+      call.on('error', reject);
+      call.on('end', resolve);
+    }), grpc.status.CANCELLED);
+    call.cancel();
+    await cancelled;
+  });
+
+  it('reports the driven pose in GetState', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    assert.ok(drivenFrame, 'needs the frame of the Drive test');
+    const state = await unary(client, 'GetState', { session_id: created.info.session_id },
+      sessionMd(created.viewer_token));
+    assert.equal(state.version, drivenFrame.version);
+    assert.equal(state.pose.length, 3 * BASE_VERTICES);
+    state.pose.forEach((v, i) => {
+      const rest = created.info.base.positions[i];
+      assert.ok(Math.abs(v - (i % 3 === 1 ? rest + LIFT : rest)) <= 1e-5, `pose[${i}] = ${v}`);
+    });
+  });
+
+  // A rigid motion of the whole base moves the whole mesh rigidly too; unlike
+  // the translation, a rotation moves every vertex differently, so this also
+  // checks that decoded point i is original vertex i.
+  it('drives a rotated base and decodes a rigidly rotated mesh, vertex by vertex', { timeout: TEST_TIMEOUT_MS },
+    async () => {
+      needSession();
+      const base = created.info.base.positions;
+      const rest = created.info.rest.positions;
+      const m = base.length / 3;
+      const centre = [0, 1, 2].map((k) => base.filter((_, i) => i % 3 === k).reduce((a, b) => a + b, 0) / m);
+      const angle = Math.PI / 6;  // 30° about the y axis through the base's centroid
+      const [c, s] = [Math.cos(angle), Math.sin(angle)];
+      const rotate = (p, i) => {
+        const [x, y, z] = [p[3 * i] - centre[0], p[3 * i + 1], p[3 * i + 2] - centre[2]];
+        return [centre[0] + c * x + s * z, y, centre[2] - s * x + c * z];
+      };
+      const positions = [];
+      for (let i = 0; i < m; ++i) positions.push(...rotate(base, i));
+
+      const frame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
+        openCalls);
+      assert.equal(frame.vertex_count, REST_VERTICES);
+      const deltas = decodeDeltas(draco, frame);
+      const tolerance = frame.max_error + 1e-5;
+      let worst = 0;
+      let worstVertex = -1;
+      for (let i = 0; i < REST_VERTICES; ++i) {
+        const expected = rotate(rest, i);
+        for (let k = 0; k < 3; ++k) {
+          const error = Math.abs(rest[3 * i + k] + deltas[3 * i + k] - expected[k]);
+          if (error > worst) [worst, worstVertex] = [error, i];
+        }
+      }
+      assert.ok(worst <= tolerance,
+        `rest + delta is the rotated rest position: vertex ${worstVertex} is off by ${worst} > ${tolerance}`);
+    });
+
+  it('refuses a Drive with the viewer token (PERMISSION_DENIED)', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    const call = client.Drive(sessionMd(created.viewer_token));
+    openCalls.push(call);
+    const failed = expectCode(new Promise((resolve, reject) => {
+      call.on('data', () => reject(new Error('a viewer got a Drive frame')));
+      call.on('error', reject);
+      call.on('end', resolve);
+    }), grpc.status.PERMISSION_DENIED);
+    call.write({ pose_id: '1', session_id: created.info.session_id, positions: created.info.base.positions });
+    call.end();
+    await failed;
+  });
+
+  it('refuses a JoinSession without a token (UNAUTHENTICATED)', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    await expectCode(unary(client, 'JoinSession', { session_id: created.info.session_id },
+      metadata({ 'x-session-id': created.info.session_id })), grpc.status.UNAUTHENTICATED);
+  });
+
+  it('refuses a wrong token (PERMISSION_DENIED)', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    await expectCode(unary(client, 'JoinSession', { session_id: created.info.session_id },
+      sessionMd('not-a-token')), grpc.status.PERMISSION_DENIED);
+  });
+
+  it('answers NOT_FOUND for an unknown session', { timeout: TEST_TIMEOUT_MS }, async () => {
+    needSession();
+    await expectCode(unary(client, 'JoinSession', { session_id: 'no-such-session' },
+      metadata({ 'x-session-id': 'no-such-session', 'x-filigree-token': created.viewer_token })),
+    grpc.status.NOT_FOUND);
+  });
+});
