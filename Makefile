@@ -28,6 +28,7 @@ demo: build
 bench: build
 	$(BUILD)/bench/filigree_bench_preprocess
 	$(BUILD)/bench/filigree_bench_runtime
+	$(BUILD)/bench/filigree_bench_service
 
 clean:
 	rm -rf $(BUILD) out

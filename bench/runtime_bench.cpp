@@ -6,7 +6,7 @@
 // 12 timed frames oscillate around full strength, so the cut update works as
 // it does in use. Quality is measured on the last timed frame.
 //
-// Usage: filigree_bench_runtime [--quick] [--threads N]
+// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--threads N]
 //   --quick: only the shipped Armadillo (for a fast look).
 
 #include <chrono>
@@ -83,7 +83,7 @@ void compare_rotation_methods(const Hierarchy& h, const TriMesh& mesh, const std
         Deformer d(h, o);
         const DeformResult r = d.deform(pose);
         distortion[i] = edge_distortion(mesh, r.positions);
-        rotations_ms = r.stats.rotations_ms;
+        if (i == 0) rotations_ms = r.stats.rotations_ms;  // T = 0 needs no rotations
       }
       std::printf("| %s | %s | %.2f | %.3f%% | %.3f%% |\n", to_string(motion), to_string(method), rotations_ms,
                   100 * distortion[0], 100 * distortion[1]);
@@ -161,20 +161,22 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
 
 int main(int argc, char** argv) {
   using namespace filigree;
-  bool quick = false;
+  std::string only;  // camel, armadillo, dragon or large; empty: all
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   for (int i = 1; i < argc; ++i) {
-    if (!std::strcmp(argv[i], "--quick")) quick = true;
+    if (!std::strcmp(argv[i], "--quick")) only = "armadillo";
+    if (!std::strcmp(argv[i], "--mesh") && i + 1 < argc) only = argv[++i];
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
   }
   const std::string shared = FILIGREE_SHARED_DATA_DIR, repo = FILIGREE_REPO_DATA_DIR;
+  auto wanted = [&](const char* name) { return only.empty() || only == name; };
   std::printf("# Filigree runtime benchmark (%d threads; distances as %% of the bbox diagonal, to the T = ∞ result)\n", threads);
-  if (!quick && std::filesystem::exists(shared + "/camel.off"))
+  if (wanted("camel") && std::filesystem::exists(shared + "/camel.off"))
     bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads);
-  bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads);
-  if (quick) return 0;
-  if (std::filesystem::exists(shared + "/dragon.ply"))
+  if (wanted("armadillo")) bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads);
+  if (wanted("dragon") && std::filesystem::exists(shared + "/dragon.ply"))
     bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads);
-  bench::run_mesh("armadillo Loop x2 + sqrt3", bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1), threads);
+  if (wanted("large"))
+    bench::run_mesh("armadillo Loop x2 + sqrt3", bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1), threads);
   return 0;
 }

@@ -101,7 +101,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   void OnWriteDone(bool ok) override { writer_.on_write_done(ok); }
   void OnCancel() override { writer_.finish(grpc::Status::CANCELLED); }
   void OnDone() override {
-    if (job_.joinable()) job_.join();
+    // gRPC may run OnDone on the job's own thread (Finish called from it).
+    if (job_.joinable()) job_.get_id() == std::this_thread::get_id() ? job_.detach() : job_.join();
     delete this;
   }
 
@@ -122,8 +123,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   void start_processing() {
     if (!service_.begin_job()) return writer_.finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
     job_ = std::thread([this] {
-      writer_.finish(process());
+      const grpc::Status status = process();
       service_.end_job();
+      writer_.finish(status);  // the last touch of this reactor from the job
     });
   }
 

@@ -8,6 +8,7 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <grpcpp/grpcpp.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include "server/filigree_service.h"
@@ -29,6 +30,8 @@ int main(int argc, char** argv) {
   app.add_option("--idle-timeout", registry_limits.idle_seconds, "Seconds after which an idle session leaves memory (its record stays)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
   CLI11_PARSE(app, argc, argv);
+  // Logs go to stderr; stdout carries only the "listening on" line for scripts.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("filigree-server"));
   spdlog::set_level(spdlog::level::from_str(log_level));
   spdlog::set_pattern("%Y-%m-%dT%H:%M:%S.%e level=%l %v");
 

@@ -1,7 +1,8 @@
 // A Filigree client written against proto/filigree/v1/filigree.proto alone,
 // with another gRPC implementation (@grpc/grpc-js + @grpc/proto-loader) and
-// Draco's official WASM decoder (draco3d): uploads a mesh, drives a pose,
-// decodes the frame and checks the access rules and the health service.
+// Draco's official WASM decoder (draco3d): uploads a mesh, drives rigid poses,
+// decodes the frames and checks them vertex by vertex, the access rules and
+// the standard health service.
 //
 // Environment:
 //   FILIGREE_SERVER  path of the filigree-server binary
@@ -53,10 +54,25 @@ function startServer(binary, dataDir) {
     child.on('exit', (code, signal) => resolve({ code, signal }));
     child.on('error', (error) => resolve({ code: null, signal: null, error }));
   });
-  // Should this process die without running `after`, the server goes with it.
-  const killOnExit = () => child.kill('SIGKILL');
+  // Should this process exit without finishing `after`, the server and its
+  // data directory go with it.
+  const killOnExit = () => {
+    child.kill('SIGKILL');
+    try { rmSync(dataDir, { recursive: true, force: true }); } catch { /* best effort */ }
+  };
+  // A signal (the test runner or a timeout stopping this process) skips the
+  // 'exit' event unless handled.
+  const onSignal = (signal) => {
+    killOnExit();
+    process.exit(128 + (signal === 'SIGINT' ? 2 : signal === 'SIGHUP' ? 1 : 15));
+  };
+  const signals = ['SIGTERM', 'SIGINT', 'SIGHUP'];
   process.on('exit', killOnExit);
-  exited.then(() => process.off('exit', killOnExit));
+  for (const s of signals) process.on(s, onSignal);
+  exited.then(() => {
+    process.off('exit', killOnExit);
+    for (const s of signals) process.off(s, onSignal);
+  });
   const address = new Promise((resolve, reject) => {
     const lines = createInterface({ input: child.stdout });
     lines.on('line', (line) => {
@@ -123,6 +139,38 @@ function unary(client, method, request, md) {
 // Writes with back-pressure: waits for 'drain' when the stream asks to.
 function write(call, message) {
   return new Promise((resolve) => { if (call.write(message)) resolve(); else call.once('drain', resolve); });
+}
+
+// The `v x y z` positions of an OBJ file, flat.
+function objVertices(bytes) {
+  const out = [];
+  for (const line of bytes.toString('latin1').split('\n')) {
+    const f = line.trim().split(/\s+/);
+    if (f[0] === 'v') out.push(Number(f[1]), Number(f[2]), Number(f[3]));
+  }
+  return out;
+}
+
+// The length of the bounding-box diagonal of flat x y z positions.
+function diagonal(positions) {
+  let sum = 0;
+  for (let k = 0; k < 3; ++k) {
+    const axis = positions.filter((_, i) => i % 3 === k);
+    sum += (Math.max(...axis) - Math.min(...axis)) ** 2;
+  }
+  return Math.sqrt(sum);
+}
+
+// Checks the quantization fields of a frame of a session with default
+// options: the bits are picked per frame so that max_error ≤ 5e-5 of the
+// rest mesh's diagonal, and max_error is within the quantization bound.
+function checkQuantization(frame, restPositions) {
+  assert.ok(frame.quantization_bits >= 8 && frame.quantization_bits <= 24, `bits ${frame.quantization_bits}`);
+  const bound = frame.delta_range / (2 ** frame.quantization_bits - 1) / 2;
+  assert.ok(frame.max_error <= bound * (1 + 1e-6) + 1e-12,
+    `max_error ${frame.max_error} ≤ delta_range / (2^bits − 1) / 2 = ${bound}`);
+  const allowed = 5e-5 * diagonal(restPositions);
+  assert.ok(frame.max_error <= allowed * (1 + 1e-6), `max_error ${frame.max_error} ≤ 5e-5 of the diagonal = ${allowed}`);
 }
 
 // Opens a Drive stream, sends one full pose (pose_id 1), returns the first
@@ -278,6 +326,19 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     assert.ok(c.info.base.faces.length > 0 && c.info.base.faces.length % 3 === 0);
     assert.equal(c.info.rest.vertex_count, REST_VERTICES);
     assert.equal(c.info.rest.positions.length, 3 * REST_VERTICES);
+    // Session vertex i is uploaded vertex uploaded_ids[i] (nothing to repair
+    // in this mesh, so a permutation), at that vertex's position.
+    const uploaded = objVertices(bytes);
+    assert.equal(uploaded.length, 3 * REST_VERTICES);
+    assert.equal(c.info.rest.uploaded_ids.length, REST_VERTICES);
+    assert.equal(new Set(c.info.rest.uploaded_ids).size, REST_VERTICES, 'uploaded_ids is a permutation');
+    c.info.rest.uploaded_ids.forEach((id, i) => {
+      assert.ok(id < REST_VERTICES);
+      for (let k = 0; k < 3; ++k) {
+        assert.equal(c.info.rest.positions[3 * i + k], Math.fround(uploaded[3 * id + k]),
+          `session vertex ${i} is at uploaded vertex ${id}`);
+      }
+    });
     // Base vertex i is original vertex original_ids[i], at the same rest position.
     c.info.base.original_ids.forEach((id, i) => {
       assert.ok(id < REST_VERTICES);
@@ -304,11 +365,8 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
 
     assert.equal(drivenFrame.vertex_count, REST_VERTICES);
     assert.ok(BigInt(drivenFrame.version) >= 1n, `version ${drivenFrame.version} ≥ 1`);
-    assert.ok(drivenFrame.quantization_bits >= 8 && drivenFrame.quantization_bits <= 24);
     assert.ok(drivenFrame.deltas.length > 0, 'a moved mesh has deltas');
-    const bound = drivenFrame.delta_range / (2 ** drivenFrame.quantization_bits - 1) / 2;
-    assert.ok(drivenFrame.max_error <= bound * (1 + 1e-6) + 1e-12,
-      `max_error ${drivenFrame.max_error} ≤ delta_range / (2^bits − 1) / 2 = ${bound}`);
+    checkQuantization(drivenFrame, created.info.rest.positions);
     const change = drivenFrame.changes.find((ch) => ch.client_name === 'node-e2e');
     assert.ok(change, 'the frame names this client among the changes');
     assert.equal(change.pose_id, '1');
@@ -376,6 +434,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       const frame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
         openCalls);
       assert.equal(frame.vertex_count, REST_VERTICES);
+      checkQuantization(frame, rest);
       const deltas = decodeDeltas(draco, frame);
       const tolerance = frame.max_error + 1e-5;
       let worst = 0;
