@@ -324,6 +324,23 @@ grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerConte
   return finish_unary(context, status);
 }
 
+grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContext* context,
+                                                      const v1::DriveRequest* request, v1::SubmitPoseResponse* response) {
+  std::shared_ptr<Session> s;
+  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
+  if (status.ok()) {
+    try {
+      response->set_accepted_at_version(s->version());
+      s->submit(/*driver=*/0, request->client_name(), request->pose_id(),
+                {request->indices().data(), static_cast<std::size_t>(request->indices().size())},
+                {request->positions().data(), static_cast<std::size_t>(request->positions().size())});
+    } catch (const PoseError& e) {
+      status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    }
+  }
+  return finish_unary(context, status);
+}
+
 grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context,
                                                     const v1::GetStateRequest* request, v1::SessionState* response) {
   std::shared_ptr<Session> s;

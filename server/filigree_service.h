@@ -31,6 +31,8 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const v1::JoinSessionRequest* request,
                                         v1::SessionInfo* response) override;
   grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* Drive(grpc::CallbackServerContext* context) override;
+  grpc::ServerUnaryReactor* SubmitPose(grpc::CallbackServerContext* context, const v1::DriveRequest* request,
+                                       v1::SubmitPoseResponse* response) override;
   grpc::ServerWriteReactor<v1::Frame>* Watch(grpc::CallbackServerContext* context,
                                              const v1::WatchRequest* request) override;
   grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,

@@ -118,7 +118,7 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
       const std::size_t v = indices.empty() ? i : indices[i];
       for (int k = 0; k < 3; ++k) record_.pose[3 * v + k] = positions[3 * i + k];
     }
-    latest_pose_of_driver_[driver] = pose_id;
+    if (driver != 0) latest_pose_of_driver_[driver] = pose_id;  // 0: a unary pose, no stream to answer
     v1::Change& change = changes_[client_name];
     change.set_client_name(client_name);
     change.set_pose_id(pose_id);

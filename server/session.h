@@ -70,7 +70,8 @@ class Session {
   const std::string& id() const { return record_.id; }
   Role authorize(const std::string& token) const;
 
-  // Merges a full (indices empty) or partial pose from `driver`. Throws
+  // Merges a full (indices empty) or partial pose from `driver` (0: a unary
+  // call, no stream to name in frames). Throws
   // PoseError (→ INVALID_ARGUMENT) for a wrong length, an index out of range or
   // NaN/Inf, without changing anything.
   void submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,

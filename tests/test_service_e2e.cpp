@@ -474,3 +474,41 @@ TEST_F(ServiceTest, SessionsSurviveARestart) {
 
 }  // namespace
 }  // namespace filigree
+
+namespace filigree {
+namespace {
+
+TEST_F(ServiceTest, UnarySubmitPoseReachesWatchers) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token(), viewer = c.created.viewer_token();
+  auto wctx = context(id, viewer);
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  auto watch = stub_->Watch(wctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));  // the current (rest) frame
+
+  v1::DriveRequest pose;
+  pose.set_session_id(id);
+  pose.set_client_name("browser");
+  pose.add_indices(2);
+  pose.add_positions(0.5f), pose.add_positions(0.5f), pose.add_positions(0.5f);
+  v1::SubmitPoseResponse accepted;
+  ASSERT_TRUE(stub_->SubmitPose(context(id, editor).get(), pose, &accepted).ok());
+  do {
+    ASSERT_TRUE(watch->Read(&f));
+  } while (f.version() <= accepted.accepted_at_version());
+  ASSERT_EQ(f.changes_size(), 1);
+  EXPECT_EQ(f.changes(0).client_name(), "browser");
+  EXPECT_EQ(f.changes(0).vertex_count(), 1u);
+
+  EXPECT_EQ(stub_->SubmitPose(context(id, viewer).get(), pose, &accepted).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  pose.add_positions(1.0f);  // 4 coordinates for one index
+  EXPECT_EQ(stub_->SubmitPose(context(id, editor).get(), pose, &accepted).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  wctx->TryCancel();
+  watch->Finish();
+}
+
+}  // namespace
+}  // namespace filigree
