@@ -9,6 +9,7 @@ PACKAGES=(
   libeigen3-dev libopenmesh-dev libtinygltf-dev libdraco-dev libsuitesparse-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev
+  libboost-dev
 )
 
 missing=()

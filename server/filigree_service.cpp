@@ -330,7 +330,7 @@ grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContex
   grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
   if (status.ok()) {
     try {
-      response->set_accepted_at_version(s->version());
+      response->set_accepted_at_version(s->accepted_version());
       s->submit(/*driver=*/0, request->client_name(), request->pose_id(),
                 {request->indices().data(), static_cast<std::size_t>(request->indices().size())},
                 {request->positions().data(), static_cast<std::size_t>(request->positions().size())});
@@ -338,6 +338,31 @@ grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContex
       status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     }
   }
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContext* context,
+                                                      const v1::SetHandlesRequest* request, v1::SetHandlesResponse* response) {
+  std::shared_ptr<Session> s;
+  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
+  if (status.ok()) {
+    std::vector<std::pair<Index, Vec3>> handles;
+    for (const v1::Handle& h : request->handles()) handles.emplace_back(h.vertex(), Vec3(h.x(), h.y(), h.z()));
+    try {
+      response->set_accepted_at_version(s->accepted_version());
+      response->set_handles_in_session(static_cast<std::uint32_t>(s->set_handles(request->client_name(), handles)));
+    } catch (const PoseError& e) {
+      status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    }
+  }
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context,
+                                                       const v1::GetOverlaysRequest* request, v1::Overlays* response) {
+  std::shared_ptr<Session> s;
+  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
+  if (status.ok()) *response = s->overlays();
   return finish_unary(context, status);
 }
 

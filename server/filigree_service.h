@@ -33,6 +33,10 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* Drive(grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* SubmitPose(grpc::CallbackServerContext* context, const v1::DriveRequest* request,
                                        v1::SubmitPoseResponse* response) override;
+  grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,
+                                       v1::SetHandlesResponse* response) override;
+  grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const v1::GetOverlaysRequest* request,
+                                        v1::Overlays* response) override;
   grpc::ServerWriteReactor<v1::Frame>* Watch(grpc::CallbackServerContext* context,
                                              const v1::WatchRequest* request) override;
   grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,

@@ -7,7 +7,9 @@
 #include <spdlog/spdlog.h>
 
 #include "codec/delta_codec.h"
+#include "hierarchy/cut_state.h"
 #include "runtime/deformer.h"
+#include "runtime/handle_solver.h"
 #include "runtime/pose.h"
 
 namespace filigree::server {
@@ -73,6 +75,7 @@ Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarch
   rest_diagonal_ = bounding_box_diagonal(h.rest_positions);
 
   deformer_ = std::make_unique<Deformer>(h, deformer_options(record_.options));
+  handle_solver_ = std::make_unique<HandleSolver>(h.base_mesh());
   // The current frame exists from the start: the rest mesh, or after a
   // restart the latest pose, under the version it had.
   compute_once(true);
@@ -158,6 +161,34 @@ void Session::driver_left(std::uint64_t driver) {
   latest_pose_of_driver_.erase(driver);
 }
 
+std::size_t Session::set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles) {
+  for (const auto& [v, target] : handles) {
+    if (v >= hierarchy_->vertex_count())
+      throw PoseError("handle vertex " + std::to_string(v) + " is out of range: the mesh has " +
+                      std::to_string(hierarchy_->vertex_count()) + " vertices");
+    if (!target.allFinite()) throw PoseError("handle target of vertex " + std::to_string(v) + " is not finite");
+  }
+  std::size_t count = 0;
+  {
+    std::lock_guard lock(mutex_);
+    if (closed_) return 0;
+    for (auto it = handles_.begin(); it != handles_.end();) {
+      std::erase_if(it->second, [&](const HandleEntry& e) { return e.client == client_name; });
+      it = it->second.empty() ? handles_.erase(it) : std::next(it);
+    }
+    for (const auto& [v, target] : handles) handles_[v].push_back({target, client_name, ++handle_stamp_});
+    count = handles_.size();
+    v1::Change& change = changes_[client_name];
+    change.set_client_name(client_name);
+    change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(handles.size()));
+    handles_dirty_ = true;
+    pending_ = true;
+    touch();
+  }
+  wake_.notify_one();
+  return count;
+}
+
 void Session::set_threshold(double threshold, bool whole_mesh) {
   {
     std::lock_guard lock(mutex_);
@@ -215,9 +246,22 @@ void Session::compute_once(bool keep_version) {
   std::map<std::string, v1::Change> changes;
   std::optional<double> threshold;
   std::uint32_t bits;
+  std::vector<HandleTarget> handle_targets;
   {
     std::lock_guard lock(mutex_);
     pending_ = false;
+    computing_ = true;
+    if (handles_dirty_) {
+      handles_dirty_ = false;
+      for (const auto& [v, entries] : handles_) {
+        const auto newest = std::max_element(entries.begin(), entries.end(),
+                                             [](const HandleEntry& a, const HandleEntry& b) { return a.stamp < b.stamp; });
+        // The handle moves the vertex's MAPS point on the base by the same
+        // displacement as the vertex (the point is not exactly at the vertex).
+        const Vec3 maps_rest = h.maps_position(v, h.rest_positions);
+        handle_targets.push_back({h.maps_face[v], h.maps_bary[v], newest->target - h.rest_positions[v] + maps_rest});
+      }
+    }
     for (std::size_t i = 0; i < m; ++i)
       pose.positions[i] = Vec3(record_.pose[3 * i], record_.pose[3 * i + 1], record_.pose[3 * i + 2]);
     pose_of_driver = latest_pose_of_driver_;
@@ -226,6 +270,13 @@ void Session::compute_once(bool keep_version) {
     bits = record_.options.quantization_bits();
   }
   try {
+    if (!handle_targets.empty()) {
+      // Handles move the whole base pose (as-rigid-as-possible from the current one).
+      pose = handle_solver_->solve(handle_targets, pose);
+      std::lock_guard lock(mutex_);
+      for (std::size_t i = 0; i < m; ++i)
+        for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+    }
     if (threshold) deformer_->set_threshold(*threshold);
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
     bool at_rest = true;
@@ -250,10 +301,39 @@ void Session::compute_once(bool keep_version) {
     fill_stats(r.stats, encode_ms, enc.bytes.size(), *f.mutable_stats());
     published->pose_of_driver = std::move(pose_of_driver);
 
+    // Overlays only while a viewer asks for them: they are O(n) per frame.
+    std::shared_ptr<v1::Overlays> overlays;
+    bool want_overlays;
+    {
+      std::lock_guard lock(mutex_);
+      want_overlays = Clock::now() < overlays_wanted_until_;
+    }
+    if (want_overlays) {
+      overlays = std::make_shared<v1::Overlays>();
+      overlays->set_ready(true);
+      const std::vector<Index>& region = deformer_->region_of_vertex();
+      std::uint32_t regions = 0;
+      for (Index r : region) {
+        overlays->add_region_of(r == kNone ? 0 : r + 1);
+        if (r != kNone) regions = std::max<std::uint32_t>(regions, r + 1);
+      }
+      if (region.empty()) overlays->mutable_region_of()->Resize(static_cast<int>(h.vertex_count()), 0);
+      overlays->set_region_count(regions);
+      const CutState& cut = deformer_->cut_state();
+      for (FaceId f = 0; f < h.faces.size(); ++f)
+        if (cut.face_alive(f))
+          for (Index v : h.faces[f]) overlays->add_cut_faces(v);
+    }
+
     std::vector<std::shared_ptr<FrameSink>> sinks;
     {
       std::lock_guard lock(mutex_);
       if (!keep_version) ++record_.version;
+      computing_ = false;
+      if (overlays) {
+        overlays->set_version(record_.version);
+        overlays_ = overlays;
+      }
       f.set_version(record_.version);
       current_ = published;
       touch();
@@ -263,10 +343,32 @@ void Session::compute_once(bool keep_version) {
     }
     for (const auto& s : sinks) s->offer(published);
   } catch (const std::exception& e) {
+    {
+      std::lock_guard lock(mutex_);
+      computing_ = false;
+    }
     // A compute failure must not take the server down; the session keeps
     // its last frame and logs why.
     spdlog::error("session={} event=compute_failed error=\"{}\"", record_.id, e.what());
   }
+}
+
+v1::Overlays Session::overlays() {
+  bool had_recent;
+  v1::Overlays out;
+  {
+    std::lock_guard lock(mutex_);
+    had_recent = overlays_ && overlays_->version() == record_.version;
+    overlays_wanted_until_ = Clock::now() + std::chrono::seconds(5);
+    if (had_recent) {
+      out = *overlays_;
+    } else {
+      pending_ = true;  // recompute the current pose once, with overlays
+    }
+    touch();
+  }
+  if (!had_recent) wake_.notify_one();
+  return out;  // ready == false until a frame with overlays exists
 }
 
 v1::SessionInfo Session::info() const {
@@ -315,6 +417,11 @@ double Session::idle_seconds() const {
 std::uint64_t Session::version() const {
   std::lock_guard lock(mutex_);
   return record_.version;
+}
+
+std::uint64_t Session::accepted_version() const {
+  std::lock_guard lock(mutex_);
+  return record_.version + (computing_ ? 1 : 0);
 }
 
 std::size_t Session::drivers() const {

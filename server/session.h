@@ -8,6 +8,7 @@
 // vertex wins). Each subscriber has a mailbox of one, so a slow one skips
 // frames without delaying anyone.
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <map>
@@ -25,6 +26,7 @@
 
 namespace filigree {
 class Deformer;
+class HandleSolver;
 }
 
 namespace filigree::server {
@@ -85,10 +87,18 @@ class Session {
   void driver_left(std::uint64_t driver);
 
   void set_threshold(double threshold, bool whole_mesh);
+  // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
+  // targets); the next frame solves every client's handles into the base pose.
+  // Throws PoseError for a vertex out of range or a non-finite target.
+  // Returns the number of handles in the session after the merge.
+  std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
   // Finishes every stream; the session computes nothing more.
   void close();
   // Finishes every stream as the server shuts down (UNAVAILABLE); state stays.
   void close_streams();
+
+  // The overlays of the latest frame; asking keeps them built for 5 s.
+  v1::Overlays overlays();
 
   v1::SessionInfo info() const;
   v1::SessionState state() const;
@@ -98,6 +108,9 @@ class Session {
   // Seconds since the last request or frame.
   double idle_seconds() const;
   std::uint64_t version() const;
+  // A version that every frame including a change made now will exceed: the
+  // current version, plus one while a frame (that missed the change) computes.
+  std::uint64_t accepted_version() const;
   std::size_t drivers() const;
 
  private:
@@ -109,6 +122,7 @@ class Session {
 
   const std::shared_ptr<const Hierarchy> hierarchy_;
   std::unique_ptr<Deformer> deformer_;
+  std::unique_ptr<HandleSolver> handle_solver_;
   v1::BaseMesh base_;
   v1::RestMesh rest_;
   double rest_diagonal_ = 1.0;
@@ -116,12 +130,22 @@ class Session {
   mutable std::mutex mutex_;
   std::condition_variable wake_;
   SessionRecord record_;
-  bool pending_ = false, stopping_ = false, closed_ = false;
+  bool pending_ = false, stopping_ = false, closed_ = false, computing_ = false;
   std::optional<double> pending_threshold_;
   std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;
   std::map<std::string, v1::Change> changes_;  // since the last frame, by client
+  struct HandleEntry {
+    Vec3 target;
+    std::string client;
+    std::uint64_t stamp;  // newest wins per vertex
+  };
+  std::map<Index, std::vector<HandleEntry>> handles_;  // by vertex
+  std::uint64_t handle_stamp_ = 0;
+  bool handles_dirty_ = false;
   std::vector<std::weak_ptr<FrameSink>> sinks_;
   std::shared_ptr<const PublishedFrame> current_;
+  std::shared_ptr<const v1::Overlays> overlays_;
+  std::chrono::steady_clock::time_point overlays_wanted_until_{};
   std::chrono::steady_clock::time_point last_activity_;
   std::thread worker_;
 };

@@ -512,3 +512,149 @@ TEST_F(ServiceTest, UnarySubmitPoseReachesWatchers) {
 
 }  // namespace
 }  // namespace filigree
+
+namespace filigree {
+namespace {
+
+TEST_F(ServiceTest, HandlesOfSeveralClientsMergeIntoTheBasePose) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  const v1::RestMesh& rest = c.created.info().rest();
+  auto rest_of = [&](int v) { return Vec3(rest.positions(3 * v), rest.positions(3 * v + 1), rest.positions(3 * v + 2)); };
+
+  // One handle moved by t: an as-rigid-as-possible base moves rigidly, so
+  // every base vertex moves by t.
+  const Vec3 t(0.0, 0.3, 0.0);
+  v1::SetHandlesRequest one;
+  one.set_session_id(id);
+  one.set_client_name("alice");
+  auto* h = one.add_handles();
+  h->set_vertex(100);
+  const Vec3 target = rest_of(100) + t;
+  h->set_x(float(target.x())), h->set_y(float(target.y())), h->set_z(float(target.z()));
+  v1::SetHandlesResponse r;
+  ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), one, &r).ok());
+  EXPECT_EQ(r.handles_in_session(), 1u);
+
+  auto wait_for_version_after = [&](std::uint64_t v) {
+    v1::SessionState state;
+    v1::GetStateRequest gr;
+    gr.set_session_id(id);
+    auto wctx = context(id, editor);
+    v1::WatchRequest wr;
+    wr.set_session_id(id);
+    wr.set_after_version(v);
+    auto watch = stub_->Watch(wctx.get(), wr);
+    v1::Frame f;
+    do {
+      EXPECT_TRUE(watch->Read(&f));
+    } while (f.version() <= v);  // after_version 0 also yields the current frame first
+    wctx->TryCancel();
+    watch->Finish();
+    EXPECT_TRUE(stub_->GetState(context(id, editor).get(), gr, &state).ok());
+    return state;
+  };
+  v1::SessionState state = wait_for_version_after(r.accepted_at_version());
+  const auto& base = c.created.info().base();
+  for (int i = 0; i < base.original_ids_size(); ++i)
+    for (int k = 0; k < 3; ++k) ASSERT_NEAR(state.pose(3 * i + k), base.positions(3 * i + k) + t[k], 1e-3) << i;
+
+  // Bob adds a handle elsewhere, holding it in place: both count.
+  v1::SetHandlesRequest other;
+  other.set_session_id(id);
+  other.set_client_name("bob");
+  auto* hb = other.add_handles();
+  hb->set_vertex(1500);
+  hb->set_x(rest.positions(4500)), hb->set_y(rest.positions(4501)), hb->set_z(rest.positions(4502));
+  ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), other, &r).ok());
+  EXPECT_EQ(r.handles_in_session(), 2u);
+  state = wait_for_version_after(r.accepted_at_version());
+  bool saw_bob = false;
+  for (const auto& ch : state.frame().changes()) saw_bob |= ch.client_name() == "bob";
+  EXPECT_TRUE(saw_bob);
+
+  // Alice clears hers: Bob's remains.
+  v1::SetHandlesRequest clear;
+  clear.set_session_id(id);
+  clear.set_client_name("alice");
+  ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), clear, &r).ok());
+  EXPECT_EQ(r.handles_in_session(), 1u);
+
+  v1::SetHandlesRequest bad = one;
+  bad.mutable_handles(0)->set_vertex(1839);
+  EXPECT_EQ(stub_->SetHandles(context(id, editor).get(), bad, &r).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(stub_->SetHandles(context(id, c.created.viewer_token()).get(), one, &r).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+TEST_F(ServiceTest, OverlaysShowRegionsThatFollowTheThreshold) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  auto wctx = context(id, editor);
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  auto watch = stub_->Watch(wctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));
+
+  // Ask for overlays (the first answer may not be ready), then follow frames
+  // until one carries them; bounded by frames, not time.
+  std::uint64_t requested_at = 0;  // overlays must describe a frame after this version
+  auto overlays_after_next_frames = [&]() {
+    v1::GetOverlaysRequest req;
+    req.set_session_id(id);
+    v1::Overlays o;
+    for (int attempt = 0; attempt < 20; ++attempt) {
+      EXPECT_TRUE(stub_->GetOverlays(context(id, c.created.viewer_token()).get(), req, &o).ok());
+      if (o.ready() && o.version() > requested_at && o.version() == f.version()) return o;
+      EXPECT_TRUE(watch->Read(&f));
+    }
+    return o;
+  };
+  auto set_threshold = [&](double t) {
+    v1::SetOptionsRequest so;
+    so.set_session_id(id);
+    so.set_threshold(t);
+    v1::SessionInfo info;
+    EXPECT_TRUE(stub_->SetOptions(context(id, editor).get(), so, &info).ok());
+  };
+  auto bend = [&](std::uint64_t pose_id, double phase) {
+    const Pose p = procedural_pose(local_hierarchy().base_mesh().positions, Motion::kBend, phase);
+    v1::DriveRequest r;
+    r.set_session_id(id);
+    r.set_pose_id(pose_id);
+    for (float x : pose_floats(p)) r.add_positions(x);
+    v1::SubmitPoseResponse a;
+    EXPECT_TRUE(stub_->SubmitPose(context(id, editor).get(), r, &a).ok());
+    requested_at = std::max(requested_at, a.accepted_at_version());
+  };
+
+  set_threshold(1e5);
+  for (int i = 1; i <= 5; ++i) bend(i, 0.2 * i);
+  v1::Overlays with_regions = overlays_after_next_frames();
+  ASSERT_TRUE(with_regions.ready());
+  EXPECT_EQ(with_regions.region_of_size(), 1839);
+  EXPECT_GT(with_regions.region_count(), 0u);
+  EXPECT_EQ(with_regions.cut_faces_size() % 3, 0);
+  EXPECT_GT(with_regions.cut_faces_size(), 0);
+
+  set_threshold(0.0);
+  bend(6, 1.0);  // its accepted version is the barrier: the threshold is applied with it
+  v1::Overlays direct = overlays_after_next_frames();
+  ASSERT_TRUE(direct.ready());
+  EXPECT_EQ(direct.region_count(), 0u);
+  EXPECT_EQ(direct.cut_faces_size(), 3 * 3674);  // every node recovered: the original mesh
+  wctx->TryCancel();
+  watch->Finish();
+}
+
+}  // namespace
+}  // namespace filigree

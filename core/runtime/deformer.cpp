@@ -59,6 +59,8 @@ std::size_t Deformer::base_vertex_count() const { return h_.base_vertices.size()
 
 const std::vector<Index>& Deformer::region_of_vertex() const { return s_->cut.regions().region_of; }
 
+const CutState& Deformer::cut_state() const { return s_->cut.state(); }
+
 void Deformer::set_threshold(double threshold) {
   if (std::isnan(threshold) || threshold < 0.0) throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
   options_.threshold = threshold;

@@ -13,6 +13,7 @@
 namespace filigree {
 
 struct Hierarchy;
+class CutState;
 
 struct DeformerOptions {
   // Performance threshold T on Σ (n_i² + c_i²) (thesis eq. 3.12): 0 = direct
@@ -73,6 +74,8 @@ class Deformer {
   std::size_t base_vertex_count() const;
   // Per-vertex region id of the last frame (kNone for cut vertices), for overlays.
   const std::vector<Index>& region_of_vertex() const;
+  // The cut of the last frame (its alive faces are the cut mesh), for overlays.
+  const CutState& cut_state() const;
 
  private:
   struct State;

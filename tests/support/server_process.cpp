@@ -9,7 +9,19 @@
 
 namespace filigree::test {
 
-ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::string>& args) {
+namespace {
+
+// Blocking read of one line (without the newline); stops at EOF.
+std::string read_line(int fd) {
+  std::string line;
+  char c;
+  while (read(fd, &c, 1) == 1 && c != '\n') line += c;
+  return line;
+}
+
+}  // namespace
+
+ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http) {
   int out[2];
   if (pipe(out) != 0) throw std::runtime_error("pipe failed");
   pid_ = fork();
@@ -19,6 +31,7 @@ ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::s
     close(out[0]);
     close(out[1]);
     std::vector<std::string> all = {binary, "--listen", "127.0.0.1:0", "--log-level", "warn"};
+    if (http) all.insert(all.end(), {"--http", "127.0.0.1:0"});
     all.insert(all.end(), args.begin(), args.end());
     std::vector<char*> argv;
     for (auto& a : all) argv.push_back(a.data());
@@ -28,16 +41,17 @@ ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::s
   }
   close(out[1]);
   // Blocking read of the first line: the server prints it once it listens.
-  std::string line;
-  char c;
-  while (read(out[0], &c, 1) == 1 && c != '\n') line += c;
+  const std::string line = read_line(out[0]);
+  // With --http, the second line follows at once.
+  const std::string http_line = http ? read_line(out[0]) : std::string();
   close(out[0]);
-  const std::string prefix = "listening on ";
-  if (line.rfind(prefix, 0) != 0) {
+  const std::string prefix = "listening on ", http_prefix = "http on ";
+  if (line.rfind(prefix, 0) != 0 || (http && http_line.rfind(http_prefix, 0) != 0)) {
     terminate();
-    throw std::runtime_error("filigree-server did not start: '" + line + "'");
+    throw std::runtime_error("filigree-server did not start: '" + line + "' '" + http_line + "'");
   }
   address_ = line.substr(prefix.size());
+  if (http) http_address_ = http_line.substr(http_prefix.size());
 }
 
 ServerProcess::~ServerProcess() {

@@ -11,19 +11,24 @@ class ServerProcess {
  public:
   // Starts `binary --listen 127.0.0.1:0 <args>` and waits for its
   // "listening on HOST:PORT" line. Throws std::runtime_error if it exits first.
-  ServerProcess(const std::string& binary, const std::vector<std::string>& args);
+  // With `http`, also passes `--http 127.0.0.1:0` and waits for the
+  // "http on HOST:PORT" line that follows.
+  ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http = false);
   // Kills the server (SIGKILL) if it is still running.
   ~ServerProcess();
   ServerProcess(const ServerProcess&) = delete;
   ServerProcess& operator=(const ServerProcess&) = delete;
 
   const std::string& address() const { return address_; }
+  // The HTTP (web viewer, gRPC-Web) address; empty unless started with `http`.
+  const std::string& http_address() const { return http_address_; }
   // Sends SIGTERM and waits; returns the exit status (0 for a clean drain).
   int terminate();
 
  private:
   int pid_ = -1;
   std::string address_;
+  std::string http_address_;
 };
 
 }  // namespace filigree::test

@@ -1,0 +1,559 @@
+#include "server/http/http_server.h"
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <stdexcept>
+#include <thread>
+#include <type_traits>
+#include <unordered_map>
+
+#include <boost/asio/dispatch.hpp>
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/post.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/strand.hpp>
+#include <boost/asio/write.hpp>
+#include <boost/beast/core.hpp>
+#include <boost/beast/http.hpp>
+#include <spdlog/spdlog.h>
+
+#include "server/http/grpc_web_bridge.h"
+#include "server/http/static_files.h"
+
+namespace filigree::server::http {
+namespace {
+
+namespace beast = boost::beast;
+namespace bhttp = boost::beast::http;
+namespace net = boost::asio;
+using tcp = net::ip::tcp;
+
+constexpr auto kIdleTimeout = std::chrono::seconds(120);  // waiting for a request (keep-alive) or its body
+constexpr auto kWriteTimeout = std::chrono::seconds(30);  // one response or one streamed frame
+constexpr auto kLingerTimeout = std::chrono::seconds(2);  // after our FIN, for the client's
+constexpr std::uint32_t kHeaderLimit = 16 * 1024;
+
+std::string_view sv(beast::string_view s) { return {s.data(), s.size()}; }
+
+std::string lower(std::string_view s) {
+  std::string out(s);
+  std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return out;
+}
+
+template <class Body>
+void set_cors(bhttp::response<Body>& res) {
+  res.set(bhttp::field::access_control_allow_origin, "*");
+  res.set(bhttp::field::access_control_expose_headers, "grpc-status, grpc-message, grpc-status-details-bin");
+}
+
+template <class Body>
+void set_grpc_web(bhttp::response<Body>& res) {
+  res.set(bhttp::field::content_type, beast::string_view(kGrpcWebContentType.data(), kGrpcWebContentType.size()));
+  res.set(bhttp::field::cache_control, "no-store");
+}
+
+}  // namespace
+
+class Connection;
+
+struct HttpServer::Impl {
+  Impl(HttpOptions o, std::shared_ptr<grpc::Channel> channel)
+      : options(std::move(o)), files(options.web_root),
+        bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services)),
+        acceptor(net::make_strand(ioc)), accept_retry(acceptor.get_executor()) {}
+
+  void accept();
+  void remove(std::uint64_t id) {
+    std::lock_guard lock(mutex);
+    connections.erase(id);
+    if (connections.empty()) all_closed.notify_all();
+  }
+  std::vector<std::shared_ptr<Connection>> live_connections();
+
+  HttpOptions options;
+  StaticFiles files;
+  std::shared_ptr<GrpcWebBridge> bridge;
+  std::string address;
+
+  // Declared before the io_context: handlers it destroys unregister here.
+  std::mutex mutex;
+  std::condition_variable all_closed;
+  std::uint64_t next_connection = 0;
+  std::unordered_map<std::uint64_t, std::weak_ptr<Connection>> connections;
+  bool shut_down = false;
+
+  net::io_context ioc;
+  std::optional<net::executor_work_guard<net::io_context::executor_type>> work;
+  tcp::acceptor acceptor;
+  net::steady_timer accept_retry;
+  std::vector<std::thread> threads;
+};
+
+// One HTTP/1.1 connection on its own strand. Requests are served one after
+// the other (keep-alive). A gRPC-Web call's events come from gRPC threads and
+// are posted to the strand; a server-streaming response is chunked, one
+// chunk per frame, and the connection closes when it ends.
+class Connection : public std::enable_shared_from_this<Connection> {
+ public:
+  Connection(tcp::socket&& socket, HttpServer::Impl& server, std::uint64_t id)
+      : stream_(std::move(socket)), server_(server), id_(id), linger_timer_(stream_.get_executor()) {}
+
+  ~Connection() {
+    if (call_) call_->cancel();
+    server_.remove(id_);
+  }
+
+  void start() {
+    net::dispatch(stream_.get_executor(), [self = shared_from_this()] { self->read_request(); });
+  }
+
+  // Shutdown: close now if waiting for a request, else after the response in progress.
+  void stop() {
+    net::post(stream_.get_executor(), [self = shared_from_this()] {
+      self->stopping_ = true;
+      if (self->idle_) self->close();
+    });
+  }
+
+  void force_close() {
+    net::post(stream_.get_executor(), [self = shared_from_this()] { self->close(); });
+  }
+
+ private:
+  // ---------------------------------------------------------------- reading
+
+  void read_request() {
+    if (closed_) return;
+    if (stopping_) return close();
+    idle_ = true;
+    parser_.emplace();
+    parser_->body_limit(server_.options.max_request_bytes);
+    parser_->header_limit(kHeaderLimit);
+    stream_.expires_after(kIdleTimeout);
+    bhttp::async_read_header(stream_, buffer_, *parser_,
+                             [self = shared_from_this()](beast::error_code ec, std::size_t) { self->on_header(ec); });
+  }
+
+  void on_header(beast::error_code ec) {
+    // body_limit here: the header is parsed, its Content-Length is over the limit.
+    const bool too_large = ec == bhttp::error::body_limit;
+    if (ec && !too_large) return close();  // the client closed, timed out, or sent garbage
+    idle_ = false;
+    const auto& req = parser_->get();
+    version_ = req.version();
+    keep_alive_ = req.keep_alive();
+    request_line_ = std::string(sv(req.method_string())) + " " + std::string(sv(req.target()));
+    if (too_large) return refuse_too_large();
+    if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
+      auto res = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::continue_, version_);
+      stream_.expires_after(kWriteTimeout);
+      return bhttp::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code ec, std::size_t) {
+        if (ec) return self->close();
+        self->read_body();
+      });
+    }
+    read_body();
+  }
+
+  void read_body() {
+    stream_.expires_after(kIdleTimeout);
+    bhttp::async_read(stream_, buffer_, *parser_,
+                      [self = shared_from_this()](beast::error_code ec, std::size_t) { self->on_request(ec); });
+  }
+
+  void on_request(beast::error_code ec) {
+    if (ec == bhttp::error::body_limit) return refuse_too_large();
+    if (ec) return close();
+    handle(parser_->release());
+  }
+
+  // ---------------------------------------------------------------- routing
+
+  void handle(bhttp::request<bhttp::string_body> req) {
+    switch (req.method()) {
+      case bhttp::verb::options: return send_preflight();
+      case bhttp::verb::post: return handle_grpc_web(std::move(req));
+      case bhttp::verb::get:
+      case bhttp::verb::head: return serve_file(req);
+      default: {
+        auto res = text(bhttp::status::method_not_allowed, "method not allowed\n");
+        res.set(bhttp::field::allow, "GET, HEAD, POST, OPTIONS");
+        return send(std::move(res));
+      }
+    }
+  }
+
+  void send_preflight() {
+    bhttp::response<bhttp::empty_body> res{bhttp::status::no_content, version_};
+    res.set(bhttp::field::access_control_allow_methods, "POST, GET, OPTIONS");
+    res.set(bhttp::field::access_control_allow_headers,
+            "content-type, x-grpc-web, x-user-agent, grpc-timeout, x-filigree-token, x-session-id");
+    res.set(bhttp::field::access_control_max_age, "86400");
+    send(std::move(res));
+  }
+
+  void serve_file(const bhttp::request<bhttp::string_body>& req) {
+    const StaticFiles::Result found = server_.files.resolve(sv(req.target()));
+    if (found.status != 200) return send(text(static_cast<bhttp::status>(found.status), found.message));
+    beast::error_code ec;
+    bhttp::file_body::value_type body;
+    body.open(found.file.c_str(), beast::file_mode::scan, ec);
+    if (ec) return send(text(bhttp::status::not_found, "not found\n"));
+    const std::uint64_t size = body.size();
+    const auto headers = [&](auto& res) {
+      res.set(bhttp::field::content_type, found.content_type);
+      res.set(bhttp::field::cache_control, "no-cache");
+      res.set("x-content-type-options", "nosniff");
+      res.content_length(size);
+    };
+    if (req.method() == bhttp::verb::head) {
+      bhttp::response<bhttp::empty_body> res{bhttp::status::ok, version_};
+      headers(res);
+      return send(std::move(res));
+    }
+    bhttp::response<bhttp::file_body> res{std::piecewise_construct, std::make_tuple(std::move(body)),
+                                          std::make_tuple(bhttp::status::ok, version_)};
+    headers(res);
+    send(std::move(res));
+  }
+
+  // ---------------------------------------------------------------- gRPC-Web
+
+  void handle_grpc_web(bhttp::request<bhttp::string_body> req) {
+    GrpcWebRequest request;
+    request.content_type = std::string(sv(req[bhttp::field::content_type]));
+    if (!is_grpc_web_binary(request.content_type))
+      return send(text(bhttp::status::unsupported_media_type,
+                       "filigree-server answers POST with gRPC-Web only: content type application/grpc-web+proto "
+                       "(application/grpc-web-text is not served)\n"));
+    const std::string_view target = sv(req.target());
+    request.path = std::string(target.substr(0, target.find('?')));
+    request.body = std::move(req.body());
+    for (const auto& field : req) request.headers.emplace_back(lower(sv(field.name_string())), std::string(sv(field.value())));
+
+    const auto self = shared_from_this();
+    const auto executor = stream_.get_executor();
+    GrpcWebEvents events{
+        [self, executor](std::string frame) {
+          net::post(executor, [self, frame = std::move(frame)]() mutable { self->on_call_data(std::move(frame)); });
+        },
+        [self, executor](std::string frame) {
+          net::post(executor, [self, frame = std::move(frame)]() mutable { self->on_call_end(std::move(frame)); });
+        }};
+    GrpcWebBridge::Started started = server_.bridge->start(request, std::move(events));
+    if (!started.call) return send_grpc_web_body(std::move(started.immediate));
+    call_ = std::move(started.call);
+    streaming_ = started.server_streaming;
+    if (streaming_) begin_stream();
+    // Unary: the response is written when on_call_end arrives.
+  }
+
+  void on_call_data(std::string frame) {
+    if (closed_ || !call_) return;
+    if (!streaming_) {
+      unary_body_ += frame;
+      return call_->read_more();
+    }
+    out_.push_back({std::move(frame), /*data=*/true});
+    pump();
+  }
+
+  void on_call_end(std::string trailer) {
+    call_.reset();
+    if (closed_) return;
+    if (!streaming_) {
+      unary_body_ += trailer;
+      std::string body = std::move(unary_body_);
+      unary_body_.clear();
+      return send_grpc_web_body(std::move(body));
+    }
+    out_.push_back({std::move(trailer), /*data=*/false});
+    pump();
+  }
+
+  void send_grpc_web_body(std::string body) {
+    bhttp::response<bhttp::string_body> res{bhttp::status::ok, version_};
+    set_grpc_web(res);
+    res.body() = std::move(body);
+    res.prepare_payload();
+    send(std::move(res));
+  }
+
+  void refuse_too_large() {
+    keep_alive_ = false;  // the rest of the body is never read
+    const auto& req = parser_->get();
+    const std::size_t limit = server_.options.max_request_bytes;
+    if (req.method() == bhttp::verb::post && is_grpc_web_binary(sv(req[bhttp::field::content_type])))
+      return send_grpc_web_body(GrpcWebBridge::too_large(limit));
+    send(text(bhttp::status::payload_too_large, "request body over the limit of " + std::to_string(limit) + " bytes\n"));
+  }
+
+  // A server-streaming response: the header now, then a chunk per frame as
+  // it arrives (flushed at once), the trailer frame, the last chunk, close.
+  void begin_stream() {
+    chunked_ = version_ >= 11;
+    auto head = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::ok, version_);
+    set_cors(*head);
+    set_grpc_web(*head);
+    head->set(bhttp::field::server, "filigree-server");
+    head->set("x-accel-buffering", "no");  // a proxy in front must not buffer the stream
+    head->keep_alive(false);
+    if (chunked_) head->chunked(true);
+    auto serializer = std::make_shared<bhttp::response_serializer<bhttp::empty_body>>(*head);
+    writing_ = true;
+    stream_.expires_after(kWriteTimeout);
+    bhttp::async_write_header(stream_, *serializer,
+                              [self = shared_from_this(), head, serializer](beast::error_code ec, std::size_t) {
+                                self->writing_ = false;
+                                if (ec) return self->close();
+                                spdlog::debug("event=http_request request=\"{}\" status=200 streaming=true", self->request_line_);
+                                // Notice a browser that goes away while nothing is being written.
+                                self->start_discard_read();
+                                self->pump();
+                              });
+  }
+
+  void pump() {
+    if (writing_ || closed_ || out_.empty()) return;
+    Out next = std::move(out_.front());
+    out_.pop_front();
+    wire_.clear();
+    if (chunked_) {
+      char size[20];
+      std::snprintf(size, sizeof size, "%zx\r\n", next.bytes.size());
+      wire_.append(size).append(next.bytes).append("\r\n");
+      if (!next.data) wire_.append("0\r\n\r\n");  // the trailer frame is the last chunk
+    } else {
+      wire_ = std::move(next.bytes);
+    }
+    writing_ = true;
+    stream_.expires_after(kWriteTimeout);
+    net::async_write(stream_, net::buffer(wire_),
+                     [self = shared_from_this(), data = next.data](beast::error_code ec, std::size_t) {
+                       self->writing_ = false;
+                       if (ec) return self->close();  // also cancels the upstream call
+                       if (!data) return self->linger();
+                       if (self->call_) self->call_->read_more();
+                       self->pump();
+                     });
+  }
+
+  // ---------------------------------------------------------------- writing, closing
+
+  static bhttp::response<bhttp::string_body> text(bhttp::status status, std::string body) {
+    bhttp::response<bhttp::string_body> res{status, 11};
+    res.set(bhttp::field::content_type, "text/plain; charset=utf-8");
+    res.body() = std::move(body);
+    return res;
+  }
+
+  template <class Body>
+  void send(bhttp::response<Body>&& res) {
+    res.version(version_);
+    res.set(bhttp::field::server, "filigree-server");
+    set_cors(res);
+    res.keep_alive(keep_alive_ && !stopping_);
+    if constexpr (std::is_same_v<Body, bhttp::string_body>) res.prepare_payload();
+    spdlog::debug("event=http_request request=\"{}\" status={}", request_line_, res.result_int());
+    auto sp = std::make_shared<bhttp::response<Body>>(std::move(res));
+    stream_.expires_after(kWriteTimeout);
+    bhttp::async_write(stream_, *sp, [self = shared_from_this(), sp](beast::error_code ec, std::size_t) {
+      if (ec) return self->close();
+      if (!sp->keep_alive()) return self->linger();
+      self->read_request();
+    });
+  }
+
+  // Reads and drops whatever the client sends; its end (EOF, reset) closes
+  // the connection — while streaming, that cancels the upstream call.
+  void start_discard_read() {
+    if (discard_reading_ || closed_) return;
+    discard_reading_ = true;
+    stream_.socket().async_read_some(net::buffer(discard_),
+                                     [self = shared_from_this()](beast::error_code ec, std::size_t) {
+                                       self->discard_reading_ = false;
+                                       if (self->closed_) return;
+                                       if (ec) return self->close();
+                                       self->start_discard_read();
+                                     });
+  }
+
+  // Graceful close: our FIN first, then wait (bounded) for the client's, so
+  // that unread request bytes cannot turn our close into a reset that loses
+  // the response.
+  void linger() {
+    if (closed_) return;
+    beast::error_code ec;
+    stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
+    if (ec) return close();
+    linger_timer_.expires_after(kLingerTimeout);
+    linger_timer_.async_wait([self = shared_from_this()](beast::error_code ec) {
+      if (!ec) self->close();
+    });
+    start_discard_read();
+  }
+
+  void close() {
+    if (closed_) return;
+    closed_ = true;
+    if (call_) call_->cancel();  // its on_call_end still comes, and is dropped
+    linger_timer_.cancel();
+    beast::error_code ec;
+    stream_.socket().shutdown(tcp::socket::shutdown_both, ec);
+    stream_.close();
+  }
+
+  struct Out {
+    std::string bytes;
+    bool data;  // a data frame (else the trailer frame)
+  };
+
+  beast::tcp_stream stream_;
+  HttpServer::Impl& server_;
+  const std::uint64_t id_;
+  net::steady_timer linger_timer_;
+  beast::flat_buffer buffer_;
+  std::optional<bhttp::request_parser<bhttp::string_body>> parser_;
+  unsigned version_ = 11;
+  std::string request_line_;
+  bool keep_alive_ = true, idle_ = false, stopping_ = false, closed_ = false;
+  // gRPC-Web
+  std::shared_ptr<GrpcWebCall> call_;
+  std::string unary_body_;
+  bool streaming_ = false, chunked_ = true, writing_ = false, discard_reading_ = false;
+  std::deque<Out> out_;
+  std::string wire_;
+  std::array<char, 4096> discard_{};
+};
+
+void HttpServer::Impl::accept() {
+  acceptor.async_accept(net::make_strand(ioc), [this](beast::error_code ec, tcp::socket socket) {
+    if (ec == net::error::operation_aborted || !acceptor.is_open()) return;
+    if (ec) {
+      // Out of descriptors, most likely: try again a little later rather than spin.
+      spdlog::warn("event=http_accept_failed error=\"{}\"", ec.message());
+      accept_retry.expires_after(std::chrono::milliseconds(100));
+      accept_retry.async_wait([this](beast::error_code e) {
+        if (!e) accept();
+      });
+      return;
+    }
+    beast::error_code ignored;
+    socket.set_option(tcp::no_delay(true), ignored);  // frames go out as they come
+    std::shared_ptr<Connection> connection;
+    {
+      std::lock_guard lock(mutex);
+      if (!shut_down) {
+        const std::uint64_t id = next_connection++;
+        connection = std::make_shared<Connection>(std::move(socket), *this, id);
+        connections.emplace(id, connection);
+      }
+    }
+    if (connection) connection->start();
+    accept();
+  });
+}
+
+std::vector<std::shared_ptr<Connection>> HttpServer::Impl::live_connections() {
+  std::vector<std::shared_ptr<Connection>> out;
+  std::lock_guard lock(mutex);
+  for (const auto& [id, weak] : connections)
+    if (auto c = weak.lock()) out.push_back(std::move(c));
+  return out;
+}
+
+HttpServer::HttpServer(HttpOptions options, std::shared_ptr<grpc::Channel> channel)
+    : impl_(std::make_unique<Impl>(std::move(options), std::move(channel))) {
+  Impl& s = *impl_;
+  const std::string& listen = s.options.listen;
+  const auto colon = listen.rfind(':');
+  if (colon == std::string::npos) throw std::runtime_error("--http wants HOST:PORT, got '" + listen + "'");
+  const std::string host = listen.substr(0, colon), port = listen.substr(colon + 1);
+  std::string bare_host = host;
+  if (bare_host.size() >= 2 && bare_host.front() == '[' && bare_host.back() == ']')
+    bare_host = bare_host.substr(1, bare_host.size() - 2);
+
+  beast::error_code ec;
+  tcp::resolver resolver(s.ioc);
+  const auto results =
+      resolver.resolve(bare_host, port, tcp::resolver::passive | tcp::resolver::numeric_service, ec);
+  if (ec || results.empty()) throw std::runtime_error("cannot resolve HTTP address " + listen + ": " + ec.message());
+  const tcp::endpoint endpoint = results.begin()->endpoint();
+  s.acceptor.open(endpoint.protocol(), ec);
+  if (!ec) s.acceptor.set_option(net::socket_base::reuse_address(true), ec);
+  if (!ec) s.acceptor.bind(endpoint, ec);
+  if (!ec) s.acceptor.listen(net::socket_base::max_listen_connections, ec);
+  if (ec) throw std::runtime_error("cannot listen for HTTP on " + listen + ": " + ec.message());
+  s.address = host + ":" + std::to_string(s.acceptor.local_endpoint().port());
+
+  s.accept();
+  s.work.emplace(s.ioc.get_executor());
+  for (int i = 0; i < std::max(1, s.options.threads); ++i)
+    s.threads.emplace_back([&s] {
+      for (;;) {
+        try {
+          s.ioc.run();
+          return;
+        } catch (const std::exception& e) {
+          spdlog::error("event=http_thread_error error=\"{}\"", e.what());
+        }
+      }
+    });
+  spdlog::info("event=http_listening address={} web_root=\"{}\"", s.address,
+               s.files.root() ? s.files.root()->string() : std::string());
+}
+
+HttpServer::~HttpServer() { shutdown(); }
+
+std::string HttpServer::address() const { return impl_ ? impl_->address : std::string(); }
+
+void HttpServer::stop_accepting() {
+  if (!impl_) return;
+  Impl* s = impl_.get();
+  net::post(s->acceptor.get_executor(), [s] {
+    beast::error_code ec;
+    s->acceptor.close(ec);
+    s->accept_retry.cancel();
+  });
+}
+
+void HttpServer::shutdown(std::chrono::milliseconds grace) {
+  if (!impl_) return;
+  Impl& s = *impl_;
+  {
+    std::lock_guard lock(s.mutex);
+    if (s.shut_down) return;
+    s.shut_down = true;
+  }
+  stop_accepting();
+  for (const auto& c : s.live_connections()) c->stop();
+  {
+    std::unique_lock lock(s.mutex);
+    s.all_closed.wait_until(lock, std::chrono::steady_clock::now() + grace, [&] { return s.connections.empty(); });
+  }
+  for (const auto& c : s.live_connections()) c->force_close();
+  s.bridge->cancel_all();
+  const bool idle = s.bridge->wait_idle(std::chrono::steady_clock::now() + std::chrono::seconds(5));
+  s.work.reset();
+  s.ioc.stop();
+  for (std::thread& t : s.threads) t.join();
+  s.threads.clear();
+  if (!idle) {
+    // A call that never ended still refers to a connection, and so to this
+    // server: leak it rather than free it under the call.
+    spdlog::error("event=http_shutdown_incomplete reason=\"gRPC-Web calls still running\"");
+    (void)impl_.release();
+  }
+  spdlog::info("event=http_stopped");
+}
+
+}  // namespace filigree::server::http
