@@ -4,9 +4,9 @@
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: all deps configure build test demo bench clean
+.PHONY: all deps configure build test demo bench clean viewer serve
 
-all: build
+all: build viewer
 
 deps:
 	bash scripts/install-deps.sh
@@ -19,10 +19,14 @@ configure: deps $(BUILD)/build.ninja
 build: configure
 	cmake --build $(BUILD) -j $(JOBS)
 
-test: build
+# The web viewer (web_viewer/dist, what filigree-server --http serves by default).
+viewer: deps
+	bash web_viewer/build.sh
+
+test: build viewer
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
 
-demo: build
+demo: build viewer
 	bash scripts/demo.sh $(BUILD)
 
 bench: build

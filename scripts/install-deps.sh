@@ -10,6 +10,7 @@ PACKAGES=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev
   libboost-dev
+  chromium fonts-liberation
 )
 
 missing=()

@@ -1,0 +1,81 @@
+// The Filigree service through gRPC-Web (binary), for one session and token.
+import { Code, ConnectError, createClient, type Client, type Interceptor } from '@connectrpc/connect';
+import { createGrpcWebTransport } from '@connectrpc/connect-web';
+
+import { Filigree, type Frame, type SessionInfo, type SessionState } from './gen/filigree/v1/filigree_pb';
+
+export type { Frame, SessionInfo, SessionState };
+
+export class SessionClient {
+  private readonly client: Client<typeof Filigree>;
+
+  constructor(readonly serverUrl: string, readonly sessionId: string, token: string) {
+    // Every call carries the token, and the session id so that a load
+    // balancer can route by session (DESIGN §4).
+    const credentials: Interceptor = (next) => (request) => {
+      request.header.set('x-filigree-token', token);
+      request.header.set('x-session-id', sessionId);
+      return next(request);
+    };
+    const transport = createGrpcWebTransport({ baseUrl: serverUrl, useBinaryFormat: true, interceptors: [credentials] });
+    this.client = createClient(Filigree, transport);
+  }
+
+  join(): Promise<SessionInfo> {
+    return this.client.joinSession({ sessionId: this.sessionId });
+  }
+
+  // The session's frames: the current one at once (if newer than
+  // afterVersion), then every new one; ends when the session closes.
+  watch(afterVersion: bigint, signal: AbortSignal): AsyncIterable<Frame> {
+    return this.client.watch({ sessionId: this.sessionId, afterVersion }, { signal });
+  }
+
+  getState(): Promise<SessionState> {
+    return this.client.getState({ sessionId: this.sessionId });
+  }
+
+  setOptions(threshold: number, wholeMesh: boolean): Promise<SessionInfo> {
+    return this.client.setOptions({ sessionId: this.sessionId, threshold, wholeMesh });
+  }
+
+  // A full pose (3·m floats in base order); resolves with the version the
+  // pose was accepted at: the frame that includes it has a larger one.
+  async submitPose(poseId: bigint, positions: number[], clientName: string): Promise<bigint> {
+    const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName });
+    return response.acceptedAtVersion;
+  }
+}
+
+// A sentence a person can act on, for any error of a call above.
+export function describeError(error: unknown, sessionId: string, serverUrl: string): string {
+  if (!(error instanceof ConnectError)) return error instanceof Error ? error.message : String(error);
+  // fetch() itself failed: nothing answered, or the browser refused the
+  // answer (CORS for a server=… other than this page's origin).
+  if (error.code === Code.Unknown && error.cause instanceof TypeError) {
+    return `Cannot reach the server ${serverUrl}: it is down, the address is wrong, or it does not accept ` +
+      `requests from this page's origin (${error.cause.message}).`;
+  }
+  const detail = error.rawMessage ? ` (server: ${error.rawMessage})` : '';
+  switch (error.code) {
+    case Code.Unauthenticated:
+      return `No token was accepted: add &token=… (the session's viewer or editor token) to the address.${detail}`;
+    case Code.PermissionDenied:
+      return `The token was refused for session ${sessionId}: it is wrong, or this needs the editor token.${detail}`;
+    case Code.NotFound:
+      return `Session ${sessionId} does not exist on ${serverUrl} (unknown or closed).${detail}`;
+    case Code.Unavailable:
+      return `The server ${serverUrl} is unavailable (unreachable, or shutting down).${detail}`;
+    case Code.InvalidArgument:
+      return `The server refused the request: ${error.rawMessage}`;
+    case Code.ResourceExhausted:
+      return `Over a server limit: ${error.rawMessage}`;
+    default:
+      return `${Code[error.code]}: ${error.rawMessage || 'no message'} (${serverUrl})`;
+  }
+}
+
+export function isCode(error: unknown, code: Code): boolean {
+  return error instanceof ConnectError && error.code === code;
+}
+export { Code };

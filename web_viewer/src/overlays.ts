@@ -1,0 +1,92 @@
+// Things drawn over the detailed mesh, each one toggled from the panel.
+// Only the base-mesh wireframe exists today: the cut, the optimisation
+// regions and the stretch map need per-vertex data the server does not send
+// yet, so they are listed as unavailable instead of being guessed.
+import * as THREE from 'three';
+
+export interface Overlay {
+  readonly id: string;
+  readonly label: string;
+  // Null when it can be shown; otherwise why not.
+  readonly unavailable: string | null;
+  setVisible(visible: boolean): void;
+  // Called after every applied frame with the live detailed positions.
+  update(positions: Float32Array): void;
+}
+
+// Overlays waiting for server data: the hooks the panel already lists.
+export function pendingOverlays(): Overlay[] {
+  const pending = (id: string, label: string): Overlay => ({
+    id, label,
+    unavailable: 'the server does not send this yet',
+    setVisible() {},
+    update() {},
+  });
+  return [pending('cut', 'Cut'), pending('regions', 'Regions'), pending('stretch', 'Stretch')];
+}
+
+// Each undirected edge of the triangles once, as index pairs.
+export function uniqueEdges(faces: ArrayLike<number>): Uint32Array {
+  const seen = new Set<number>();
+  const edges: number[] = [];
+  const vertexLimit = 2 ** 26;  // keeps a·limit + b exact in a double
+  for (let f = 0; f + 2 < faces.length; f += 3) {
+    for (let k = 0; k < 3; ++k) {
+      const a = faces[f + k];
+      const b = faces[f + ((k + 1) % 3)];
+      const [lo, hi] = a < b ? [a, b] : [b, a];
+      if (hi >= vertexLimit) throw new Error(`base vertex index ${hi} is too large`);
+      const key = lo * vertexLimit + hi;
+      if (seen.has(key)) continue;
+      seen.add(key);
+      edges.push(lo, hi);
+    }
+  }
+  return Uint32Array.from(edges);
+}
+
+// out[i] = positions[ids[i]] (x y z): the base vertices' current positions.
+export function gatherVertices(positions: Float32Array, ids: ArrayLike<number>, out: Float32Array): void {
+  for (let i = 0; i < ids.length; ++i) {
+    const id = ids[i];
+    out[3 * i] = positions[3 * id];
+    out[3 * i + 1] = positions[3 * id + 1];
+    out[3 * i + 2] = positions[3 * id + 2];
+  }
+}
+
+// The base mesh as a wireframe drawn through the surface. Base vertex i is
+// original vertex originalIds[i], and the deformer places base vertices at
+// the pose (core/runtime/deformer.h), so each frame already carries the
+// merged base pose to within Frame.max_error: no GetState round trip needed.
+export class BaseWireframe implements Overlay {
+  readonly id = 'base';
+  readonly label = 'Base mesh';
+  readonly unavailable = null;
+  readonly object: THREE.LineSegments;
+  private readonly positions: Float32Array;
+
+  constructor(restPositions: ArrayLike<number>, faces: ArrayLike<number>, private readonly originalIds: Uint32Array) {
+    this.positions = Float32Array.from(restPositions);
+    const geometry = new THREE.BufferGeometry();
+    const position = new THREE.BufferAttribute(this.positions, 3);
+    position.setUsage(THREE.DynamicDrawUsage);
+    geometry.setAttribute('position', position);
+    geometry.setIndex(new THREE.BufferAttribute(uniqueEdges(faces), 1));
+    // Drawn over the surface (no depth test) so the whole cage is seen.
+    const material = new THREE.LineBasicMaterial({ color: 0xff9a3c, transparent: true, opacity: 0.75, depthTest: false });
+    this.object = new THREE.LineSegments(geometry, material);
+    this.object.frustumCulled = false;
+    this.object.renderOrder = 1;
+    this.object.visible = false;
+  }
+
+  setVisible(visible: boolean): void {
+    this.object.visible = visible;
+  }
+
+  update(positions: Float32Array): void {
+    gatherVertices(positions, this.originalIds, this.positions);
+    this.object.geometry.getAttribute('position').needsUpdate = true;
+  }
+}

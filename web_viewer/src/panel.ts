@@ -1,0 +1,87 @@
+// The side panel's DOM: status line, error box, and the tables and toggles
+// filled from the session and its frames. No logic beyond presentation.
+import type { SessionInfo } from './client';
+import { hook } from './hook';
+import type { Overlay } from './overlays';
+
+export const byId = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+
+export function setStatus(text: string): void {
+  byId('status').textContent = text;
+}
+
+export function showError(message: string): void {
+  hook.error = message;
+  const box = byId('error');
+  box.textContent = message;
+  box.hidden = false;
+}
+
+// A stop: the page shows why and does nothing more.
+export function fail(message: string): void {
+  hook.state = 'error';
+  setStatus('Stopped.');
+  showError(message);
+}
+
+// A note under a control, e.g. the answer to SetOptions.
+export function setNote(id: string, text: string, bad = false): void {
+  const note = byId(id);
+  note.textContent = text;
+  note.className = bad ? 'note bad' : 'note';
+}
+
+export function showSession(info: SessionInfo, serverUrl: string): void {
+  fillList(byId('session-info'), [
+    ['session', info.sessionId],
+    ['server', serverUrl],
+    ['mesh hash', info.meshHash],
+    ['vertices', String(info.rest?.vertexCount ?? 0)],
+    ['triangles', String((info.rest?.faces.length ?? 0) / 3)],
+    ['base vertices', String((info.base?.positions.length ?? 0) / 3)],
+  ]);
+}
+
+function fillList(list: HTMLElement, rows: [string, string][]): void {
+  list.replaceChildren(...rows.flatMap(([label, value]) => {
+    const dt = document.createElement('dt');
+    dt.textContent = label;
+    const dd = document.createElement('dd');
+    dd.textContent = value;
+    return [dt, dd];
+  }));
+}
+
+export function showStats(rows: [string, string][]): void {
+  byId('stats').querySelector('tbody')!.replaceChildren(...rows.map(([label, value]) => {
+    const row = document.createElement('tr');
+    const name = document.createElement('td');
+    name.textContent = label;
+    const cell = document.createElement('td');
+    cell.textContent = value;
+    row.append(name, cell);
+    return row;
+  }));
+}
+
+// A checkbox per overlay; unavailable ones are listed, disabled, with the reason.
+export function showOverlayToggles(overlays: Overlay[], changed: () => void): void {
+  byId('overlays').replaceChildren(...overlays.map((overlay) => {
+    const label = document.createElement('label');
+    const box = document.createElement('input');
+    box.type = 'checkbox';
+    box.id = `overlay-${overlay.id}`;
+    box.disabled = overlay.unavailable !== null;
+    box.addEventListener('change', () => {
+      overlay.setVisible(box.checked);
+      changed();
+    });
+    label.append(box, ` ${overlay.label}`);
+    if (overlay.unavailable !== null) {
+      label.className = 'unavailable';
+      label.title = overlay.unavailable;
+      label.append(` (${overlay.unavailable})`);
+    }
+    return label;
+  }));
+}
