@@ -29,6 +29,10 @@ test: build viewer
 demo: build viewer
 	bash scripts/demo.sh $(BUILD)
 
+# A server with the demo session, for a person with a browser (Ctrl-C stops it).
+serve: build viewer
+	bash scripts/serve.sh $(BUILD)
+
 bench: build
 	$(BUILD)/bench/filigree_bench_preprocess
 	$(BUILD)/bench/filigree_bench_runtime

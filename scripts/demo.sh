@@ -26,23 +26,28 @@ echo
 echo "== service: filigree-server on 127.0.0.1, upload, drive a bend at 60 Hz, record it"
 SERVER_OUT="$OUT/server.out"
 rm -rf "$OUT/server-data"
-"$BUILD/server/filigree-server" --listen 127.0.0.1:0 --data-dir "$OUT/server-data" > "$SERVER_OUT" 2> "$OUT/server.log" &
+"$BUILD/server/filigree-server" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data-dir "$OUT/server-data" \
+  > "$SERVER_OUT" 2> "$OUT/server.log" &
 SERVER_PID=$!
 trap 'kill $SERVER_PID 2>/dev/null || true' EXIT
 # The server prints "listening on HOST:PORT" once it accepts calls.
-for _ in $(seq 200); do grep -q "listening on" "$SERVER_OUT" && break; sleep 0.05; done
+for _ in $(seq 200); do grep -q "http on" "$SERVER_OUT" && break; sleep 0.05; done
 ADDRESS=$(sed -n 's/^listening on //p' "$SERVER_OUT")
+HTTP=$(sed -n 's/^http on //p' "$SERVER_OUT")
 [ -n "$ADDRESS" ] || { echo "filigree-server did not start:"; cat "$OUT/server.log"; exit 1; }
 "$FILIGREE" upload data/armadillo.off --server "$ADDRESS" --name demo > "$OUT/session.txt"
 cat "$OUT/session.txt"
 SESSION=$(sed -n 's/^session_id: //p' "$OUT/session.txt")
 EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/session.txt")
+VIEWER=$(sed -n 's/^viewer_token: //p' "$OUT/session.txt")
+echo "viewer (while the server runs): http://$HTTP/?session=$SESSION&token=$VIEWER"
+echo "editor view (handles, threshold): http://$HTTP/?session=$SESSION&token=$EDITOR"
 "$FILIGREE" drive --server "$ADDRESS" --session "$SESSION" --token "$EDITOR" --motion bend --frames 120 --rate 60 \
   -o "$OUT/armadillo_driven.glb"
 kill -TERM $SERVER_PID
 wait $SERVER_PID
 trap - EXIT
-echo "server stopped (exit 0); its log is $OUT/server.log"
+echo "server stopped (exit 0); its log is $OUT/server.log. To keep one running with this session: make serve"
 
 echo
 echo "Demo outputs are in $OUT/: base mesh (GLB/OBJ), a partial cut, the fully recovered mesh,"
