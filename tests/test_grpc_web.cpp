@@ -567,6 +567,8 @@ TEST_F(GrpcWebTest, ServesTheWebViewerFilesAndNothingElse) {
   EXPECT_EQ(res.result_int(), 200u);
   EXPECT_EQ(std::string(res[bhttp::field::content_length]), "20");
 
+  EXPECT_EQ(get("/missing.html", bhttp::verb::head).result_int(), 404u);
+  EXPECT_EQ(get("/").result_int(), 200u);  // that HEAD answer had no body: the connection is still in step
   EXPECT_EQ(get("/missing.html").result_int(), 404u);
   EXPECT_EQ(get("/assets/").result_int(), 404u);  // a directory without index.html
   for (const char* escape : {"/../secret.txt", "/assets/../../secret.txt", "/%2e%2e/secret.txt", "/..%2fsecret.txt",

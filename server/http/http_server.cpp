@@ -151,6 +151,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     const auto& req = parser_->get();
     version_ = req.version();
     keep_alive_ = req.keep_alive();
+    head_ = req.method() == bhttp::verb::head;
     request_line_ = std::string(sv(req.method_string())) + " " + std::string(sv(req.target()));
     if (too_large) return refuse_too_large();
     if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
@@ -362,7 +363,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
     res.set(bhttp::field::server, "filigree-server");
     set_cors(res);
     res.keep_alive(keep_alive_ && !stopping_);
-    if constexpr (std::is_same_v<Body, bhttp::string_body>) res.prepare_payload();
+    if constexpr (std::is_same_v<Body, bhttp::string_body>) {
+      res.prepare_payload();
+      if (head_) res.body().clear();  // the Content-Length of what GET would send, no body
+    }
     spdlog::debug("event=http_request request=\"{}\" status={}", request_line_, res.result_int());
     auto sp = std::make_shared<bhttp::response<Body>>(std::move(res));
     stream_.expires_after(kWriteTimeout);
@@ -425,7 +429,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::optional<bhttp::request_parser<bhttp::string_body>> parser_;
   unsigned version_ = 11;
   std::string request_line_;
-  bool keep_alive_ = true, idle_ = false, stopping_ = false, closed_ = false;
+  bool keep_alive_ = true, head_ = false, idle_ = false, stopping_ = false, closed_ = false;
   // gRPC-Web
   std::shared_ptr<GrpcWebCall> call_;
   std::string unary_body_;
