@@ -42,6 +42,7 @@ EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/session.txt")
 VIEWER=$(sed -n 's/^viewer_token: //p' "$OUT/session.txt")
 echo "viewer (while the server runs): http://$HTTP/?session=$SESSION&token=$VIEWER"
 echo "editor view (handles, threshold): http://$HTTP/?session=$SESSION&token=$EDITOR"
+echo "  (in the page: Overlays → Regions and set T = 1000000 to see the regions; press on the mesh and drag to pull it)"
 "$FILIGREE" drive --server "$ADDRESS" --session "$SESSION" --token "$EDITOR" --motion bend --frames 120 --rate 60 \
   -o "$OUT/armadillo_driven.glb"
 kill -TERM $SERVER_PID

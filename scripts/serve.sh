@@ -15,7 +15,7 @@ trap 'kill -TERM $SERVER_PID 2>/dev/null; wait $SERVER_PID' INT TERM EXIT
 for _ in $(seq 200); do grep -q "http on" "$SERVER_OUT" && break; sleep 0.05; done
 grep -q "http on" "$SERVER_OUT" || { echo "filigree-server did not start:"; cat "$OUT/server.log"; exit 1; }
 if [ ! -s "$OUT/session.txt" ] || ! grep -q "$(sed -n 's/^session_id: //p' "$OUT/session.txt")" <("$BUILD/client/filigree" sessions --server 127.0.0.1:50051); then
-  "$BUILD/client/filigree" upload data/armadillo.off --server 127.0.0.1:50051 --name demo > "$OUT/session.txt"
+  "$BUILD/client/filigree" upload data/armadillo.off --server 127.0.0.1:50051 --name demo --threshold 1000000 > "$OUT/session.txt"
 fi
 SESSION=$(sed -n 's/^session_id: //p' "$OUT/session.txt")
 EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/session.txt")

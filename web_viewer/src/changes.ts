@@ -9,12 +9,14 @@ export interface ChangeLine {
 }
 
 // One line per Change of the frame; a frame with none (a threshold change,
-// the current frame of a late join) gives none.
+// the current frame of a late join) gives none. A change without a pose
+// (pose 0) comes from SetHandles.
 export function changeLines(frame: Frame): ChangeLine[] {
   return frame.changes.map((change) => ({
     version: frame.version,
-    text: `${change.clientName || '(unnamed client)'}: pose ${change.poseId}, ` +
-      `${change.vertexCount} base ${change.vertexCount === 1 ? 'vertex' : 'vertices'}`,
+    text: `${change.clientName || '(unnamed client)'}: ` + (change.poseId === 0n
+      ? (change.vertexCount === 0 ? 'cleared its handles' : 'moved handles')
+      : `pose ${change.poseId}, ${change.vertexCount} base ${change.vertexCount === 1 ? 'vertex' : 'vertices'}`),
   }));
 }
 

@@ -2,9 +2,17 @@
 import { Code, ConnectError, createClient, type Client, type Interceptor } from '@connectrpc/connect';
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
-import { Filigree, type Frame, type SessionInfo, type SessionState } from './gen/filigree/v1/filigree_pb';
+import {
+  Filigree, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionInfo, type SessionState,
+  type SetHandlesResponse,
+} from './gen/filigree/v1/filigree_pb';
 
-export type { Frame, SessionInfo, SessionState };
+export type { Frame, Overlays, SessionInfo, SessionState };
+export type SessionEntry = ListSessionsResponse_Entry;
+
+// A handle as this page keeps it: a vertex of the detailed mesh (original
+// order) and where it should go.
+export interface HandleTarget { vertex: number; x: number; y: number; z: number }
 
 export class SessionClient {
   private readonly client: Client<typeof Filigree>;
@@ -44,6 +52,25 @@ export class SessionClient {
   async submitPose(poseId: bigint, positions: number[], clientName: string): Promise<bigint> {
     const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName });
     return response.acceptedAtVersion;
+  }
+
+  // Replaces this client's handles (empty: none); resolves with the version
+  // they were accepted at (the frame including them has a larger one) and
+  // all participants' handle count after the merge.
+  setHandles(clientName: string, handles: HandleTarget[]): Promise<SetHandlesResponse> {
+    return this.client.setHandles({ sessionId: this.sessionId, clientName, handles });
+  }
+
+  // The regions and the cut mesh of the latest frame; ready is false until
+  // the server has built them (ask again after the next frame).
+  getOverlays(): Promise<Overlays> {
+    return this.client.getOverlays({ sessionId: this.sessionId });
+  }
+
+  // This session's line of ListSessions (undefined once it is gone).
+  async entry(): Promise<SessionEntry | undefined> {
+    const { sessions } = await this.client.listSessions({});
+    return sessions.find((s) => s.sessionId === this.sessionId);
   }
 }
 

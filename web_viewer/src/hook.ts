@@ -17,7 +17,23 @@ export interface TestHook {
   framesRendered: number;
   roundTripMs: number | null;
   displacement: number;     // largest |delta| coordinate of the last applied frame (its quantization range)
+  clientName: string;       // this page's name in SetHandles, SubmitPose and the change list
+  handleCount: number;      // this page's handles
+  handlesAnswered: number;  // SetHandles calls the server accepted
+  handlesAcceptedAt: number;  // the version the last one was accepted at: the frame with its handles is newer
+  handlesSending: boolean;  // a SetHandles call is running or waiting
+  handlesInSession: number | null;  // everyone's handles, after the last accepted call
+  regionCount: number | null;       // of the last ready GetOverlays (null: none yet)
+  overlaysVersion: number;          // the frame those overlays describe
+  cutTriangles: number;             // triangles of that cut mesh
+  stretchMax: number;       // largest |L2 − 1| of the last stretch map (0 while it is off)
   capture(): string | null; // the canvas as a PNG data URL, null before the mesh exists
+  // Page coordinates where vertex i is drawn now (null before the mesh exists).
+  screenPointOfVertex(i: number): { x: number; y: number } | null;
+  // The vertex nearest to the camera: always in view and pickable.
+  nearestVertexToCamera(): number;
+  // The vertex a press at the page point would take as a handle (null: none).
+  vertexAt(x: number, y: number): number | null;
 }
 
 declare global {
@@ -27,5 +43,7 @@ declare global {
 export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
-  displacement: 0, capture: () => null,
+  displacement: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
+  overlaysVersion: 0, cutTriangles: 0, stretchMax: 0,
+  capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
 };

@@ -1,17 +1,28 @@
 // The viewer page: join the session named in the address, show its mesh,
 // follow its frames, and the panel around it.
+import type * as THREE from 'three';
+
 import { ChangeLog } from './changes';
-import { Code, describeError, isCode, SessionClient, type Frame, type SessionInfo } from './client';
+import { Code, describeError, isCode, SessionClient, type Frame, type Overlays, type SessionInfo } from './client';
 import { DeltaDecoder } from './decoder';
 import { applyDeltas, FrameError } from './frame';
+import { HandleEditor } from './handles';
 import { FRAME_EVENT, hook } from './hook';
-import { BaseWireframe, pendingOverlays, type Overlay } from './overlays';
+import { CutWireframe } from './overlay-cut';
+import { OverlayFeed } from './overlay-feed';
+import { RegionsOverlay } from './overlay-regions';
+import { StretchOverlay } from './overlay-stretch';
+import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
 import { readParams, type ViewerParams } from './params';
+import { pollPresence } from './presence';
 import { MeshView } from './scene';
 import { StatsTracker, statsRows } from './stats';
 
-const CLIENT_NAME = 'web-viewer';
+// This page's name for SetHandles and SubmitPose (others see it in their
+// change lists): unique per page, so that two pages' handles do not replace
+// each other.
+const CLIENT_NAME = `web-${Array.from(crypto.getRandomValues(new Uint8Array(3)), (b) => b.toString(16).padStart(2, '0')).join('')}`;
 const RECONNECT_MIN_MS = 500;
 const RECONNECT_MAX_MS = 10_000;
 
@@ -26,6 +37,12 @@ class Viewer {
   private rest!: Float32Array;
   private baseRest: number[] = [];
   private overlays: Overlay[] = [];
+  private readonly shown = new Set<Overlay>();
+  private cut!: CutWireframe;
+  private regions!: RegionsOverlay;
+  private stretch!: StretchOverlay;
+  private feed!: OverlayFeed;
+  private handles!: HandleEditor;
   private lastVersion = 0n;
   private waiting: Frame | null = null;  // the newest frame not yet applied
   private applying = false;
@@ -53,26 +70,78 @@ class Viewer {
   private show(info: SessionInfo): void {
     const rest = info.rest!;
     this.rest = Float32Array.from(rest.positions);
-    this.view = new MeshView(byId('view'), this.rest, Uint32Array.from(rest.faces));
+    const faces = Uint32Array.from(rest.faces);
+    this.view = new MeshView(byId('view'), this.rest, faces);
     const base = info.base!;
     this.baseRest = base.positions;
-    const wireframe = new BaseWireframe(base.positions, base.faces, Uint32Array.from(base.originalIds));
-    this.view.add(wireframe.object);
-    this.overlays = [wireframe, ...pendingOverlays()];
-    showOverlayToggles(this.overlays, () => this.view.invalidate());
+    this.setupOverlays(base.positions, base.faces, Uint32Array.from(base.originalIds), faces);
+    this.handles = new HandleEditor(this.view, this.client, CLIENT_NAME, {
+      status: (text, bad) => setNote('handles-status', text, bad),
+      counts: (own, everyone) => {
+        hook.handleCount = own;
+        hook.handlesInSession = everyone;
+        byId('handle-count').textContent = `${own === 0 ? 'No' : own} handle${own === 1 ? '' : 's'} of this page` +
+          (everyone === null ? '.' : `; ${everyone} in the session.`);
+      },
+      describe: (error) => this.describe(error),
+    });
+    byId('clear-handles').addEventListener('click', () => this.handles.clear());
 
+    hook.clientName = CLIENT_NAME;
     hook.vertexCount = rest.vertexCount;
     hook.baseVertexCount = base.positions.length / 3;
     Object.defineProperties(hook, {
       framesRendered: { get: () => this.view.framesRendered, enumerable: true },
       roundTripMs: { get: () => this.stats.snapshot(performance.now()).roundTripMs, enumerable: true },
+      handlesAnswered: { get: () => this.handles.answered, enumerable: true },
+      handlesAcceptedAt: { get: () => Number(this.handles.acceptedAt), enumerable: true },
+      handlesSending: { get: () => this.handles.sending, enumerable: true },
     });
     hook.capture = () => this.view.capture();
-    showSession(info, this.params.serverUrl);
+    hook.screenPointOfVertex = (i) => this.view.vertexOnScreen(i);
+    hook.nearestVertexToCamera = () => this.view.nearestVertexToCamera();
+    hook.vertexAt = (x, y) => this.handles.vertexAt(x, y);
+    showSession(info, this.params.serverUrl, CLIENT_NAME);
     this.setupOptions(info);
     byId('round-trip').addEventListener('click', () => void this.timeRoundTrip());
     window.setInterval(() => showStats(statsRows(this.stats.snapshot(performance.now()))), 250);
     byId('live').hidden = false;
+  }
+
+  // The base wireframe and the stretch map come from the frames; the cut and
+  // the regions from GetOverlays, polled while one of them is shown.
+  private setupOverlays(basePositions: number[], baseFaces: number[], originalIds: Uint32Array, faces: Uint32Array): void {
+    const wireframe = new BaseWireframe(basePositions, baseFaces, originalIds);
+    this.cut = new CutWireframe(this.view.positions);
+    this.regions = new RegionsOverlay(this.view.geometry);
+    this.stretch = new StretchOverlay(this.rest, faces, this.view.positions,
+      this.view.geometry.getAttribute('normal') as THREE.BufferAttribute);
+    for (const overlay of [this.regions, this.stretch, this.cut, wireframe]) this.view.add(overlay.object);
+    this.overlays = [wireframe, this.cut, this.regions, this.stretch];
+    this.feed = new OverlayFeed(() => this.client.getOverlays(), (overlays) => this.showServerOverlays(overlays),
+      (error) => setNote('overlays-status', this.describe(error), true));
+    showOverlayToggles(this.overlays, (overlay, visible) => {
+      if (visible) this.shown.add(overlay);
+      else this.shown.delete(overlay);
+      this.feed.setWanted([...this.shown].some((o) => o.fromServer));
+      hook.stretchMax = this.shown.has(this.stretch) ? this.stretch.maxDeviation : 0;
+      this.view.invalidate();
+    });
+  }
+
+  private showServerOverlays(overlays: Overlays): void {
+    this.cut.setFaces(overlays.cutFaces);
+    this.regions.setRegions(overlays.regionOf);
+    hook.regionCount = overlays.regionCount;
+    hook.overlaysVersion = Number(overlays.version);
+    hook.cutTriangles = this.cut.triangleCount;
+    setNote('overlays-status', `Frame ${overlays.version}: ${overlays.regionCount} ` +
+      `region${overlays.regionCount === 1 ? '' : 's'}, a cut mesh of ${this.cut.triangleCount} triangles.`);
+    this.view.invalidate();
+  }
+
+  private describe(error: unknown): string {
+    return describeError(error, this.params.sessionId, this.params.serverUrl);
   }
 
   // Watch until the session closes; reconnect (from the last version seen)
@@ -111,6 +180,11 @@ class Viewer {
     ++hook.framesReceived;
     this.lastVersion = frame.version;
     this.changes.add(frame);
+    this.feed.frameArrived();
+    if (hook.framesReceived === 1) {
+      // From the first frame on, the count includes this page's own Watch.
+      pollPresence(() => this.client.entry(), (text) => { byId('presence').textContent = text; }, (e) => this.describe(e));
+    }
     if (this.waiting !== null) {
       ++hook.framesSkipped;
       this.stats.frameSkipped();
@@ -148,6 +222,7 @@ class Viewer {
     }
     this.view.positionsChanged();
     for (const overlay of this.overlays) overlay.update(this.view.positions);
+    if (this.shown.has(this.stretch)) hook.stretchMax = this.stretch.maxDeviation;
     hook.version = Number(frame.version);
     hook.displacement = frame.deltas.length === 0 ? 0
       : Math.max(Math.abs(frame.deltaMin), Math.abs(frame.deltaMin + frame.deltaRange));

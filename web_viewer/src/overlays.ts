@@ -1,28 +1,18 @@
-// Things drawn over the detailed mesh, each one toggled from the panel.
-// Only the base-mesh wireframe exists today: the cut, the optimisation
-// regions and the stretch map need per-vertex data the server does not send
-// yet, so they are listed as unavailable instead of being guessed.
+// Things drawn over the detailed mesh, each one toggled from the panel: the
+// base-mesh wireframe (here), the cut mesh (overlay-cut.ts), the regions
+// (overlay-regions.ts) and the stretch map (overlay-stretch.ts). The cut and
+// the regions come from the server (GetOverlays, overlay-feed.ts); the rest is
+// computed from the frames.
 import * as THREE from 'three';
 
 export interface Overlay {
   readonly id: string;
   readonly label: string;
-  // Null when it can be shown; otherwise why not.
-  readonly unavailable: string | null;
+  // True for overlays drawn from GetOverlays: it is polled while one is shown.
+  readonly fromServer: boolean;
   setVisible(visible: boolean): void;
   // Called after every applied frame with the live detailed positions.
   update(positions: Float32Array): void;
-}
-
-// Overlays waiting for server data: the hooks the panel already lists.
-export function pendingOverlays(): Overlay[] {
-  const pending = (id: string, label: string): Overlay => ({
-    id, label,
-    unavailable: 'the server does not send this yet',
-    setVisible() {},
-    update() {},
-  });
-  return [pending('cut', 'Cut'), pending('regions', 'Regions'), pending('stretch', 'Stretch')];
 }
 
 // Each undirected edge of the triangles once, as index pairs.
@@ -62,7 +52,7 @@ export function gatherVertices(positions: Float32Array, ids: ArrayLike<number>, 
 export class BaseWireframe implements Overlay {
   readonly id = 'base';
   readonly label = 'Base mesh';
-  readonly unavailable = null;
+  readonly fromServer = false;
   readonly object: THREE.LineSegments;
   private readonly positions: Float32Array;
 

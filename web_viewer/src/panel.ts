@@ -31,9 +31,10 @@ export function setNote(id: string, text: string, bad = false): void {
   note.className = bad ? 'note bad' : 'note';
 }
 
-export function showSession(info: SessionInfo, serverUrl: string): void {
+export function showSession(info: SessionInfo, serverUrl: string, clientName: string): void {
   fillList(byId('session-info'), [
     ['session', info.sessionId],
+    ['you are', clientName],
     ['server', serverUrl],
     ['mesh hash', info.meshHash],
     ['vertices', String(info.rest?.vertexCount ?? 0)],
@@ -64,24 +65,18 @@ export function showStats(rows: [string, string][]): void {
   }));
 }
 
-// A checkbox per overlay; unavailable ones are listed, disabled, with the reason.
-export function showOverlayToggles(overlays: Overlay[], changed: () => void): void {
+// A checkbox per overlay; `changed` after each toggle.
+export function showOverlayToggles(overlays: Overlay[], changed: (overlay: Overlay, visible: boolean) => void): void {
   byId('overlays').replaceChildren(...overlays.map((overlay) => {
     const label = document.createElement('label');
     const box = document.createElement('input');
     box.type = 'checkbox';
     box.id = `overlay-${overlay.id}`;
-    box.disabled = overlay.unavailable !== null;
     box.addEventListener('change', () => {
       overlay.setVisible(box.checked);
-      changed();
+      changed(overlay, box.checked);
     });
     label.append(box, ` ${overlay.label}`);
-    if (overlay.unavailable !== null) {
-      label.className = 'unavailable';
-      label.title = overlay.unavailable;
-      label.append(` (${overlay.unavailable})`);
-    }
     return label;
   }));
 }

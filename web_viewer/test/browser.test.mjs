@@ -1,38 +1,27 @@
 // The viewer in a real browser against a real filigree-server: Debian's
 // Chromium (headless, SwiftShader WebGL) driven by playwright-core, the page
 // served by the server itself (--web-root dist) and talking gRPC-Web to it;
-// the session is made and driven with the `filigree` CLI.
+// the session is made and driven with the `filigree` CLI (harness.mjs).
 //
-// Environment:
-//   FILIGREE_SERVER  the filigree-server binary (required)
-//   FILIGREE_CLI     the filigree CLI (default: ../client/filigree beside the server's directory)
-//   CHROMIUM         the browser (default /usr/bin/chromium)
+// Environment: FILIGREE_SERVER (required here), FILIGREE_CLI, CHROMIUM; see harness.mjs.
 // Needs `npm run build` first (dist/); run-tests.sh does both.
 //
 // No sleeps: every wait is on a condition in the page or on a process, with a timeout.
 
 import { after, before, describe, it } from 'node:test';
 import assert from 'node:assert/strict';
-import { execFile, spawn } from 'node:child_process';
-import { existsSync, mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { dirname, join, resolve } from 'node:path';
-import { createInterface } from 'node:readline';
-import { fileURLToPath } from 'node:url';
+import { join } from 'node:path';
 
 import { chromium } from 'playwright-core';
 import { PNG } from 'pngjs';
 
-const HERE = dirname(fileURLToPath(import.meta.url));
-const ROOT = resolve(HERE, '..', '..');
-const WEB_ROOT = resolve(HERE, '..', 'dist');
+import {
+  checkTools, CHROMIUM, CHROMIUM_ARGS, cli, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, upload,
+} from './harness.mjs';
+
 const MESH = join(ROOT, 'tests', 'data', 'bunny_small.obj');
-const SERVER = process.env.FILIGREE_SERVER && resolve(process.env.FILIGREE_SERVER);
-const CLI = resolve(process.env.FILIGREE_CLI ?? join(dirname(SERVER ?? '.'), '..', 'client', 'filigree'));
-const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
-// TOOLCHAIN.md, Browser.
-const CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-  '--disable-background-networking', '--disable-component-update', '--disable-sync', '--enable-unsafe-swiftshader'];
 
 const HOOK_TIMEOUT_MS = 60_000;
 const TEST_TIMEOUT_MS = 90_000;
@@ -40,61 +29,6 @@ const WAIT_MS = 30_000;          // for a condition in the page
 const STOP_TIMEOUT_MS = 20_000;
 
 // ------------------------------------------------------------------ helpers
-
-// Starts filigree-server with gRPC-Web and the viewer; resolves with both
-// addresses once it has printed `listening on H:P` and `http on H:P`.
-function startServer(dataDir) {
-  const child = spawn(SERVER, ['--listen', '127.0.0.1:0', '--http', '127.0.0.1:0', '--web-root', WEB_ROOT,
-    '--data-dir', dataDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'] });
-  let stderr = '';
-  child.stderr.on('data', (d) => { stderr += d; });
-  const exited = new Promise((done) => {
-    child.on('exit', (code, signal) => done({ code, signal }));
-    child.on('error', (error) => done({ code: null, signal: null, error }));
-  });
-  // If this process dies without running `after`, the server goes with it.
-  const kill = () => child.kill('SIGKILL');
-  process.on('exit', kill);
-  exited.then(() => process.off('exit', kill));
-  const addresses = new Promise((done, fail) => {
-    const found = {};
-    createInterface({ input: child.stdout }).on('line', (line) => {
-      const m = /^(listening|http) on (\S+:\d+)$/.exec(line);
-      if (m) found[m[1]] = m[2];
-      if (found.listening && found.http) done({ grpc: found.listening, http: found.http });
-    });
-    exited.then(({ code, signal, error }) => fail(new Error(
-      `filigree-server exited (code ${code}, signal ${signal}${error ? `, ${error.message}` : ''}) before ` +
-      `printing both addresses: ${stderr}`)));
-  });
-  return { child, exited, addresses, stderr: () => stderr };
-}
-
-// Runs the CLI; resolves with its stdout, rejects with its stderr.
-function cli(args, timeoutMs = 60_000) {
-  return new Promise((done, fail) => {
-    execFile(CLI, args, { timeout: timeoutMs }, (error, stdout, stderr) => {
-      if (error) fail(new Error(`filigree ${args[0]} failed: ${error.message}\n${stderr}`));
-      else done(stdout);
-    });
-  });
-}
-
-// `key: value` lines.
-function fields(text) {
-  return Object.fromEntries(text.split('\n').map((l) => /^(\w+):\s*(.*)$/.exec(l)).filter(Boolean).map((m) => [m[1], m[2]]));
-}
-
-function diagonal(objText) {
-  const lo = [Infinity, Infinity, Infinity];
-  const hi = [-Infinity, -Infinity, -Infinity];
-  for (const line of objText.split('\n')) {
-    const f = line.trim().split(/\s+/);
-    if (f[0] !== 'v') continue;
-    for (let k = 0; k < 3; ++k) { lo[k] = Math.min(lo[k], Number(f[k + 1])); hi[k] = Math.max(hi[k], Number(f[k + 1])); }
-  }
-  return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
-}
 
 function png(data) {
   return PNG.sync.read(typeof data === 'string' ? Buffer.from(data.replace(/^data:image\/png;base64,/, ''), 'base64') : data);
@@ -126,10 +60,16 @@ function changedFraction(a, b, tolerance = 16) {
   return changed / (a.width * a.height);
 }
 
-const hookState = (page) => page.evaluate(() => {
-  const { capture, ...plain } = window.__filigree;  // eslint-disable-line no-unused-vars
-  return plain;
-});
+// The fraction of pixels with a clearly coloured (not grey) value: the
+// region colours; the plain mesh and the background are grey.
+function colouredFraction(image, spread = 60) {
+  let coloured = 0;
+  for (let i = 0; i < image.data.length; i += 4) {
+    const [r, g, b] = image.data.subarray(i, i + 3);
+    if (Math.max(r, g, b) - Math.min(r, g, b) > spread) ++coloured;
+  }
+  return coloured / (image.width * image.height);
+}
 
 // ------------------------------------------------------------------ tests
 
@@ -157,19 +97,16 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
   const waitFor = (page, fn, arg) => page.waitForFunction(fn, arg, { timeout: WAIT_MS });
 
   before(async () => {
-    assert.ok(SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
-    assert.ok(existsSync(CLI), `the filigree CLI is not at ${CLI} (set FILIGREE_CLI)`);
-    assert.ok(existsSync(CHROMIUM), `no browser at ${CHROMIUM}: apt-get install chromium, or set CHROMIUM`);
-    assert.ok(existsSync(join(WEB_ROOT, 'index.html')), `no viewer build in ${WEB_ROOT}: run npm run build`);
-    meshDiagonal = diagonal(readFileSync(MESH, 'latin1'));
+    assert.ok(process.env.FILIGREE_SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
+    checkTools();
+    meshDiagonal = diagonal(MESH);
 
     dataDir = mkdtempSync(join(tmpdir(), 'filigree-viewer-test-'));
     server = startServer(dataDir);
     const addresses = await server.addresses;
     grpcAddress = addresses.grpc;
     baseUrl = `http://${addresses.http}`;
-    session = fields(await cli(['upload', MESH, '--server', grpcAddress, '--name', 'browser-test']));
-    assert.ok(session.session_id && session.editor_token && session.viewer_token, 'upload printed a session and tokens');
+    session = await upload(grpcAddress, MESH, 'browser-test');
 
     browser = await chromium.launch({ executablePath: CHROMIUM, headless: true, args: CHROMIUM_ARGS });
   }, { timeout: HOOK_TIMEOUT_MS });
@@ -177,12 +114,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
   after(async () => {
     await browser?.close();
     if (server && server.child.exitCode === null && server.child.signalCode === null) {
-      server.child.kill('SIGTERM');
-      let timer;
-      const stopped = await Promise.race([server.exited,
-        new Promise((done) => { timer = setTimeout(() => done(null), STOP_TIMEOUT_MS); })]);
-      clearTimeout(timer);
-      if (stopped === null) server.child.kill('SIGKILL');
+      const stopped = await stopServer(server, STOP_TIMEOUT_MS);
       assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
       assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
     }
@@ -239,8 +171,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
       window.addEventListener('filigree:frame', look);
     }), bentThreshold);
 
-    await cli(['drive', '--server', grpcAddress, '--session', session.session_id, '--token', session.editor_token,
-      '--motion', 'bend', '--frames', '30', '--rate', '30', '--name', 'browser-test-bend']);
+    await cli(driveArgs(grpcAddress, session, 'bend', 30, 30, 'browser-test-bend'));
 
     let timer;
     const bent = await Promise.race([bentCapture, new Promise((_, fail) => {
@@ -289,7 +220,91 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const { roundTripMs } = await hookState(page);
     assert.ok(roundTripMs > 0 && roundTripMs < WAIT_MS, `round trip ${roundTripMs} ms`);
     t.diagnostic(`SubmitPose → frame: ${roundTripMs.toFixed(1)} ms`);
-    await waitFor(page, () => /web-viewer: pose 1, \d+ base vertices/.test(document.querySelector('#changes').textContent));
+    const { clientName } = await hookState(page);
+    assert.match(clientName, /^web-[0-9a-f]{6}$/);
+    await waitFor(page, (name) => new RegExp(`${name}: pose 1, \\d+ base vertices`).test(document.querySelector('#changes').textContent),
+      clientName);
+    await page.context().close();
+  });
+
+  it('drags a handle with the editor token; a second page sees the change, and cannot edit', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    const live = () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1;
+    const editor = await open(viewerUrl(session.editor_token));
+    const watcher = await open(viewerUrl(session.viewer_token));
+    await waitFor(editor, live);
+    await waitFor(watcher, live);
+    const start = await hookState(editor);
+
+    // A real press, drag and release on the vertex nearest to the camera.
+    const at = await editor.evaluate(() => window.__filigree.screenPointOfVertex(window.__filigree.nearestVertexToCamera()));
+    assert.notEqual(await editor.evaluate(({ x, y }) => window.__filigree.vertexAt(x, y), at), null, 'the point is on the mesh');
+    await editor.mouse.move(at.x, at.y);
+    await editor.mouse.down();
+    await waitFor(editor, () => window.__filigree.handleCount === 1);
+    await editor.mouse.move(at.x + 70, at.y - 40, { steps: 8 });
+    await editor.mouse.up();
+
+    // Every SetHandles call answered, the frame that includes the last one
+    // shown, and the mesh moved by a good part of the drag.
+    const moved = 0.02 * meshDiagonal;
+    await waitFor(editor, ([v0, eps]) => window.__filigree.handlesAnswered >= 1 && !window.__filigree.handlesSending
+      && window.__filigree.version > Math.max(v0, window.__filigree.handlesAcceptedAt)
+      && window.__filigree.displacement > eps, [start.version, moved]);
+    const dragged = await hookState(editor);
+    assert.equal(dragged.handleCount, 1);
+    assert.equal(dragged.handlesInSession, 1);
+
+    // The watcher (viewer token, own browser context) gets the same frames.
+    await waitFor(watcher, (v) => window.__filigree.version >= v, dragged.version);
+    const seen = await hookState(watcher);
+    assert.ok(seen.displacement > moved, `the watcher's mesh moved: ${seen.displacement}`);
+    if (seen.version === dragged.version) assert.equal(seen.displacement, dragged.displacement);
+    await waitFor(watcher, (name) => document.querySelector('#changes').textContent.includes(`${name}: moved handles`),
+      dragged.clientName);
+
+    // Pressing on the mesh with a viewer token says why nothing happens.
+    const watcherAt = await watcher.evaluate(() => window.__filigree.screenPointOfVertex(window.__filigree.nearestVertexToCamera()));
+    await watcher.mouse.click(watcherAt.x, watcherAt.y);
+    await waitFor(watcher, () => /editor token/.test(document.querySelector('#handles-status').textContent));
+    assert.equal((await hookState(watcher)).handleCount, 0);
+
+    // Clearing sends an empty set: no handles left in the session.
+    await editor.click('#clear-handles');
+    await waitFor(editor, () => window.__filigree.handleCount === 0 && window.__filigree.handlesInSession === 0);
+    t.diagnostic(`drag: v${start.version} → v${dragged.version}, displacement ${dragged.displacement.toFixed(4)} ` +
+      `(diagonal ${meshDiagonal.toFixed(3)}), ${dragged.handlesAnswered} SetHandles answered; watcher at v${seen.version}`);
+    await editor.context().close();
+    await watcher.context().close();
+  });
+
+  it('shows the regions, which the threshold turns on and off', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    const page = await open(viewerUrl(session.editor_token));
+    await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
+    const setThreshold = async (value) => {
+      await page.fill('#threshold', String(value));
+      await page.click('#options button[type=submit]');
+      await waitFor(page, (v) => document.querySelector('#options-status').textContent === `T is now ${v}.`, value);
+    };
+    await page.check('#overlay-regions');
+    await setThreshold(1e5);
+
+    // Armed before the drive: a bend with T = 1e5 refines regions.
+    const sawRegions = waitFor(page, () => window.__filigree.regionCount > 0);
+    await cli(driveArgs(grpcAddress, session, 'bend', 20, 20, 'browser-test-regions'));
+    await sawRegions;
+    const withRegions = await hookState(page);
+    const coloured = colouredFraction(png(await page.evaluate(() => window.__filigree.capture())));
+    assert.ok(coloured > 0.02, `the regions are coloured: ${(100 * coloured).toFixed(1)}% of pixels`);
+    assert.match(await page.textContent('#overlays-status'), /[1-9]\d* regions?, a cut mesh of \d+ triangles/);
+
+    // T = 0 and one more pose: direct recovery only, no regions.
+    await setThreshold(0);
+    await page.click('#round-trip');
+    await waitFor(page, () => window.__filigree.regionCount === 0);
+    const without = colouredFraction(png(await page.evaluate(() => window.__filigree.capture())));
+    assert.ok(without < 0.005, `no region colours at T = 0: ${(100 * without).toFixed(2)}% of pixels`);
+    t.diagnostic(`T = 1e5: ${withRegions.regionCount} regions at v${withRegions.overlaysVersion}, ` +
+      `${(100 * coloured).toFixed(1)}% coloured pixels; T = 0: ${(100 * without).toFixed(2)}%`);
     await page.context().close();
   });
 });

@@ -82,6 +82,11 @@ describe('changeLines', () => {
       { version: 9n, text: '(unnamed client): pose 1, 1 base vertex' },
     ]);
   });
+
+  it('tells handle edits (no pose) apart', () => {
+    const f = frame(3, { changes: [{ clientName: 'web-1a2b3c', vertexCount: 2 }, { clientName: 'web-4d5e6f', vertexCount: 0 }] });
+    expect(changeLines(f).map((l) => l.text)).toEqual(['web-1a2b3c: moved handles', 'web-4d5e6f: cleared its handles']);
+  });
 });
 
 describe('base wireframe geometry', () => {

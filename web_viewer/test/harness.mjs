@@ -1,0 +1,122 @@
+// What the browser test (browser.test.mjs) and the screenshot script
+// (screenshots.mjs) share: a real filigree-server serving the viewer build
+// and gRPC-Web, the `filigree` CLI, and Debian's Chromium.
+//
+// Environment:
+//   FILIGREE_SERVER  the filigree-server binary (default: build/server/filigree-server of this repository)
+//   FILIGREE_CLI     the filigree CLI (default: ../client/filigree beside the server's directory)
+//   CHROMIUM         the browser (default /usr/bin/chromium)
+
+import { execFile, spawn } from 'node:child_process';
+import { existsSync, readFileSync } from 'node:fs';
+import { dirname, join, resolve } from 'node:path';
+import { createInterface } from 'node:readline';
+import { fileURLToPath } from 'node:url';
+
+const HERE = dirname(fileURLToPath(import.meta.url));
+export const ROOT = resolve(HERE, '..', '..');
+export const WEB_ROOT = resolve(HERE, '..', 'dist');
+export const SERVER = resolve(process.env.FILIGREE_SERVER ?? join(ROOT, 'build', 'server', 'filigree-server'));
+export const CLI = resolve(process.env.FILIGREE_CLI ?? join(dirname(SERVER), '..', 'client', 'filigree'));
+export const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
+// TOOLCHAIN.md, Browser.
+export const CHROMIUM_ARGS = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync', '--enable-unsafe-swiftshader'];
+
+// What must exist before anything starts; throws with what is missing.
+export function checkTools() {
+  for (const [path, what] of [[SERVER, 'filigree-server (set FILIGREE_SERVER)'], [CLI, 'the filigree CLI (set FILIGREE_CLI)'],
+    [CHROMIUM, 'a browser: apt-get install chromium, or set CHROMIUM'], [join(WEB_ROOT, 'index.html'), 'the viewer build: run npm run build']]) {
+    if (!existsSync(path)) throw new Error(`${path} is missing: ${what}`);
+  }
+}
+
+// Starts filigree-server with gRPC-Web and the viewer; `addresses` resolves
+// with both once it has printed `listening on H:P` and `http on H:P`.
+export function startServer(dataDir) {
+  const child = spawn(SERVER, ['--listen', '127.0.0.1:0', '--http', '127.0.0.1:0', '--web-root', WEB_ROOT,
+    '--data-dir', dataDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'] });
+  let stderr = '';
+  child.stderr.on('data', (d) => { stderr += d; });
+  const exited = new Promise((done) => {
+    child.on('exit', (code, signal) => done({ code, signal }));
+    child.on('error', (error) => done({ code: null, signal: null, error }));
+  });
+  // If this process dies without stopping it, the server goes with it.
+  const kill = () => child.kill('SIGKILL');
+  process.on('exit', kill);
+  exited.then(() => process.off('exit', kill));
+  const addresses = new Promise((done, fail) => {
+    const found = {};
+    createInterface({ input: child.stdout }).on('line', (line) => {
+      const m = /^(listening|http) on (\S+:\d+)$/.exec(line);
+      if (m) found[m[1]] = m[2];
+      if (found.listening && found.http) done({ grpc: found.listening, http: found.http });
+    });
+    exited.then(({ code, signal, error }) => fail(new Error(
+      `filigree-server exited (code ${code}, signal ${signal}${error ? `, ${error.message}` : ''}) before ` +
+      `printing both addresses: ${stderr}`)));
+  });
+  return { child, exited, addresses, stderr: () => stderr };
+}
+
+// SIGTERM, then SIGKILL after `timeoutMs`; resolves with { code, signal }, or null if it had to be killed.
+export async function stopServer(server, timeoutMs) {
+  if (server.child.exitCode !== null || server.child.signalCode !== null) return server.exited;
+  server.child.kill('SIGTERM');
+  let timer;
+  const stopped = await Promise.race([server.exited,
+    new Promise((done) => { timer = setTimeout(() => done(null), timeoutMs); })]);
+  clearTimeout(timer);
+  if (stopped === null) server.child.kill('SIGKILL');
+  return stopped;
+}
+
+// Runs the CLI; resolves with its stdout, rejects with its stderr.
+export function cli(args, timeoutMs = 60_000) {
+  return new Promise((done, fail) => {
+    execFile(CLI, args, { timeout: timeoutMs }, (error, stdout, stderr) => {
+      if (error) fail(new Error(`filigree ${args[0]} failed: ${error.message}\n${stderr}`));
+      else done(stdout);
+    });
+  });
+}
+
+// Uploads a mesh; resolves with { session_id, editor_token, viewer_token, … }.
+export async function upload(grpcAddress, mesh, name) {
+  const session = fields(await cli(['upload', mesh, '--server', grpcAddress, '--name', name]));
+  if (!session.session_id || !session.editor_token || !session.viewer_token) throw new Error('upload printed no session and tokens');
+  return session;
+}
+
+// The CLI's arguments to drive a procedural motion.
+export const driveArgs = (grpcAddress, session, motion, frames, rate, name) => ['drive', '--server', grpcAddress,
+  '--session', session.session_id, '--token', session.editor_token, '--motion', motion, '--frames', String(frames),
+  '--rate', String(rate), '--name', name];
+
+// `key: value` lines.
+export function fields(text) {
+  return Object.fromEntries(text.split('\n').map((l) => /^(\w+):\s*(.*)$/.exec(l)).filter(Boolean).map((m) => [m[1], m[2]]));
+}
+
+// The bounding-box diagonal of an .obj or .off file.
+export function diagonal(path) {
+  const text = readFileSync(path, 'latin1');
+  const rows = path.endsWith('.off')
+    ? (() => {
+      const lines = text.split('\n').map((l) => l.trim()).filter((l) => l && !l.startsWith('#'));
+      const count = Number(lines[1].split(/\s+/)[0]);
+      return lines.slice(2, 2 + count).map((l) => l.split(/\s+/).map(Number));
+    })()
+    : text.split('\n').map((l) => l.trim().split(/\s+/)).filter((f) => f[0] === 'v').map((f) => f.slice(1, 4).map(Number));
+  const lo = [Infinity, Infinity, Infinity];
+  const hi = [-Infinity, -Infinity, -Infinity];
+  for (const row of rows) {
+    for (let k = 0; k < 3; ++k) { lo[k] = Math.min(lo[k], row[k]); hi[k] = Math.max(hi[k], row[k]); }
+  }
+  return Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
+}
+
+// window.__filigree without its functions (what page.evaluate can return).
+export const hookState = (page) => page.evaluate(() =>
+  Object.fromEntries(Object.entries(window.__filigree).filter(([, v]) => typeof v !== 'function')));
