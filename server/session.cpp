@@ -282,7 +282,9 @@ void Session::compute_once(bool keep_version) {
     bool at_rest = true;
     for (std::size_t i = 0; i < m && at_rest; ++i)
       for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == base_.positions(static_cast<int>(3 * i + k));
-    const DeformResult r = at_rest ? DeformResult{h.rest_positions, {}} : deformer_->deform(pose);
+    // Deform anyway so the cut, regions and stats (overlays) follow this frame.
+    DeformResult r = deformer_->deform(pose);
+    if (at_rest) r.positions = h.rest_positions;
     const auto t = Clock::now();
     std::vector<Vec3> deltas(h.vertex_count());
     for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] = r.positions[i] - h.rest_positions[i];
