@@ -36,12 +36,7 @@ namespace net = boost::asio;
 using tcp = net::ip::tcp;
 using test::ServerProcess;
 
-std::string file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::file_bytes;
 
 // ------------------------------------------------------------ gRPC-Web wire format
 

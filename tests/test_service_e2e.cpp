@@ -27,12 +27,7 @@ namespace {
 
 using test::ServerProcess;
 
-std::string file_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using test::file_bytes;
 
 struct Created {
   grpc::Status status;

@@ -1,6 +1,8 @@
 #include "support/test_meshes.h"
 
 #include <cmath>
+#include <fstream>
+#include <sstream>
 #include <map>
 #include <numbers>
 
@@ -83,6 +85,13 @@ TriMesh two_spheres(int levels) {
 }
 
 std::string shipped_path(const std::string& file_name) { return std::string(FILIGREE_TEST_DATA_DIR) + "/" + file_name; }
+
+std::string file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
 
 TriMesh shipped_mesh(const std::string& file_name) { return read_mesh(shipped_path(file_name)); }
 

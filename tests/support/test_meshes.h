@@ -18,5 +18,7 @@ TriMesh two_spheres(int levels);
 // A mesh shipped in tests/data, read with read_mesh.
 TriMesh shipped_mesh(const std::string& file_name);
 std::string shipped_path(const std::string& file_name);
+// A whole file as bytes (e.g. a mesh to upload).
+std::string file_bytes(const std::string& path);
 
 }  // namespace filigree::test
