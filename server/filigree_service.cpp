@@ -116,7 +116,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     v1::CreateSessionResponse r;
     r.mutable_progress()->set_stage(stage);
     r.mutable_progress()->set_fraction(fraction);
-    writer_.send(std::move(r), /*droppable=*/true);
+    writer_.send(std::make_shared<const v1::CreateSessionResponse>(std::move(r)), /*droppable=*/true);
   }
 
   // Parsing and preprocessing can take seconds: never on a gRPC thread.
@@ -170,7 +170,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       created->set_editor_token(record.editor_token);
       created->set_viewer_token(record.viewer_token);
       created->set_cached(!built);
-      writer_.send(std::move(r), /*droppable=*/false);
+      writer_.send(std::make_shared<const v1::CreateSessionResponse>(std::move(r)), /*droppable=*/false);
       spdlog::info("event=upload_done session={} bytes={} vertices={} cached={}", session->id(), bytes_.size(),
                    mesh.vertex_count(), !built);
       return grpc::Status::OK;
@@ -207,11 +207,15 @@ class FrameStream : public FrameSink {
   FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {}
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
-    v1::Frame out = frame->frame;
-    if (driver_) {
-      const auto it = frame->pose_of_driver.find(driver_);
-      out.set_pose_id(it == frame->pose_of_driver.end() ? 0 : it->second);
+    if (!driver_) {
+      // Watchers all write the one encoded frame (aliasing its PublishedFrame).
+      writer_.send(std::shared_ptr<const v1::Frame>(frame, &frame->frame), /*droppable=*/true);
+      return;
     }
+    // A driver's copy names the newest of its poses in the frame.
+    auto out = std::make_shared<v1::Frame>(frame->frame);
+    const auto it = frame->pose_of_driver.find(driver_);
+    out->set_pose_id(it == frame->pose_of_driver.end() ? 0 : it->second);
     writer_.send(std::move(out), /*droppable=*/true);
   }
   void close(bool session_closed) override {

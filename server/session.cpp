@@ -240,7 +240,8 @@ void Session::run() {
 void Session::compute_once(bool keep_version) {
   const Hierarchy& h = *hierarchy_;
   const std::size_t m = h.base_vertices.size();
-  Pose pose;
+  // Buffers reused frame to frame; only this session's worker computes.
+  Pose& pose = scratch_pose_;
   pose.positions.resize(m);
   std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
   std::map<std::string, v1::Change> changes;
@@ -286,7 +287,8 @@ void Session::compute_once(bool keep_version) {
     DeformResult r = deformer_->deform(pose);
     if (at_rest) r.positions = h.rest_positions;
     const auto t = Clock::now();
-    std::vector<Vec3> deltas(h.vertex_count());
+    std::vector<Vec3>& deltas = scratch_deltas_;
+    deltas.resize(h.vertex_count());
     for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] = r.positions[i] - h.rest_positions[i];
     const EncodedDeltas enc = encode_deltas(deltas, bits ? bits : automatic_bits(deltas, rest_diagonal_));
     const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();

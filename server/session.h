@@ -23,6 +23,7 @@
 
 #include "filigree/v1/filigree.pb.h"
 #include "hierarchy/hierarchy.h"
+#include "runtime/pose.h"
 
 namespace filigree {
 class Deformer;
@@ -126,6 +127,8 @@ class Session {
   v1::BaseMesh base_;
   v1::RestMesh rest_;
   double rest_diagonal_ = 1.0;
+  Pose scratch_pose_;                // compute_once's buffers (worker thread only)
+  std::vector<Vec3> scratch_deltas_;
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;

@@ -2,8 +2,10 @@
 // Serialises writes on a gRPC callback stream: one write in flight, a mailbox
 // of one for droppable messages (a newer frame replaces a waiting one), and a
 // Finish that waits for the write in flight — the callback API allows neither
-// two outstanding writes nor Finish during a write.
+// two outstanding writes nor Finish during a write. Messages are held by
+// shared pointer, so one frame can be written to every subscriber uncopied.
 
+#include <memory>
 #include <mutex>
 #include <optional>
 
@@ -18,7 +20,7 @@ class StreamWriter {
 
   // Queues a message. A droppable one replaces a waiting droppable one; a
   // waiting non-droppable message is never replaced.
-  void send(Message message, bool droppable) {
+  void send(std::shared_ptr<const Message> message, bool droppable) {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
     if (closing_ || finished_) return;
     if (waiting_ && !waiting_droppable_ && droppable) return;
@@ -57,10 +59,9 @@ class StreamWriter {
   void pump() {
     if (finished_ || writing_) return;
     if (waiting_) {
-      out_ = std::move(*waiting_);
-      waiting_.reset();
+      out_ = std::move(waiting_);
       writing_ = true;
-      reactor_->StartWrite(&out_);
+      reactor_->StartWrite(out_.get());
     } else if (closing_) {
       finished_ = true;
       reactor_->Finish(*closing_);
@@ -70,8 +71,8 @@ class StreamWriter {
   // Recursive: gRPC may run OnWriteDone inline from StartWrite.
   std::recursive_mutex mutex_;
   Reactor* reactor_;
-  Message out_;
-  std::optional<Message> waiting_;
+  std::shared_ptr<const Message> out_;  // kept alive until OnWriteDone
+  std::shared_ptr<const Message> waiting_;
   bool waiting_droppable_ = true;
   bool writing_ = false;
   bool finished_ = false;

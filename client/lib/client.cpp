@@ -16,6 +16,18 @@ std::shared_ptr<grpc::Channel> make_channel(const std::string& target) {
   return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
 }
 
+// One unary call on a session: metadata set, failure thrown as ClientError.
+template <class Request, class Response>
+Response call(v1::Filigree::Stub& stub,
+              grpc::Status (v1::Filigree::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
+              const std::string& session_id, const std::string& token, const Request& request) {
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token);
+  Response response;
+  throw_if_error((stub.*method)(&context, request, &response));
+  return response;
+}
+
 }  // namespace
 
 Client::Client(const std::string& target) : Client(make_channel(target)) {}
@@ -74,44 +86,30 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
 }
 
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {
-  grpc::ClientContext context;
-  set_session_metadata(context, session_id, token);
   v1::JoinSessionRequest request;
   request.set_session_id(session_id);
-  v1::SessionInfo info;
-  throw_if_error(stub_->JoinSession(&context, request, &info));
-  return to_session_mesh(info);
+  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request));
 }
 
 v1::SessionState Client::state(const std::string& session_id, const std::string& token) {
-  grpc::ClientContext context;
-  set_session_metadata(context, session_id, token);
   v1::GetStateRequest request;
   request.set_session_id(session_id);
-  v1::SessionState state;
-  throw_if_error(stub_->GetState(&context, request, &state));
-  return state;
+  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request);
 }
 
 void Client::set_threshold(const std::string& session_id, const std::string& token, double threshold,
                            bool whole_mesh) {
-  grpc::ClientContext context;
-  set_session_metadata(context, session_id, token);
   v1::SetOptionsRequest request;
   request.set_session_id(session_id);
   request.set_threshold(threshold);
   request.set_whole_mesh(whole_mesh);
-  v1::SessionInfo info;
-  throw_if_error(stub_->SetOptions(&context, request, &info));
+  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request);
 }
 
 void Client::close(const std::string& session_id, const std::string& token) {
-  grpc::ClientContext context;
-  set_session_metadata(context, session_id, token);
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  v1::CloseSessionResponse response;
-  throw_if_error(stub_->CloseSession(&context, request, &response));
+  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request);
 }
 
 std::vector<v1::ListSessionsResponse::Entry> Client::list() {
