@@ -9,7 +9,8 @@ PACKAGES=(
   libeigen3-dev libopenmesh-dev libtinygltf-dev libdraco-dev libsuitesparse-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev
-  libboost-dev
+  libboost-dev libhiredis-dev
+  redis-server nginx
   chromium fonts-liberation
 )
 

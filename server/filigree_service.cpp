@@ -31,11 +31,20 @@ grpc::ServerUnaryReactor* finish_unary(grpc::CallbackServerContext* context, con
 
 }  // namespace
 
-grpc::Status authorize(SessionRegistry& registry, const grpc::CallbackServerContext& context, const std::string& id,
+grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& context, const std::string& id,
                        Role needed, std::shared_ptr<Session>* session) {
   const std::string session_id = id.empty() ? metadata(context, "x-session-id") : id;
   if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "no session id (field session_id or x-session-id metadata)"};
-  *session = registry.find(session_id);
+  try {
+    // A client that routes itself does not pull sessions to the replica it calls.
+    *session = registry.find(session_id, metadata(context, "x-filigree-route") != "direct");
+  } catch (const SessionElsewhere& e) {
+    if (!e.owner_address.empty()) context.AddTrailingMetadata("x-filigree-owner", e.owner_address);
+    context.AddTrailingMetadata("x-filigree-retry-after-ms", std::to_string(e.retry_after_ms));
+    return {grpc::StatusCode::UNAVAILABLE, e.what()};
+  } catch (const StoreUnavailable& e) {
+    return {grpc::StatusCode::UNAVAILABLE, e.what()};
+  }
   if (!*session) return {grpc::StatusCode::NOT_FOUND, "no session '" + session_id + "'"};
   const std::string token = metadata(context, "x-filigree-token");
   if (token.empty()) return {grpc::StatusCode::UNAUTHENTICATED, "missing x-filigree-token metadata"};
@@ -162,7 +171,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       bool built = false;
       auto h = service_.cache().get_or_build(mesh, pre, &key, &built);
       progress("starting", 1.0);
-      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids));
+      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id());
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
       *created->mutable_info() = session->info();
@@ -174,6 +183,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       spdlog::info("event=upload_done session={} bytes={} vertices={} cached={}", session->id(), bytes_.size(),
                    mesh.vertex_count(), !built);
       return grpc::Status::OK;
+    } catch (const BadSessionId& e) {
+      return {e.taken ? grpc::StatusCode::ALREADY_EXISTS : grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const MeshIoError& e) {
       return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const InvalidMeshError& e) {
@@ -182,6 +193,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const TooManySessions& e) {
       return {grpc::StatusCode::RESOURCE_EXHAUSTED, e.what()};
+    } catch (const StoreUnavailable& e) {
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
     } catch (const std::exception& e) {
       spdlog::error("event=upload_failed error=\"{}\"", e.what());
       return {grpc::StatusCode::INTERNAL, e.what()};
@@ -218,8 +231,8 @@ class FrameStream : public FrameSink {
     out->set_pose_id(it == frame->pose_of_driver.end() ? 0 : it->second);
     writer_.send(std::move(out), /*droppable=*/true);
   }
-  void close(bool session_closed) override {
-    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+  void close(bool session_closed, const std::string& why) override {
+    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
   }
   StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
 
@@ -252,6 +265,8 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
                        {request_.positions().data(), static_cast<std::size_t>(request_.positions().size())});
     } catch (const PoseError& e) {
       return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
+    } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
+      return stream_->writer().finish({grpc::StatusCode::UNAVAILABLE, e.what()});
     }
     StartRead(&request_);
   }
@@ -340,6 +355,8 @@ grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContex
                 {request->positions().data(), static_cast<std::size_t>(request->positions().size())});
     } catch (const PoseError& e) {
       status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    } catch (const StoreUnavailable& e) {
+      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
   }
   return finish_unary(context, status);
@@ -385,8 +402,12 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
   if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
     status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
   if (status.ok()) {
-    s->set_threshold(request->threshold(), request->whole_mesh());
-    *response = s->info();
+    try {
+      s->set_threshold(request->threshold(), request->whole_mesh());
+      *response = s->info();
+    } catch (const StoreUnavailable& e) {
+      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+    }
   }
   return finish_unary(context, status);
 }
@@ -395,7 +416,33 @@ grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerCont
                                                         const v1::CloseSessionRequest* request, v1::CloseSessionResponse*) {
   std::shared_ptr<Session> s;
   grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
-  if (status.ok()) registry_.close(s->id());
+  if (status.ok()) {
+    try {
+      registry_.close(s->id());
+    } catch (const StoreUnavailable& e) {
+      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+    }
+  }
+  return finish_unary(context, status);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::LocateSession(grpc::CallbackServerContext* context,
+                                                         const v1::LocateSessionRequest* request,
+                                                         v1::SessionLocation* response) {
+  grpc::Status status;
+  try {
+    const SessionLocation where = registry_.locate(request->session_id());
+    if (!where.exists) {
+      status = {grpc::StatusCode::NOT_FOUND, "no session '" + request->session_id() + "'"};
+    } else {
+      response->set_session_id(request->session_id());
+      response->set_replica_id(where.replica_id);
+      response->set_address(where.address);
+      response->set_here(where.here);
+    }
+  } catch (const StoreUnavailable& e) {
+    status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+  }
   return finish_unary(context, status);
 }
 

@@ -45,6 +45,8 @@ class FiligreeService final : public v1::Filigree::CallbackService {
                                        v1::SessionInfo* response) override;
   grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context, const v1::CloseSessionRequest* request,
                                          v1::CloseSessionResponse* response) override;
+  grpc::ServerUnaryReactor* LocateSession(grpc::CallbackServerContext* context, const v1::LocateSessionRequest* request,
+                                         v1::SessionLocation* response) override;
   grpc::ServerUnaryReactor* ListSessions(grpc::CallbackServerContext* context, const v1::ListSessionsRequest* request,
                                          v1::ListSessionsResponse* response) override;
 
@@ -70,7 +72,8 @@ class FiligreeService final : public v1::Filigree::CallbackService {
 // Looks up the session and checks the token in the call's metadata
 // (x-filigree-token) against `needed`. Returns OK and sets *session, or the
 // status to answer with: NOT_FOUND, UNAUTHENTICATED, PERMISSION_DENIED.
-grpc::Status authorize(SessionRegistry& registry, const grpc::CallbackServerContext& context, const std::string& id,
+// Another replica serving the session, or the shared store unreachable: UNAVAILABLE.
+grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& context, const std::string& id,
                        Role needed, std::shared_ptr<Session>* session);
 
 }  // namespace filigree::server

@@ -1,6 +1,9 @@
 #include "server/hierarchy_cache.h"
 
 #include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <thread>
 
 #include <spdlog/spdlog.h>
 
@@ -8,8 +11,25 @@
 #include "util/content_hash.h"
 
 namespace filigree::server {
+namespace {
 
-HierarchyCache::HierarchyCache(std::filesystem::path dir) : dir_(std::move(dir)) {
+// Write then rename: a crash leaves no half file under the final name.
+void write_file(const std::filesystem::path& file, const std::string& bytes) {
+  // Unique per writer: two threads may fetch the same hierarchy at once.
+  std::ostringstream name;
+  name << file.string() << "." << std::this_thread::get_id() << ".partial";
+  const auto tmp = std::filesystem::path(name.str());
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out.write(bytes.data(), static_cast<std::streamsize>(bytes.size())))
+      throw std::runtime_error("cannot write " + tmp.string());
+  }
+  std::filesystem::rename(tmp, file);
+}
+
+}  // namespace
+
+HierarchyCache::HierarchyCache(std::filesystem::path dir, HierarchyStore* shared) : dir_(std::move(dir)), shared_(shared) {
   if (!dir_.empty()) std::filesystem::create_directories(dir_);
 }
 
@@ -26,6 +46,25 @@ std::string HierarchyCache::key_of(std::uint64_t mesh_hash, const PreprocessOpti
 }
 
 std::filesystem::path HierarchyCache::file_of(const std::string& key) const { return dir_ / (key + ".fgh"); }
+
+std::shared_ptr<const Hierarchy> HierarchyCache::remember(const std::string& key, std::shared_ptr<const Hierarchy> h) {
+  std::lock_guard lock(mutex_);
+  if (auto existing = loaded_[key].lock()) return existing;
+  loaded_[key] = h;
+  return h;
+}
+
+std::shared_ptr<const Hierarchy> HierarchyCache::fetch_shared(const std::string& key) {
+  if (!shared_) return nullptr;
+  std::optional<std::string> bytes = shared_->get(key);
+  if (!bytes) return nullptr;
+  auto h = std::make_shared<const Hierarchy>(deserialize_hierarchy(*bytes, "shared hierarchy " + key));
+  if (!dir_.empty()) write_file(file_of(key), *bytes);
+  spdlog::info("event=hierarchy_fetched key={} bytes={}", key, bytes->size());
+  std::lock_guard lock(mutex_);
+  ++shared_loads_;
+  return h;
+}
 
 std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mesh, const PreprocessOptions& options,
                                                               std::string* key_out, bool* built) {
@@ -50,21 +89,33 @@ std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mes
   if (!we_build) return load(key);
 
   std::shared_ptr<const Hierarchy> h;
+  bool fetched = false;
   try {
-    h = std::make_shared<const Hierarchy>(preprocess(mesh, options));
-    if (!dir_.empty()) save_hierarchy(*h, file_of(key));
+    // Another replica may have built it already.
+    h = fetch_shared(key);
+    fetched = h != nullptr;
+    if (!h) {
+      h = std::make_shared<const Hierarchy>(preprocess(mesh, options));
+      if (!dir_.empty() || shared_) {
+        const std::string bytes = serialize_hierarchy(*h);
+        if (!dir_.empty()) write_file(file_of(key), bytes);
+        if (shared_) shared_->put(key, bytes);
+      }
+    }
   } catch (...) {
     std::lock_guard lock(mutex_);
     promise.set_exception(std::current_exception());
     building_.erase(key);
     throw;
   }
-  spdlog::info("event=hierarchy_built key={} vertices={} base={} seconds={:.2f}", key, h->vertex_count(),
-               h->base_vertices.size(), h->build.build_seconds);
-  if (built) *built = true;
+  if (!fetched) {
+    spdlog::info("event=hierarchy_built key={} vertices={} base={} seconds={:.2f}", key, h->vertex_count(),
+                 h->base_vertices.size(), h->build.build_seconds);
+  }
+  if (built) *built = !fetched;
   std::lock_guard lock(mutex_);
   loaded_[key] = h;
-  ++builds_;
+  if (!fetched) ++builds_;
   promise.set_value(h);
   building_.erase(key);
   return h;
@@ -75,17 +126,20 @@ std::shared_ptr<const Hierarchy> HierarchyCache::load(const std::string& key) {
     std::lock_guard lock(mutex_);
     if (auto h = loaded_[key].lock()) return h;
   }
-  if (dir_.empty()) throw std::runtime_error("hierarchy " + key + " is not in memory and there is no data directory");
-  auto h = std::make_shared<const Hierarchy>(load_hierarchy(file_of(key)));
-  std::lock_guard lock(mutex_);
-  if (auto existing = loaded_[key].lock()) return existing;
-  loaded_[key] = h;
-  return h;
+  if (!dir_.empty() && std::filesystem::exists(file_of(key)))
+    return remember(key, std::make_shared<const Hierarchy>(load_hierarchy(file_of(key))));
+  if (auto h = fetch_shared(key)) return remember(key, std::move(h));
+  throw std::runtime_error("hierarchy " + key + " is in neither memory, the data directory nor the shared store");
 }
 
 std::size_t HierarchyCache::builds() const {
   std::lock_guard lock(mutex_);
   return builds_;
+}
+
+std::size_t HierarchyCache::shared_loads() const {
+  std::lock_guard lock(mutex_);
+  return shared_loads_;
 }
 
 }  // namespace filigree::server

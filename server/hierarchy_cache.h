@@ -1,7 +1,8 @@
 #pragma once
 // Hierarchies by mesh hash and base size: the same mesh uploaded twice is
 // preprocessed once (even concurrently), kept in memory while any session uses
-// it and on disk under --data-dir/hierarchies/ for restarts.
+// it, on disk under --data-dir/hierarchies/ for restarts and, with replicas,
+// in the shared store so a hierarchy built by one replica is loaded by others.
 
 #include <filesystem>
 #include <functional>
@@ -13,13 +14,15 @@
 
 #include "hierarchy/hierarchy.h"
 #include "preprocess/preprocess.h"
+#include "server/state/hierarchy_store.h"
 
 namespace filigree::server {
 
 class HierarchyCache {
  public:
-  // `dir` empty: memory only.
-  explicit HierarchyCache(std::filesystem::path dir);
+  // `dir` empty: no local files. `shared` (may be null, must outlive the
+  // cache): the store shared by replicas.
+  explicit HierarchyCache(std::filesystem::path dir, HierarchyStore* shared = nullptr);
 
   // The cache key: mesh hash and the base-size request.
   static std::string key_of(std::uint64_t mesh_hash, const PreprocessOptions& options);
@@ -28,19 +31,26 @@ class HierarchyCache {
   // building it at most once per key; `built` tells whether this call built it.
   std::shared_ptr<const Hierarchy> get_or_build(const TriMesh& mesh, const PreprocessOptions& options,
                                                 std::string* key, bool* built);
-  // A hierarchy by key from memory or disk; throws if it is neither.
+  // A hierarchy by key from memory, disk or the shared store; throws if it
+  // is in none.
   std::shared_ptr<const Hierarchy> load(const std::string& key);
 
   std::size_t builds() const;
+  // Hierarchies this process loaded from the shared store (built elsewhere).
+  std::size_t shared_loads() const;
 
  private:
   std::filesystem::path file_of(const std::string& key) const;
+  // From the shared store (kept on local disk too), or nullptr.
+  std::shared_ptr<const Hierarchy> fetch_shared(const std::string& key);
+  std::shared_ptr<const Hierarchy> remember(const std::string& key, std::shared_ptr<const Hierarchy> h);
 
   const std::filesystem::path dir_;
+  HierarchyStore* const shared_;
   mutable std::mutex mutex_;
   std::map<std::string, std::weak_ptr<const Hierarchy>> loaded_;
   std::map<std::string, std::shared_future<std::shared_ptr<const Hierarchy>>> building_;
-  std::size_t builds_ = 0;
+  std::size_t builds_ = 0, shared_loads_ = 0;
 };
 
 }  // namespace filigree::server

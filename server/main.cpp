@@ -6,6 +6,8 @@
 #include <optional>
 #include <thread>
 
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -15,6 +17,10 @@
 
 #include "server/filigree_service.h"
 #include "server/http/http_server.h"
+#include "server/state/file_session_store.h"
+#include "server/state/redis_client.h"
+#include "server/state/redis_hierarchy_store.h"
+#include "server/state/redis_session_store.h"
 
 namespace {
 
@@ -32,6 +38,12 @@ std::optional<std::filesystem::path> web_root(const std::string& flag) {
   const fs::path dist = (exe.parent_path() / ".." / ".." / "web_viewer" / "dist").lexically_normal();
   if (fs::is_directory(dist, ec)) return dist;
   return std::nullopt;
+}
+
+std::string host_name() {
+  char name[256] = {};
+  if (gethostname(name, sizeof name - 1) != 0 || !name[0]) return "localhost";
+  return name;
 }
 
 }  // namespace
@@ -59,6 +71,19 @@ int main(int argc, char** argv) {
   app.add_option("--web-root", web_root_flag,
                  "Directory of the built web viewer served over --http (default: <executable dir>/../../web_viewer/dist "
                  "if it exists)");
+  std::string redis_address, replica_id, advertise, redis_prefix = "filigree:";
+  int lease_ms = 3000;
+  app.add_option("--redis", redis_address,
+                 "HOST:PORT of a Redis shared by replicas: hierarchies, session records and ownership leases live "
+                 "there, so any replica can take a session over (default: none; this process is the only replica)");
+  app.add_option("--replica-id", replica_id, "This replica's unique name (default: <hostname>-<pid>)");
+  app.add_option("--advertise", advertise,
+                 "HOST:PORT at which clients reach this replica directly, told by LocateSession (default: the "
+                 "listening address, with the host name for 0.0.0.0)");
+  app.add_option("--lease-ms", lease_ms, "Ownership lease of a session (with --redis): how long a dead replica's "
+                                         "sessions wait before another replica takes them over")
+      ->check(CLI::Range(300, 600000));
+  app.add_option("--redis-prefix", redis_prefix, "Prefix of every Redis key (several deployments on one Redis)");
   CLI11_PARSE(app, argc, argv);
   // Logs go to stderr; stdout carries only the "listening on" (and "http on") lines for scripts.
   spdlog::set_default_logger(spdlog::stderr_color_mt("filigree-server"));
@@ -73,8 +98,24 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   try {
-    HierarchyCache cache(data_dir.empty() ? std::filesystem::path() : std::filesystem::path(data_dir) / "hierarchies");
-    SessionRegistry registry(cache, data_dir, registry_limits);
+    const std::filesystem::path data = data_dir;
+    // One machine: records as files. Replicas: records, leases and hierarchies in Redis
+    // (hierarchy files stay in --data-dir as a local cache).
+    std::shared_ptr<RedisClient> redis;
+    std::unique_ptr<SessionStore> store;
+    std::unique_ptr<HierarchyStore> shared_hierarchies;
+    if (!redis_address.empty()) {
+      redis = std::make_shared<RedisClient>(redis_address, std::chrono::milliseconds(std::max(200, lease_ms / 3)));
+      if (replica_id.empty()) replica_id = host_name() + "-" + std::to_string(getpid());
+      store = std::make_unique<RedisSessionStore>(redis, RedisSessionStoreOptions{redis_prefix, replica_id, "",
+                                                                                  std::chrono::milliseconds(lease_ms)});
+      shared_hierarchies = std::make_unique<RedisHierarchyStore>(redis, redis_prefix);
+      registry_limits.lease_seconds = lease_ms / 1000.0;
+    } else {
+      store = std::make_unique<FileSessionStore>(data.empty() ? data : data / "sessions");
+    }
+    HierarchyCache cache(data.empty() ? data : data / "hierarchies", shared_hierarchies.get());
+    SessionRegistry registry(cache, *store, registry_limits);
     const std::size_t restored = registry.restore();
     FiligreeService service(registry, cache, service_limits);
 
@@ -104,6 +145,13 @@ int main(int argc, char** argv) {
       http_server = std::make_unique<http::HttpServer>(std::move(http_options), server->InProcessChannel(channel_args));
     }
     const std::string host = listen.substr(0, listen.rfind(':'));
+    if (redis) {
+      if (advertise.empty()) advertise = (host == "0.0.0.0" || host == "[::]" ? host_name() : host) + ":" + std::to_string(port);
+      // The port is known only now (--listen HOST:0).
+      static_cast<RedisSessionStore&>(*store).set_advertise(advertise);
+      spdlog::info("event=replica replica_id={} advertise={} redis={} lease_ms={}", replica_id, advertise, redis_address,
+                   lease_ms);
+    }
     spdlog::info("event=listening address={}:{} data_dir=\"{}\" restored_sessions={}", host, port, data_dir, restored);
     // Tests and scripts read the port from this line on stdout.
     std::printf("listening on %s:%d\n", host.c_str(), port);
@@ -112,8 +160,10 @@ int main(int argc, char** argv) {
 
     std::atomic<bool> stopping{false};
     std::thread maintenance([&] {
+      // Leases are renewed three times per lease; records (one machine) once a second.
+      const int tick_ms = redis ? lease_ms / 3 : 1000;
       while (!stopping) {
-        for (int i = 0; i < 10 && !stopping; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        for (int t = 0; t < tick_ms && !stopping; t += 50) std::this_thread::sleep_for(std::chrono::milliseconds(50));
         registry.maintain();
       }
     });

@@ -56,8 +56,8 @@ std::uint32_t automatic_bits(const std::vector<Vec3>& deltas, double diagonal) {
 
 }  // namespace
 
-Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy)
-    : hierarchy_(std::move(hierarchy)), record_(std::move(record)), last_activity_(Clock::now()) {
+Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy, Journal journal)
+    : hierarchy_(std::move(hierarchy)), record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = *hierarchy_;
   const TriMesh base = h.base_mesh();
   for (const Vec3& p : base.positions)
@@ -114,6 +114,8 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
   for (std::size_t i = 0; i < positions.size(); ++i)
     if (!std::isfinite(positions[i])) throw PoseError("pose coordinate " + std::to_string(i) + " is not finite (NaN or Inf)");
 
+  std::uint64_t seq;
+  SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     if (closed_) return;
@@ -127,9 +129,13 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
     change.set_pose_id(pose_id);
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
     pending_ = true;
+    seq = ++journal_seq_;
+    // The frame that will show this change: the next, or the one after the one computing.
+    if (journal_) progress = progress_locked(record_.version + 1 + (computing_ ? 1 : 0));
     touch();
   }
   wake_.notify_one();
+  journal(progress, seq);
 }
 
 void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<std::uint64_t> after_version) {
@@ -137,7 +143,7 @@ void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<st
   {
     std::lock_guard lock(mutex_);
     if (closed_) {
-      sink->close(true);
+      sink->close(true, {});
       return;
     }
     sinks_.push_back(sink);
@@ -190,15 +196,20 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
 }
 
 void Session::set_threshold(double threshold, bool whole_mesh) {
+  std::uint64_t seq;
+  SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
     pending_ = true;
+    seq = ++journal_seq_;
+    if (journal_) progress = progress_locked(record_.version + 1 + (computing_ ? 1 : 0));
     touch();
   }
   wake_.notify_one();
+  journal(progress, seq);
 }
 
 void Session::close() {
@@ -212,10 +223,10 @@ void Session::close() {
     sinks_.clear();
   }
   wake_.notify_all();
-  for (const auto& s : sinks) s->close(true);
+  for (const auto& s : sinks) s->close(true, {});
 }
 
-void Session::close_streams() {
+void Session::close_streams(const std::string& why) {
   std::vector<std::shared_ptr<FrameSink>> sinks;
   {
     std::lock_guard lock(mutex_);
@@ -223,7 +234,24 @@ void Session::close_streams() {
       if (auto s = w.lock()) sinks.push_back(s);
     sinks_.clear();
   }
-  for (const auto& s : sinks) s->close(false);
+  for (const auto& s : sinks) s->close(false, why);
+}
+
+std::string Session::failure() const {
+  std::lock_guard lock(mutex_);
+  return failure_;
+}
+
+SessionProgress Session::progress_locked(std::uint64_t version) const {
+  return {record_.options, record_.pose, version};
+}
+
+void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
+  if (!journal_) return;
+  std::lock_guard lock(journal_mutex_);
+  if (seq <= journaled_seq_) return;  // a later snapshot, with this change, is stored
+  journal_(progress);
+  journaled_seq_ = seq;
 }
 
 void Session::run() {
@@ -248,6 +276,8 @@ void Session::compute_once(bool keep_version) {
   std::optional<double> threshold;
   std::uint32_t bits;
   std::vector<HandleTarget> handle_targets;
+  std::uint64_t seq;
+  SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     pending_ = false;
@@ -269,6 +299,7 @@ void Session::compute_once(bool keep_version) {
     changes.swap(changes_);
     threshold.swap(pending_threshold_);
     bits = record_.options.quantization_bits();
+    seq = journal_seq_;
   }
   try {
     if (!handle_targets.empty()) {
@@ -277,6 +308,33 @@ void Session::compute_once(bool keep_version) {
       std::lock_guard lock(mutex_);
       for (std::size_t i = 0; i < m; ++i)
         for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+      seq = ++journal_seq_;
+    }
+    if (journal_) {
+      // Nothing is acknowledged (published) before it is journaled.
+      std::lock_guard lock(mutex_);
+      progress = progress_locked(keep_version ? record_.version : record_.version + 1);
+      for (std::size_t i = 0; i < m; ++i)
+        for (int k = 0; k < 3; ++k) progress.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+    }
+    try {
+      journal(progress, seq);
+    } catch (const std::exception& e) {
+      // Unjournaled frames must not be published: stop here; the registry
+      // drops the session and the next call loads it from the store again.
+      std::vector<std::shared_ptr<FrameSink>> sinks;
+      {
+        std::lock_guard lock(mutex_);
+        failure_ = e.what();
+        stopping_ = true;
+        computing_ = false;
+        for (const auto& w : sinks_)
+          if (auto sink = w.lock()) sinks.push_back(sink);
+        sinks_.clear();
+      }
+      spdlog::warn("session={} event=journal_failed error=\"{}\"", record_.id, e.what());
+      for (const auto& sink : sinks) sink->close(false, std::string("the session stopped on this replica: ") + e.what());
+      return;
     }
     if (threshold) deformer_->set_threshold(*threshold);
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -24,6 +25,7 @@
 #include "filigree/v1/filigree.pb.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/pose.h"
+#include "server/session_record.h"
 
 namespace filigree {
 class Deformer;
@@ -47,25 +49,22 @@ class FrameSink {
   virtual ~FrameSink() = default;
   // Called with every new frame, from the session's worker; must not block.
   virtual void offer(std::shared_ptr<const PublishedFrame> frame) = 0;
-  // The session is closing: finish the stream.
-  virtual void close(bool session_closed) = 0;
+  // The session is closing (session_closed) or leaves this process (the
+  // server stops, or the session moves to another replica): finish the
+  // stream, with `why` as the UNAVAILABLE message in the second case.
+  virtual void close(bool session_closed, const std::string& why) = 0;
 };
 
-// What is persisted of a session (DESIGN §3, issue: sessions survive restarts).
-struct SessionRecord {
-  std::string id;
-  std::string hierarchy_key;
-  v1::SessionOptions options;
-  std::string editor_token, viewer_token;
-  std::vector<float> pose;  // 3·m, base order
-  std::uint64_t version = 0;
-  std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
-};
+// Called with the session's progress before a change is acknowledged (a
+// SubmitPose answered, a frame published); throws to refuse it (the shared
+// store is unreachable, or another replica owns the session now). Empty: no
+// journal (one machine: the registry writes records periodically).
+using Journal = std::function<void(const SessionProgress&)>;
 
 class Session {
  public:
   // Computes the current frame, then starts the worker.
-  Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy);
+  Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy, Journal journal = {});
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
@@ -76,7 +75,9 @@ class Session {
   // Merges a full (indices empty) or partial pose from `driver` (0: a unary
   // call, no stream to name in frames). Throws
   // PoseError (→ INVALID_ARGUMENT) for a wrong length, an index out of range or
-  // NaN/Inf, without changing anything.
+  // NaN/Inf, without changing anything. With a journal, returns once the
+  // change is journaled, and throws what the journal throws (the change is
+  // then merged here but not acknowledged).
   void submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
               std::span<const std::uint32_t> indices, std::span<const float> positions);
 
@@ -95,8 +96,11 @@ class Session {
   std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
   // Finishes every stream; the session computes nothing more.
   void close();
-  // Finishes every stream as the server shuts down (UNAVAILABLE); state stays.
-  void close_streams();
+  // Finishes every stream with UNAVAILABLE and `why` (the server shuts down,
+  // the session moves); state stays.
+  void close_streams(const std::string& why);
+  // Why the session stopped computing here (its journal failed), or empty.
+  std::string failure() const;
 
   // The overlays of the latest frame; asking keeps them built for 5 s.
   v1::Overlays overlays();
@@ -120,6 +124,9 @@ class Session {
   // grows by one unless `keep_version` (the frame made when (re)loading).
   void compute_once(bool keep_version);
   void touch();
+  // Journals `progress` unless a later progress (by seq) already was.
+  void journal(const SessionProgress& progress, std::uint64_t seq);
+  SessionProgress progress_locked(std::uint64_t version) const;
 
   const std::shared_ptr<const Hierarchy> hierarchy_;
   std::unique_ptr<Deformer> deformer_;
@@ -150,6 +157,11 @@ class Session {
   std::shared_ptr<const v1::Overlays> overlays_;
   std::chrono::steady_clock::time_point overlays_wanted_until_{};
   std::chrono::steady_clock::time_point last_activity_;
+  const Journal journal_;
+  std::mutex journal_mutex_;
+  std::uint64_t journal_seq_ = 0;    // changes merged (mutex_)
+  std::uint64_t journaled_seq_ = 0;  // changes journaled (journal_mutex_)
+  std::string failure_;
   std::thread worker_;
 };
 

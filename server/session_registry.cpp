@@ -1,13 +1,22 @@
 #include "server/session_registry.h"
 
-#include <fstream>
 #include <random>
 
 #include <spdlog/spdlog.h>
 
-#include "filigree/internal/session_record.pb.h"
-
 namespace filigree::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+constexpr std::size_t kIdLength = 20;
+bool is_session_id(const std::string& id) {
+  return id.size() == kIdLength && id.find_first_not_of("0123456789abcdef") == std::string::npos;
+}
+
+}  // namespace
 
 std::string random_token() {
   static thread_local std::random_device device;
@@ -20,49 +29,138 @@ std::string random_token() {
   return out;
 }
 
-SessionRegistry::SessionRegistry(HierarchyCache& cache, std::filesystem::path data_dir, RegistryLimits limits)
-    : cache_(cache), dir_(data_dir.empty() ? data_dir : data_dir / "sessions"), limits_(limits) {
-  if (!dir_.empty()) std::filesystem::create_directories(dir_);
-}
+SessionRegistry::SessionRegistry(HierarchyCache& cache, SessionStore& store, RegistryLimits limits)
+    : cache_(cache), store_(store), limits_(limits) {}
 
 SessionRegistry::~SessionRegistry() = default;
 
-std::filesystem::path SessionRegistry::record_file(const std::string& id) const { return dir_ / (id + ".session"); }
+Journal SessionRegistry::journal_for(const std::string& id) {
+  if (!store_.shared()) return {};
+  return [this, id](const SessionProgress& p) {
+    if (!store_.save_progress(id, p))
+      throw StoreUnavailable("replica " + store_.replica_id() + " no longer holds the lease of session " + id +
+                             "; another replica serves it: reconnect");
+  };
+}
+
+std::shared_ptr<Session> SessionRegistry::insert(std::shared_ptr<Session> s) {
+  std::lock_guard lock(mutex_);
+  const auto now = Clock::now();
+  const auto [it, inserted] = sessions_.emplace(s->id(), Entry{s, s->version(), now, now});
+  return it->second.session;
+}
 
 std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
-                                                 const v1::SessionOptions& options, std::vector<Index> uploaded_ids) {
+                                                 const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
+                                                 const std::string& proposed_id) {
   {
     std::lock_guard lock(mutex_);
     if (sessions_.size() >= limits_.max_sessions)
       throw TooManySessions("the server holds its maximum of " + std::to_string(limits_.max_sessions) + " sessions");
   }
+  if (!proposed_id.empty() && !is_session_id(proposed_id))
+    throw BadSessionId("a proposed session id is " + std::to_string(kIdLength) + " lowercase hex digits, not '" +
+                           proposed_id + "'",
+                       false);
   SessionRecord r;
-  r.id = random_token().substr(0, 20);
+  r.id = proposed_id.empty() ? random_token().substr(0, kIdLength) : proposed_id;
   r.hierarchy_key = hierarchy_key;
   r.options = options;
   r.editor_token = random_token();
   r.viewer_token = random_token();
   r.uploaded_ids = std::move(uploaded_ids);
-  auto s = std::make_shared<Session>(std::move(r), std::move(h));
-  persist(*s);
-  std::lock_guard lock(mutex_);
-  sessions_[s->id()] = s;
+  if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
+  auto s = insert(std::make_shared<Session>(std::move(r), std::move(h), journal_for(r.id)));
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
   return s;
 }
 
-std::shared_ptr<Session> SessionRegistry::find(const std::string& id) {
+std::shared_ptr<Session> SessionRegistry::find(const std::string& id, bool take_over) {
   {
     std::lock_guard lock(mutex_);
     const auto it = sessions_.find(id);
-    if (it != sessions_.end()) return it->second;
+    if (it != sessions_.end() && it->second.session->failure().empty()) return it->second.session;
   }
-  // Evicted (or never loaded): its record may be on disk. Ids are hex, so the
-  // file name cannot escape the directory.
-  if (dir_.empty() || id.empty() || id.find_first_not_of("0123456789abcdef") != std::string::npos) return nullptr;
-  const auto file = record_file(id);
-  if (!std::filesystem::exists(file)) return nullptr;
-  return load_record(file);
+  // A session whose journal failed stopped computing: load it again from the store.
+  drop(id, "the session is reloaded");
+  // Evicted, never loaded here, or another replica's.
+  if (!is_session_id(id)) return nullptr;
+  return load(id, take_over);
+}
+
+std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_over) {
+  // One load per session at a time: concurrent calls for it wait and share it.
+  std::shared_ptr<std::mutex> loading;
+  {
+    std::lock_guard lock(mutex_);
+    auto& m = loading_[id];
+    if (!m) m = std::make_shared<std::mutex>();
+    loading = m;
+  }
+  std::lock_guard load_lock(*loading);
+  struct Forget {
+    SessionRegistry& r;
+    const std::string& id;
+    ~Forget() {
+      std::lock_guard lock(r.mutex_);
+      r.loading_.erase(id);
+    }
+  } forget{*this, id};
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = sessions_.find(id);
+    if (it != sessions_.end()) return it->second.session;
+  }
+  if (!store_.exists(id)) return nullptr;
+  const Claim claim = store_.claim(id, take_over);
+  if (!claim.acquired) throw SessionElsewhere(id, claim.owner_id, claim.owner_address, claim.lease_ms_left, take_over);
+  // Read after claiming: the previous owner wrote its last change before its lease ended.
+  std::optional<SessionRecord> r = store_.load(id);
+  if (!r) {
+    store_.release(id);
+    return nullptr;
+  }
+  std::shared_ptr<Session> s;
+  try {
+    auto h = cache_.load(r->hierarchy_key);
+    s = std::make_shared<Session>(std::move(*r), std::move(h), journal_for(id));
+  } catch (const StoreUnavailable&) {
+    store_.release(id);
+    throw;
+  } catch (const std::exception& e) {
+    store_.release(id);
+    spdlog::error("event=record_unusable session={} error=\"{}\"", id, e.what());
+    throw StoreUnavailable("session " + id + " cannot be loaded here: " + e.what());
+  }
+  s = insert(std::move(s));
+  spdlog::info("event=session_loaded session={} version={}", s->id(), s->version());
+  return s;
+}
+
+void SessionRegistry::drop(const std::string& id, const std::string& why) {
+  std::shared_ptr<Session> s;
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = sessions_.find(id);
+    if (it == sessions_.end()) return;
+    s = it->second.session;
+    sessions_.erase(it);
+  }
+  s->close_streams(why);
+}
+
+SessionLocation SessionRegistry::locate(const std::string& id) {
+  SessionLocation where;
+  {
+    std::lock_guard lock(mutex_);
+    where.here = sessions_.count(id) > 0;
+  }
+  if (!where.here && (!is_session_id(id) || !store_.exists(id))) return where;
+  where.exists = true;
+  where.replica_id = where.here ? store_.replica_id() : store_.owner_of(id);
+  if (!where.replica_id.empty()) where.address = store_.address_of(where.replica_id);
+  where.here = where.here || (!store_.shared());
+  return where;
 }
 
 bool SessionRegistry::close(const std::string& id) {
@@ -71,10 +169,9 @@ bool SessionRegistry::close(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
     sessions_.erase(id);
-    persisted_version_.erase(id);
   }
   s->close();
-  if (!dir_.empty()) std::filesystem::remove(record_file(id));
+  store_.remove(id);
   spdlog::info("event=session_closed session={}", id);
   return true;
 }
@@ -82,91 +179,96 @@ bool SessionRegistry::close(const std::string& id) {
 std::vector<std::shared_ptr<Session>> SessionRegistry::loaded() const {
   std::lock_guard lock(mutex_);
   std::vector<std::shared_ptr<Session>> out;
-  for (const auto& [id, s] : sessions_) out.push_back(s);
+  for (const auto& [id, e] : sessions_) out.push_back(e.session);
   return out;
 }
 
 void SessionRegistry::persist(const Session& s) {
-  if (dir_.empty()) return;
-  const SessionRecord r = s.record();
-  internal::SessionRecord p;
-  p.set_format_version(1);
-  p.set_session_id(r.id);
-  p.set_hierarchy_key(r.hierarchy_key);
-  *p.mutable_options() = r.options;
-  p.set_editor_token(r.editor_token);
-  p.set_viewer_token(r.viewer_token);
-  for (float c : r.pose) p.add_pose(c);
-  p.set_version(r.version);
-  for (Index v : r.uploaded_ids) p.add_uploaded_ids(v);
-  // Write then rename: a crash leaves the old record, never half a new one.
-  const auto file = record_file(r.id);
-  const auto tmp = std::filesystem::path(file.string() + ".partial");
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out || !p.SerializeToOstream(&out)) {
-      spdlog::error("event=persist_failed session={} file={}", r.id, tmp.string());
-      return;
-    }
-  }
-  std::filesystem::rename(tmp, file);
-  std::lock_guard lock(mutex_);
-  persisted_version_[r.id] = r.version;
-}
-
-std::shared_ptr<Session> SessionRegistry::load_record(const std::filesystem::path& file) {
-  internal::SessionRecord p;
-  {
-    std::ifstream in(file, std::ios::binary);
-    if (!in || !p.ParseFromIstream(&in) || p.format_version() != 1) {
-      spdlog::error("event=record_unreadable file={}", file.string());
-      return nullptr;
-    }
-  }
-  SessionRecord r;
-  r.id = p.session_id();
-  r.hierarchy_key = p.hierarchy_key();
-  r.options = p.options();
-  r.editor_token = p.editor_token();
-  r.viewer_token = p.viewer_token();
-  r.pose.assign(p.pose().begin(), p.pose().end());
-  r.version = p.version();
-  r.uploaded_ids.assign(p.uploaded_ids().begin(), p.uploaded_ids().end());
-  std::shared_ptr<Session> s;
   try {
-    s = std::make_shared<Session>(std::move(r), cache_.load(p.hierarchy_key()));
+    const SessionRecord r = s.record();
+    if (!store_.save(r)) return;
+    std::lock_guard lock(mutex_);
+    const auto it = sessions_.find(r.id);
+    if (it != sessions_.end()) it->second.persisted_version = r.version;
   } catch (const std::exception& e) {
-    spdlog::error("event=record_unusable file={} error=\"{}\"", file.string(), e.what());
-    return nullptr;
+    spdlog::error("event=persist_failed session={} error=\"{}\"", s.id(), e.what());
   }
-  std::lock_guard lock(mutex_);
-  const auto [it, inserted] = sessions_.emplace(s->id(), s);
-  persisted_version_[s->id()] = s->version();
-  if (inserted) spdlog::info("event=session_loaded session={} version={}", s->id(), s->version());
-  return it->second;
 }
 
 std::size_t SessionRegistry::restore() {
-  if (dir_.empty()) return 0;
+  if (store_.shared()) return 0;  // other replicas' sessions load when asked for
   std::size_t n = 0;
-  for (const auto& entry : std::filesystem::directory_iterator(dir_))
-    if (entry.path().extension() == ".session" && load_record(entry.path())) ++n;
+  for (const std::string& id : store_.list()) {
+    try {
+      if (find(id)) ++n;
+    } catch (const std::exception& e) {
+      spdlog::error("event=restore_failed session={} error=\"{}\"", id, e.what());
+    }
+  }
   return n;
 }
 
 void SessionRegistry::maintain() {
-  for (const auto& s : loaded()) {
-    bool changed;
-    {
-      std::lock_guard lock(mutex_);
-      changed = persisted_version_[s->id()] != s->version();
+  const bool shared = store_.shared();
+  if (shared) {
+    try {
+      store_.heartbeat();
+    } catch (const std::exception& e) {
+      spdlog::warn("event=heartbeat_failed error=\"{}\"", e.what());
     }
-    if (changed) persist(*s);
+  }
+  std::vector<std::pair<std::string, Entry>> entries;
+  {
+    std::lock_guard lock(mutex_);
+    entries.assign(sessions_.begin(), sessions_.end());
+  }
+  for (const auto& [id, e] : entries) {
+    const auto& s = e.session;
+    if (shared) {
+      Renewal renewal = Renewal::kHeld;
+      try {
+        renewal = store_.renew(id, seconds_since(e.since) >= limits_.min_hold_seconds);
+        std::lock_guard lock(mutex_);
+        const auto it = sessions_.find(id);
+        if (it != sessions_.end()) it->second.renewed = Clock::now();
+      } catch (const std::exception& ex) {
+        spdlog::warn("event=lease_renewal_failed session={} error=\"{}\"", id, ex.what());
+        // Past the lease another replica may own it: stop computing here.
+        if (seconds_since(e.renewed) > limits_.lease_seconds) renewal = Renewal::kLost;
+      }
+      if (renewal == Renewal::kLost) {
+        spdlog::warn("event=lease_lost session={}", id);
+        drop(id, "this replica lost the session's lease; another replica serves it: reconnect");
+        continue;
+      }
+      if (renewal == Renewal::kHandOff) {
+        // Every change is journaled already; this write only makes sure.
+        persist(*s);
+        drop(id, "the session moved to another replica: reconnect");
+        try {
+          store_.release(id);
+        } catch (const std::exception& ex) {
+          spdlog::warn("event=lease_release_failed session={} error=\"{}\"", id, ex.what());
+        }
+        spdlog::info("event=session_handed_off session={} version={}", id, s->version());
+        continue;
+      }
+    } else if (e.persisted_version != s->version()) {
+      persist(*s);
+    }
     if (s->subscriber_count() == 0 && s->idle_seconds() > limits_.idle_seconds) {
       persist(*s);
-      std::lock_guard lock(mutex_);
-      sessions_.erase(s->id());
-      spdlog::info("event=session_evicted session={} idle_seconds={:.0f}", s->id(), s->idle_seconds());
+      {
+        std::lock_guard lock(mutex_);
+        sessions_.erase(id);
+      }
+      if (shared) {
+        try {
+          store_.release(id);
+        } catch (const std::exception&) {  // the lease then simply expires
+        }
+      }
+      spdlog::info("event=session_evicted session={} idle_seconds={:.0f}", id, s->idle_seconds());
     }
   }
 }
@@ -174,7 +276,13 @@ void SessionRegistry::maintain() {
 void SessionRegistry::shutdown() {
   for (const auto& s : loaded()) {
     persist(*s);
-    s->close_streams();
+    s->close_streams("the server is shutting down");
+    if (store_.shared()) {
+      try {
+        store_.release(s->id());
+      } catch (const std::exception&) {  // the lease then simply expires
+      }
+    }
   }
 }
 

@@ -1,10 +1,11 @@
 #pragma once
 // The server's sessions: creation with fresh ids and tokens, lookup, limits,
-// persistence of each session's record under --data-dir/sessions/, restore at
-// start, and eviction of idle sessions from memory (their records stay, and a
-// later request loads them again).
+// records in a SessionStore (files under --data-dir, or Redis shared by
+// replicas), restore at start, eviction of idle sessions from memory (their
+// records stay, and a later request loads them again) and, with a shared
+// store, the lease that makes exactly one replica compute each session.
 
-#include <filesystem>
+#include <chrono>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -13,12 +14,19 @@
 
 #include "server/hierarchy_cache.h"
 #include "server/session.h"
+#include "server/state/session_store.h"
 
 namespace filigree::server {
 
 struct RegistryLimits {
   std::size_t max_sessions = 64;
   double idle_seconds = 3600.0;
+  // A replica keeps a session at least this long before handing it to
+  // another that asks for it (no ping-pong between two routes).
+  double min_hold_seconds = 2.0;
+  // The lease's length (shared store): a replica that could not renew a
+  // lease for this long stops computing the session.
+  double lease_seconds = 3.0;
 };
 
 // More sessions than --max-sessions.
@@ -26,38 +34,73 @@ struct TooManySessions : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A proposed session id that is malformed or taken.
+struct BadSessionId : std::invalid_argument {
+  BadSessionId(const std::string& message, bool taken) : std::invalid_argument(message), taken(taken) {}
+  bool taken;
+};
+
+struct SessionLocation {
+  bool exists = false;
+  std::string replica_id, address;  // empty: no replica serves it now
+  bool here = false;
+};
+
 class SessionRegistry {
  public:
-  // `data_dir` empty: nothing is persisted.
-  SessionRegistry(HierarchyCache& cache, std::filesystem::path data_dir, RegistryLimits limits);
+  // `store` must outlive the registry.
+  SessionRegistry(HierarchyCache& cache, SessionStore& store, RegistryLimits limits);
   ~SessionRegistry();
 
+  // A new session under `proposed_id` (20 lowercase hex digits, so that a
+  // load balancer routing by x-session-id sends the upload where the session
+  // will live), or under a fresh id when it is empty.
   std::shared_ptr<Session> create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
-                                  const v1::SessionOptions& options, std::vector<Index> uploaded_ids);
-  // nullptr for an unknown (or closed) session; evicted sessions are reloaded.
-  std::shared_ptr<Session> find(const std::string& id);
+                                  const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
+                                  const std::string& proposed_id = {});
+  // nullptr for an unknown (or closed) session; evicted sessions and, with a
+  // shared store, sessions of other replicas whose lease is free are loaded.
+  // Throws SessionElsewhere while another replica holds the lease (asking it
+  // to hand the session over if `take_over`), StoreUnavailable if the shared
+  // store cannot be reached.
+  std::shared_ptr<Session> find(const std::string& id, bool take_over = true);
+  // Which replica serves the session, without loading it.
+  SessionLocation locate(const std::string& id);
   // Closes the session's streams and deletes its record; false if unknown.
   bool close(const std::string& id);
   std::vector<std::shared_ptr<Session>> loaded() const;
 
-  // Loads every persisted session (at start).
+  // Loads every persisted session (at start; a shared store loads lazily).
   std::size_t restore();
-  // Writes the records of sessions whose version changed, evicts idle ones.
+  // Every tick: writes changed records (local store) or renews leases
+  // (shared store: sessions whose lease was lost or asked for leave this
+  // replica), and evicts idle sessions.
   void maintain();
-  // Finishes every stream (UNAVAILABLE) and writes every record.
+  // Finishes every stream (UNAVAILABLE), writes every record and releases
+  // every lease, so another replica can take the sessions at once.
   void shutdown();
 
+  SessionStore& store() { return store_; }
+
  private:
-  std::shared_ptr<Session> load_record(const std::filesystem::path& file);
+  struct Entry {
+    std::shared_ptr<Session> session;
+    std::uint64_t persisted_version = 0;
+    std::chrono::steady_clock::time_point since, renewed;
+  };
+  std::shared_ptr<Session> load(const std::string& id, bool take_over);
+  std::shared_ptr<Session> insert(std::shared_ptr<Session> s);
+  // Removes the session from this process (not from the store), ending its streams with `why`.
+  void drop(const std::string& id, const std::string& why);
   void persist(const Session& s);
-  std::filesystem::path record_file(const std::string& id) const;
+  Journal journal_for(const std::string& id);
 
   HierarchyCache& cache_;
-  const std::filesystem::path dir_;
+  SessionStore& store_;
   const RegistryLimits limits_;
   mutable std::mutex mutex_;
-  std::map<std::string, std::shared_ptr<Session>> sessions_;
-  std::map<std::string, std::uint64_t> persisted_version_;
+  std::map<std::string, Entry> sessions_;
+  std::map<std::string, std::shared_ptr<std::mutex>> loading_;
 };
 
 // 128 random bits as 32 hex digits.

@@ -2,18 +2,44 @@
 
 #include <algorithm>
 #include <optional>
+#include <random>
 
 namespace filigree {
 namespace {
 
 constexpr std::size_t kChunkBytes = 1 << 20;  // upload chunk: well under any message limit
 
+// Unary calls are retried while a session moves between replicas (or a
+// replica restarts): UNAVAILABLE, up to 5 attempts over about 3 s.
+constexpr char kServiceConfig[] = R"({"methodConfig": [{
+  "name": [{"service": "filigree.v1.Filigree", "method": "JoinSession"},
+           {"service": "filigree.v1.Filigree", "method": "GetState"},
+           {"service": "filigree.v1.Filigree", "method": "SetOptions"},
+           {"service": "filigree.v1.Filigree", "method": "SubmitPose"},
+           {"service": "filigree.v1.Filigree", "method": "LocateSession"}],
+  "retryPolicy": {"maxAttempts": 5, "initialBackoff": "0.25s", "maxBackoff": "1.5s",
+                  "backoffMultiplier": 2, "retryableStatusCodes": ["UNAVAILABLE"]}}]})";
+
 std::shared_ptr<grpc::Channel> make_channel(const std::string& target) {
   grpc::ChannelArguments args;
   // A SessionInfo carries the whole rest mesh: 1M vertices ≈ 36 MiB, over
   // gRPC's 4 MiB default.
   args.SetMaxReceiveMessageSize(-1);
+  args.SetServiceConfigJSON(kServiceConfig);
   return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+}
+
+// 20 random lowercase hex digits: a new session's id, chosen here so that a
+// load balancer routing by x-session-id sends the upload to its replica.
+std::string new_session_id() {
+  std::random_device device;
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string id;
+  while (id.size() < 20) {
+    std::uint32_t bits = device();
+    for (int k = 0; k < 8 && id.size() < 20; ++k, bits >>= 4) id += kHex[bits & 15];
+  }
+  return id;
 }
 
 // One unary call on a session: metadata set, failure thrown as ClientError.
@@ -39,6 +65,8 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
                                      const v1::SessionOptions& options, const std::string& client_name,
                                      const ProgressCallback& progress) {
   grpc::ClientContext context;
+  const std::string session_id = new_session_id();
+  set_session_metadata(context, session_id, {});
   auto stream = stub_->CreateSession(&context);
   // If a progress callback throws, the call is cancelled and drained first:
   // gRPC wants Finish() before the stream goes away.
@@ -61,6 +89,7 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
   begin->set_total_bytes(mesh_bytes.size());
   *begin->mutable_options() = options;
   begin->set_client_name(client_name);
+  begin->set_session_id(session_id);
   bool writing = stream->Write(request);
   // The server reads the whole file before it answers; a refusal (too large)
   // makes Write fail, and Finish below reports why.
@@ -117,6 +146,12 @@ std::vector<v1::ListSessionsResponse::Entry> Client::list() {
   v1::ListSessionsResponse response;
   throw_if_error(stub_->ListSessions(&context, v1::ListSessionsRequest(), &response));
   return {response.sessions().begin(), response.sessions().end()};
+}
+
+v1::SessionLocation Client::locate(const std::string& session_id) {
+  v1::LocateSessionRequest request;
+  request.set_session_id(session_id);
+  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request);
 }
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,

@@ -61,6 +61,13 @@ ServerProcess::~ServerProcess() {
   }
 }
 
+void ServerProcess::kill_now() {
+  if (pid_ <= 0) return;
+  kill(pid_, SIGKILL);
+  waitpid(pid_, nullptr, 0);
+  pid_ = -1;
+}
+
 int ServerProcess::terminate() {
   if (pid_ <= 0) return -1;
   kill(pid_, SIGTERM);

@@ -24,6 +24,9 @@ class ServerProcess {
   const std::string& http_address() const { return http_address_; }
   // Sends SIGTERM and waits; returns the exit status (0 for a clean drain).
   int terminate();
+  // Sends SIGKILL and waits: the process dies without a chance to clean up.
+  void kill_now();
+  bool running() const { return pid_ > 0; }
 
  private:
   int pid_ = -1;

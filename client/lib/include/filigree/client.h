@@ -73,8 +73,11 @@ class Client {
   void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh);
   // Ends the session for everyone (editor token).
   void close(const std::string& session_id, const std::string& token);
-  // The server's sessions (no token needed).
+  // The server's sessions (no token needed; with replicas, this replica's).
   std::vector<v1::ListSessionsResponse::Entry> list();
+  // Which replica serves the session, and its address (no token needed):
+  // for engines that route themselves instead of through a load balancer.
+  v1::SessionLocation locate(const std::string& session_id);
 
   // Opens a Drive stream (editor token). `client_name` is shown to others in
   // Frame.changes. The stream's failures show in send()/read()/finish().

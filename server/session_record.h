@@ -1,0 +1,43 @@
+#pragma once
+// What is kept of a session beyond one process: enough to restart it, on this
+// replica after a restart or on another after a failover (DESIGN §4).
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "filigree/v1/filigree.pb.h"
+#include "mesh/tri_mesh.h"
+
+namespace filigree::server {
+
+struct SessionRecord {
+  std::string id;
+  std::string hierarchy_key;
+  v1::SessionOptions options;
+  std::string editor_token, viewer_token;
+  std::vector<float> pose;  // 3·m, base order
+  // The version of the frame that shows `pose`: the current frame's version,
+  // or the next frame's while a change is journaled but not yet published.
+  std::uint64_t version = 0;
+  std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
+};
+
+// What changes while a session runs, journaled on every accepted change when
+// replicas share state (the rest of the record is written once).
+struct SessionProgress {
+  v1::SessionOptions options;
+  std::vector<float> pose;
+  std::uint64_t version = 0;
+};
+
+// The record as bytes (filigree.internal.SessionRecord) and back. decode
+// throws std::runtime_error for bytes that are not a record of this format.
+std::string encode_session_record(const SessionRecord& r);
+SessionRecord decode_session_record(const std::string& bytes);
+// Progress as bytes (a record with only options, pose and version), and
+// applied onto a record; throws std::runtime_error for unreadable bytes.
+std::string encode_session_progress(const SessionProgress& p);
+void apply_session_progress(const std::string& bytes, SessionRecord& r);
+
+}  // namespace filigree::server

@@ -1,0 +1,39 @@
+#pragma once
+// Session records as files under <data-dir>/sessions/ (one machine): this
+// process owns every session, so claims always succeed and nothing is
+// journaled per change (the registry writes records periodically).
+
+#include <filesystem>
+
+#include "server/state/session_store.h"
+
+namespace filigree::server {
+
+class FileSessionStore final : public SessionStore {
+ public:
+  // `dir` empty: nothing is kept (memory only).
+  explicit FileSessionStore(std::filesystem::path dir);
+
+  bool shared() const override { return false; }
+  bool create(const SessionRecord& r) override;
+  bool save(const SessionRecord& r) override;
+  bool save_progress(const std::string& id, const SessionProgress& p) override;
+  std::optional<SessionRecord> load(const std::string& id) override;
+  bool exists(const std::string& id) override;
+  void remove(const std::string& id) override;
+  std::vector<std::string> list() override;
+  Claim claim(const std::string&, bool) override {
+    Claim c;
+    c.acquired = true;
+    return c;
+  }
+  Renewal renew(const std::string&, bool) override { return Renewal::kHeld; }
+  void release(const std::string&) override {}
+
+ private:
+  // Empty for an id that is not a session id (ids are hex: no path escapes).
+  std::filesystem::path file_of(const std::string& id) const;
+  const std::filesystem::path dir_;
+};
+
+}  // namespace filigree::server

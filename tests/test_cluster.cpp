@@ -1,0 +1,371 @@
+// Replicas behind a gRPC load balancer (DESIGN §4, issue 6), on loopback:
+// Redis, three filigree-server replicas sharing it, and nginx routing by
+// x-session-id with a consistent hash, all started and stopped here.
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <condition_variable>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <thread>
+
+#include "filigree/client.h"
+#include "support/child_process.h"
+#include "support/server_process.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+namespace fs = std::filesystem;
+using test::ChildProcess;
+using test::ServerProcess;
+
+constexpr int kReplicas = 3;
+constexpr int kLeaseMs = 1500;
+
+// nginx: a plain-text HTTP/2 listener; calls with x-session-id hash to a
+// replica (consistently: removing a replica moves only its sessions); calls
+// without it (uploads that propose no id) spread at random.
+std::string nginx_conf(const fs::path& dir, int port, const std::vector<std::string>& replicas) {
+  std::string upstream;
+  for (const auto& r : replicas) upstream += "    server " + r + " max_fails=1 fail_timeout=5s;\n";
+  const std::string d = dir.string();
+  return "worker_processes 1;\nerror_log " + d + "/nginx-error.log warn;\npid " + d + "/nginx.pid;\n" +
+         "events { worker_connections 512; }\n"
+         "http {\n  access_log off;\n"
+         "  client_body_temp_path " + d + "/tmp/body;\n  proxy_temp_path " + d + "/tmp/proxy;\n" +
+         "  fastcgi_temp_path " + d + "/tmp/fastcgi;\n  uwsgi_temp_path " + d + "/tmp/uwsgi;\n" +
+         "  scgi_temp_path " + d + "/tmp/scgi;\n" +
+         "  map $http_x_session_id $filigree_route { \"\" $request_id; default $http_x_session_id; }\n"
+         "  upstream filigree {\n    hash $filigree_route consistent;\n" + upstream + "  }\n"
+         "  server {\n    listen 127.0.0.1:" + std::to_string(port) + " http2;\n    client_max_body_size 0;\n"
+         "    location / {\n      grpc_pass grpc://filigree;\n      grpc_next_upstream error timeout;\n"
+         "      grpc_connect_timeout 1s;\n      grpc_read_timeout 3600s;\n      grpc_send_timeout 3600s;\n    }\n  }\n}\n";
+}
+
+class Cluster {
+ public:
+  Cluster() {
+    char tmpl[] = "/tmp/filigree-cluster-XXXXXX";
+    dir_ = mkdtemp(tmpl);
+    fs::create_directories(dir_ / "tmp");
+    fs::permissions(dir_, fs::perms::all);  // nginx workers run as nobody when the test runs as root
+    fs::permissions(dir_ / "tmp", fs::perms::all);
+    const int redis_port = test::free_port();
+    redis_ = std::make_unique<ChildProcess>(
+        std::vector<std::string>{"redis-server", "--bind", "127.0.0.1", "--port", std::to_string(redis_port), "--save", "",
+                                 "--appendonly", "no", "--dir", dir_.string()},
+        (dir_ / "redis.log").string());
+    redis_->wait_for_port(redis_port, 20);
+    for (int i = 0; i < kReplicas; ++i) {
+      ids_.push_back("replica-" + std::to_string(i + 1));
+      replicas_.push_back(std::make_unique<ServerProcess>(
+          FILIGREE_SERVER_BINARY,
+          std::vector<std::string>{"--redis", "127.0.0.1:" + std::to_string(redis_port), "--replica-id", ids_.back(),
+                                   "--data-dir", (dir_ / ids_.back()).string(), "--lease-ms", std::to_string(kLeaseMs)}));
+      addresses_.push_back(replicas_.back()->address());
+    }
+    const int lb_port = test::free_port();
+    std::ofstream(dir_ / "nginx.conf") << nginx_conf(dir_, lb_port, addresses_);
+    nginx_ = std::make_unique<ChildProcess>(
+        std::vector<std::string>{fs::exists("/usr/sbin/nginx") ? "/usr/sbin/nginx" : "nginx", "-p", dir_.string(), "-c",
+                                 (dir_ / "nginx.conf").string(), "-g", "daemon off;"},
+        (dir_ / "nginx.log").string());
+    nginx_->wait_for_port(lb_port, 20);
+    lb_ = "127.0.0.1:" + std::to_string(lb_port);
+  }
+  ~Cluster() {
+    nginx_.reset();
+    replicas_.clear();
+    redis_.reset();
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+
+  const std::string& lb() const { return lb_; }
+  const std::string& address(int i) const { return addresses_[i]; }
+  int index_of(const std::string& replica_id) const {
+    for (int i = 0; i < kReplicas; ++i)
+      if (ids_[i] == replica_id) return i;
+    return -1;
+  }
+  void kill(int i) { replicas_[i]->kill_now(); }
+  fs::path data_dir(int i) const { return dir_ / ids_[i]; }
+
+ private:
+  fs::path dir_;
+  std::unique_ptr<ChildProcess> redis_, nginx_;
+  std::vector<std::unique_ptr<ServerProcess>> replicas_;
+  std::vector<std::string> ids_, addresses_;
+  std::string lb_;
+};
+
+const std::string& bunny() {
+  static const std::string bytes = test::file_bytes(test::shipped_path("bunny_small.obj"));
+  return bytes;
+}
+
+// Pose i: every base vertex displaced along a smooth field that changes with i.
+std::vector<float> pose(const SessionMesh& mesh, std::uint64_t i) {
+  std::vector<float> p = mesh.base_positions;
+  for (std::size_t v = 0; v < p.size() / 3; ++v) {
+    const float y = mesh.base_positions[3 * v + 1];
+    p[3 * v] += 0.01f * std::sin(0.15f * static_cast<float>(i) + 20.0f * y);
+    p[3 * v + 2] += 0.005f * std::cos(0.1f * static_cast<float>(i));
+  }
+  return p;
+}
+
+double max_difference(const std::vector<float>& a, const std::vector<float>& b) {
+  EXPECT_EQ(a.size(), b.size());
+  double d = 0.0;
+  for (std::size_t i = 0; i < std::min(a.size(), b.size()); ++i) d = std::max(d, std::abs(double(a[i]) - double(b[i])));
+  return d;
+}
+
+TEST(Cluster, SessionsSpreadOverReplicasAndEachSessionsCallsReachItsReplica) {
+  Cluster cluster;
+  Client lb(cluster.lb());
+  constexpr int kSessions = 30;
+  std::vector<SessionHandle> sessions;
+  int built = 0;
+  for (int i = 0; i < kSessions; ++i) {
+    sessions.push_back(lb.create_session(bunny(), "obj", {}, "spread"));
+    built += sessions.back().cached ? 0 : 1;
+  }
+  // One replica preprocessed the mesh; the others loaded its hierarchy from Redis.
+  EXPECT_EQ(built, 1);
+
+  std::map<std::string, std::set<std::string>> by_replica;
+  for (const auto& s : sessions) {
+    const v1::SessionLocation first = lb.locate(s.session_id);
+    // Through nginx, a session's calls reach the replica that serves it.
+    EXPECT_TRUE(first.here()) << s.session_id << " is served by " << first.replica_id();
+    for (int k = 0; k < 4; ++k) {
+      lb.state(s.session_id, s.viewer_token);
+      const v1::SessionLocation again = lb.locate(s.session_id);
+      EXPECT_EQ(again.replica_id(), first.replica_id());
+      EXPECT_TRUE(again.here());
+    }
+    by_replica[first.replica_id()].insert(s.session_id);
+  }
+  // 30 random ids over 3 replicas: each gets some (all on two: p ≈ 2e-5).
+  EXPECT_EQ(by_replica.size(), std::size_t(kReplicas));
+  // Each replica computes exactly the sessions routed to it.
+  for (const auto& [replica, ids] : by_replica) {
+    const int i = cluster.index_of(replica);
+    ASSERT_GE(i, 0) << replica;
+    Client direct(cluster.address(i));
+    std::set<std::string> listed;
+    for (const auto& e : direct.list()) listed.insert(e.session_id());
+    EXPECT_EQ(listed, ids) << replica;
+    EXPECT_EQ(direct.locate(*ids.begin()).address(), cluster.address(i));
+  }
+}
+
+TEST(Cluster, HierarchyBuiltByOneReplicaIsLoadedByAnother) {
+  Cluster cluster;
+  Client first(cluster.address(0)), second(cluster.address(1));
+  const SessionHandle a = first.create_session(bunny(), "obj", {}, "builder");
+  EXPECT_FALSE(a.cached);
+  const SessionHandle b = second.create_session(bunny(), "obj", {}, "loader");
+  EXPECT_TRUE(b.cached) << "replica 2 preprocessed the mesh again";
+  EXPECT_EQ(a.mesh.mesh_hash, b.mesh.mesh_hash);
+  EXPECT_EQ(a.mesh.base_positions, b.mesh.base_positions);
+  // Replica 2 keeps the fetched file in its own data directory.
+  std::size_t files = 0;
+  for (const auto& e : fs::directory_iterator(cluster.data_dir(1) / "hierarchies")) files += e.path().extension() == ".fgh";
+  EXPECT_EQ(files, 1u);
+}
+
+TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
+  Cluster cluster;
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "direct");
+  const v1::SessionLocation where = lb.locate(s.session_id);
+  const int owner = cluster.index_of(where.replica_id());
+  ASSERT_GE(owner, 0);
+  EXPECT_EQ(where.address(), cluster.address(owner));
+  const int other = (owner + 1) % kReplicas;
+  // A direct call to a replica that does not serve the session: UNAVAILABLE naming the owner.
+  auto channel = grpc::CreateChannel(cluster.address(other), grpc::InsecureChannelCredentials());
+  auto stub = v1::Filigree::NewStub(channel);
+  grpc::ClientContext context;
+  context.AddMetadata("x-filigree-token", s.viewer_token);
+  context.AddMetadata("x-session-id", s.session_id);
+  context.AddMetadata("x-filigree-route", "direct");
+  v1::GetStateRequest request;
+  request.set_session_id(s.session_id);
+  v1::SessionState state;
+  const grpc::Status status = stub->GetState(&context, request, &state);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(status.error_message().find(where.address()), std::string::npos) << status.error_message();
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto it = trailers.find("x-filigree-owner");
+  ASSERT_NE(it, trailers.end());
+  EXPECT_EQ(std::string(it->second.data(), it->second.size()), cluster.address(owner));
+  // The owner still serves it.
+  EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
+}
+
+TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
+  Cluster cluster;
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "failover");
+  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  ASSERT_GE(owner, 0);
+  const FrameDecoder decoder(s.mesh.rest_positions);
+  constexpr std::uint64_t kPoses = 80, kKillAfter = 25;
+
+  // Watchers: reconnect with the last version seen; versions only grow.
+  struct WatchLog {
+    std::mutex mutex;
+    std::condition_variable changed;
+    std::uint64_t last_version = 0;
+    bool seen_any = false;
+    v1::Frame last;
+    int reconnects = 0;
+    std::unique_ptr<Watcher> stream;
+    bool stop = false;
+  };
+  std::vector<std::unique_ptr<WatchLog>> logs;
+  std::vector<std::thread> watchers;
+  for (int w = 0; w < 2; ++w) {
+    logs.push_back(std::make_unique<WatchLog>());
+    watchers.emplace_back([&, log = logs.back().get()] {
+      Client client(cluster.lb());
+      for (int attempt = 0; attempt < 200; ++attempt) {
+        {
+          std::lock_guard lock(log->mutex);
+          if (log->stop) return;
+          log->stream = client.watch(s.session_id, s.viewer_token, log->last_version);
+        }
+        while (auto f = log->stream->read()) {
+          std::lock_guard lock(log->mutex);
+          if (log->seen_any) {
+            EXPECT_GT(f->version(), log->last_version);
+          }
+          log->seen_any = true;
+          log->last_version = f->version();
+          log->last = *f;
+          log->changed.notify_all();
+        }
+        std::lock_guard lock(log->mutex);
+        if (log->stop) return;
+        ++log->reconnects;
+        // Backoff before reconnecting while the session moves (not synchronisation).
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
+      ADD_FAILURE() << "watcher gave up reconnecting";
+    });
+  }
+
+  // The driver, lock-step: pose i, then wait for the frame that acknowledges it.
+  std::atomic<std::uint64_t> acked{0};
+  std::atomic<bool> killed{false};
+  std::thread killer([&] {
+    // Kill the owner while poses stream (the driver does not pause for it).
+    while (acked < kKillAfter) std::this_thread::yield();
+    cluster.kill(owner);
+    killed = true;
+  });
+  std::uint64_t acked_version = 0, next = 1;
+  int reconnects = 0;
+  bool checked_restore = false;
+  while (next <= kPoses) {
+    if (killed && !checked_restore) {
+      // Nothing acknowledged is lost: the new replica has the acknowledged
+      // pose (or the next one, journaled but not yet acknowledged).
+      try {
+        const v1::SessionState state = lb.state(s.session_id, s.viewer_token);
+        const std::vector<float> restored(state.pose().begin(), state.pose().end());
+        EXPECT_GE(state.version(), acked_version);
+        EXPECT_TRUE(restored == pose(s.mesh, next - 1) || restored == pose(s.mesh, next))
+            << "restored pose is neither pose " << next - 1 << " nor " << next;
+        checked_restore = true;
+      } catch (const ClientError& e) {
+        ++reconnects;
+        ASSERT_LT(reconnects, 100) << e.what();
+        continue;
+      }
+    }
+    auto driver = lb.drive(s.session_id, s.editor_token, "failover");
+    bool broken = false;
+    while (next <= kPoses && !broken) {
+      const std::vector<float> p = pose(s.mesh, next);
+      if (!driver->send(next, p)) {
+        broken = true;
+        break;
+      }
+      std::optional<v1::Frame> f;
+      while ((f = driver->read()) && f->pose_id() < next) {
+      }
+      if (!f) {
+        broken = true;
+        break;
+      }
+      EXPECT_GT(f->version(), acked_version) << "versions go on from the last acknowledged one";
+      acked_version = f->version();
+      acked = next++;
+    }
+    if (broken) {
+      const grpc::Status status = driver->finish();
+      EXPECT_NE(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+      ++reconnects;
+      ASSERT_LT(reconnects, 100) << "the session did not come back: " << status.error_message();
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));  // backoff, as a client would
+    } else {
+      driver->writes_done();
+      EXPECT_TRUE(driver->finish().ok());
+    }
+  }
+  killer.join();
+  EXPECT_TRUE(checked_restore);
+  EXPECT_GE(reconnects, 1);
+
+  const v1::SessionLocation now = lb.locate(s.session_id);
+  EXPECT_NE(cluster.index_of(now.replica_id()), owner) << "the dead replica still owns the session";
+  const v1::SessionState final_state = lb.state(s.session_id, s.viewer_token);
+  EXPECT_EQ(final_state.version(), acked_version);
+  EXPECT_EQ(std::vector<float>(final_state.pose().begin(), final_state.pose().end()), pose(s.mesh, kPoses));
+
+  // Watchers catch up with the last frame after reconnecting.
+  for (auto& log : logs) {
+    std::unique_lock lock(log->mutex);
+    EXPECT_TRUE(log->changed.wait_for(lock, std::chrono::seconds(30), [&] { return log->last_version >= acked_version; }))
+        << "a watcher stopped at version " << log->last_version << " of " << acked_version;
+    EXPECT_GE(log->reconnects, 1);
+    log->stop = true;
+    if (log->stream) log->stream->cancel();
+  }
+  for (auto& t : watchers) t.join();
+
+  // The same poses without a failure, on a fresh session, give the same result.
+  const SessionHandle reference = lb.create_session(bunny(), "obj", {}, "reference");
+  {
+    auto driver = lb.drive(reference.session_id, reference.editor_token, "reference");
+    for (std::uint64_t i = 1; i <= kPoses; ++i) ASSERT_TRUE(driver->send(i, pose(reference.mesh, i)));
+    std::optional<v1::Frame> f;
+    while ((f = driver->read()) && f->pose_id() < kPoses) {
+    }
+    ASSERT_TRUE(f.has_value());
+    driver->writes_done();
+    driver->finish();
+  }
+  const v1::SessionState expected = lb.state(reference.session_id, reference.viewer_token);
+  const DecodedFrame got = decoder.decode(final_state.frame());
+  const DecodedFrame want = decoder.decode(expected.frame());
+  EXPECT_LE(max_difference(got.positions, want.positions), 1e-6);
+  for (auto& log : logs) EXPECT_LE(max_difference(decoder.decode(log->last).positions, want.positions), 1e-6);
+}
+
+}  // namespace
+}  // namespace filigree
