@@ -44,6 +44,8 @@ grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& c
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
   } catch (const StoreUnavailable& e) {
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
+  } catch (const SessionUnusable& e) {
+    return {grpc::StatusCode::DATA_LOSS, e.what()};
   }
   if (!*session) return {grpc::StatusCode::NOT_FOUND, "no session '" + session_id + "'"};
   const std::string token = metadata(context, "x-filigree-token");
@@ -97,6 +99,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       begun_ = true;
       if (begin_.total_bytes() > service_.limits().max_mesh_bytes)
         return writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, too_large(begin_.total_bytes())});
+      // A proposed id is checked now, not after seconds of preprocessing (create() checks it again).
+      if (const grpc::Status id_status = check_proposed_id(begin_.session_id()); !id_status.ok())
+        return writer_.finish(id_status);
       bytes_.reserve(begin_.total_bytes());
     } else {
       if (!begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the first message must be 'begin'"});
@@ -119,6 +124,18 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   std::string too_large(std::uint64_t n) const {
     return "mesh of " + std::to_string(n) + " bytes is over the server's limit of " +
            std::to_string(service_.limits().max_mesh_bytes) + " bytes (--max-mesh-bytes)";
+  }
+
+  grpc::Status check_proposed_id(const std::string& id) {
+    if (id.empty()) return grpc::Status::OK;
+    if (id.size() != 20 || id.find_first_not_of("0123456789abcdef") != std::string::npos)
+      return {grpc::StatusCode::INVALID_ARGUMENT, "a proposed session id is 20 lowercase hex digits, not '" + id + "'"};
+    try {
+      if (service_.registry().store().exists(id)) return {grpc::StatusCode::ALREADY_EXISTS, "session id " + id + " is taken"};
+    } catch (const StoreUnavailable& e) {
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
+    }
+    return grpc::Status::OK;
   }
 
   void progress(const char* stage, double fraction) {

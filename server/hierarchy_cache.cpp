@@ -92,7 +92,12 @@ std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mes
   bool fetched = false;
   try {
     // Another replica may have built it already.
-    h = fetch_shared(key);
+    try {
+      h = fetch_shared(key);
+    } catch (const HierarchyFileError& e) {
+      // We have the mesh: build it again, and replace the corrupt copy.
+      spdlog::warn("event=shared_hierarchy_corrupt key={} error=\"{}\"", key, e.what());
+    }
     fetched = h != nullptr;
     if (!h) {
       h = std::make_shared<const Hierarchy>(preprocess(mesh, options));

@@ -115,22 +115,25 @@ std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_
   const Claim claim = store_.claim(id, take_over);
   if (!claim.acquired) throw SessionElsewhere(id, claim.owner_id, claim.owner_address, claim.lease_ms_left, take_over);
   // Read after claiming: the previous owner wrote its last change before its lease ended.
-  std::optional<SessionRecord> r = store_.load(id);
-  if (!r) {
-    store_.release(id);
-    return nullptr;
-  }
   std::shared_ptr<Session> s;
   try {
+    std::optional<SessionRecord> r = store_.load(id);
+    if (!r) {
+      store_.release(id);
+      return nullptr;
+    }
     auto h = cache_.load(r->hierarchy_key);
     s = std::make_shared<Session>(std::move(*r), std::move(h), journal_for(id));
   } catch (const StoreUnavailable&) {
     store_.release(id);
     throw;
   } catch (const std::exception& e) {
+    // A corrupt record or hierarchy: say so; the lease goes back (nobody can compute it).
     store_.release(id);
-    spdlog::error("event=record_unusable session={} error=\"{}\"", id, e.what());
-    throw StoreUnavailable("session " + id + " cannot be loaded here: " + e.what());
+    spdlog::error("event=session_unusable session={} error=\"{}\"", id, e.what());
+    throw SessionUnusable(std::string(e.what()).find(id) != std::string::npos
+                              ? std::string(e.what())
+                              : "session " + id + " cannot be loaded: " + e.what());
   }
   s = insert(std::move(s));
   spdlog::info("event=session_loaded session={} version={}", s->id(), s->version());

@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "filigree/client.h"
+#include "server/state/redis_client.h"
 #include "support/child_process.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
@@ -65,6 +66,7 @@ class Cluster {
                                  "--appendonly", "no", "--dir", dir_.string()},
         (dir_ / "redis.log").string());
     redis_->wait_for_port(redis_port, 20);
+    redis_address_ = "127.0.0.1:" + std::to_string(redis_port);
     for (int i = 0; i < kReplicas; ++i) {
       ids_.push_back("replica-" + std::to_string(i + 1));
       replicas_.push_back(std::make_unique<ServerProcess>(
@@ -98,6 +100,8 @@ class Cluster {
     return -1;
   }
   void kill(int i) { replicas_[i]->kill_now(); }
+  const std::string& redis_address() const { return redis_address_; }
+  void stop_redis() { redis_.reset(); }
   fs::path data_dir(int i) const { return dir_ / ids_[i]; }
 
  private:
@@ -105,8 +109,19 @@ class Cluster {
   std::unique_ptr<ChildProcess> redis_, nginx_;
   std::vector<std::unique_ptr<ServerProcess>> replicas_;
   std::vector<std::string> ids_, addresses_;
-  std::string lb_;
+  std::string lb_, redis_address_;
 };
+
+// A unary call to one replica as a load balancer would make it (no
+// x-filigree-route: the replica may take the session over).
+grpc::Status get_state(const std::string& address, const SessionHandle& s, v1::SessionState* state) {
+  auto stub = v1::Filigree::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  set_session_metadata(context, s.session_id, s.viewer_token);
+  v1::GetStateRequest request;
+  request.set_session_id(s.session_id);
+  return stub->GetState(&context, request, state);
+}
 
 const std::string& bunny() {
   static const std::string bytes = test::file_bytes(test::shipped_path("bunny_small.obj"));
@@ -214,6 +229,139 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   EXPECT_EQ(std::string(it->second.data(), it->second.size()), cluster.address(owner));
   // The owner still serves it.
   EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
+}
+
+TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
+  // What happens when a load balancer's routing changes (a replica came back):
+  // the replica that now gets the calls asks for the session, the owner hands
+  // it over, and its streams end telling clients to reconnect.
+  Cluster cluster;
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "moving");
+  auto driver = lb.drive(s.session_id, s.editor_token, "moving");
+  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
+  std::optional<v1::Frame> f;
+  while ((f = driver->read()) && f->pose_id() < 1) {
+  }
+  ASSERT_TRUE(f.has_value());
+  const std::uint64_t version = f->version();
+  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  const int other = (owner + 1) % kReplicas;
+  auto watcher = lb.watch(s.session_id, s.viewer_token, version);
+
+  v1::SessionState state;
+  grpc::Status status;
+  int attempts = 0;
+  while (!(status = get_state(cluster.address(other), s, &state)).ok()) {
+    ASSERT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+    ASSERT_LT(++attempts, 100) << status.error_message();
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // retry backoff, as a client would
+  }
+  EXPECT_GE(attempts, 1) << "the other replica served the session without a hand-over";
+  EXPECT_EQ(state.version(), version);
+  EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 1));
+  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id).replica_id(), "replica-" + std::to_string(other + 1));
+  // The old owner's streams end with UNAVAILABLE, saying the session moved.
+  while (watcher->read()) {
+  }
+  const grpc::Status watch_status = watcher->finish();
+  EXPECT_EQ(watch_status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(watch_status.error_message().find("moved"), std::string::npos) << watch_status.error_message();
+  while (driver->read()) {
+  }
+  EXPECT_EQ(driver->finish().error_code(), grpc::StatusCode::UNAVAILABLE);
+}
+
+TEST(Cluster, BadSharedStateIsAClearErrorAndHarmsNoOtherSession) {
+  Cluster cluster;
+  Client first(cluster.address(0));
+  const SessionHandle good = first.create_session(bunny(), "obj", {}, "good");
+  server::RedisClient redis(cluster.redis_address(), std::chrono::milliseconds(2000));
+
+  // A record that is not a record, under a well-formed id.
+  const std::string bad_id = "0123456789abcdef0123";
+  redis.command({"SET", "filigree:session:" + bad_id, "not a protobuf \xff\xff"});
+  v1::SessionState state;
+  SessionHandle fake = good;
+  fake.session_id = bad_id;
+  grpc::Status status = get_state(cluster.address(1), fake, &state);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DATA_LOSS) << status.error_message();
+  EXPECT_NE(status.error_message().find("record"), std::string::npos) << status.error_message();
+
+  // A corrupt hierarchy blob: a replica that must load it refuses with the reason.
+  const auto keys = redis.command({"KEYS", "filigree:hierarchy:*"});
+  ASSERT_EQ(keys.elements.size(), 1u);
+  redis.command({"SETRANGE", keys.elements[0].str, "100", "garbage garbage garbage"});
+  cluster.kill(0);
+  int attempts = 0;
+  while ((status = get_state(cluster.address(1), good, &state)).error_code() == grpc::StatusCode::UNAVAILABLE) {
+    ASSERT_LT(++attempts, 100) << status.error_message();
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // until the dead replica's lease expires
+  }
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DATA_LOSS) << status.error_message();
+  EXPECT_NE(status.error_message().find("checksum"), std::string::npos) << status.error_message();
+
+  // The replica still serves; an upload of the same mesh rebuilds the corrupt shared hierarchy.
+  Client second(cluster.address(1));
+  EXPECT_NO_THROW(second.list());
+  const SessionHandle rebuilt = second.create_session(bunny(), "obj", {}, "rebuild");
+  EXPECT_FALSE(rebuilt.cached);
+  EXPECT_EQ(second.state(rebuilt.session_id, rebuilt.viewer_token).version(), 0u);
+  // Proposed ids: malformed, or taken.
+  v1::CreateSessionRequest begin;
+  for (const std::string& id : {std::string("NOT-HEX"), good.session_id}) {
+    auto stub = v1::Filigree::NewStub(grpc::CreateChannel(cluster.address(1), grpc::InsecureChannelCredentials()));
+    grpc::ClientContext context;
+    auto stream = stub->CreateSession(&context);
+    v1::CreateSessionRequest r;
+    r.mutable_begin()->set_format("obj");
+    r.mutable_begin()->set_total_bytes(bunny().size());
+    r.mutable_begin()->set_session_id(id);
+    ASSERT_TRUE(stream->Write(r));
+    r.Clear();
+    r.set_chunk(bunny());
+    stream->Write(r);
+    stream->WritesDone();
+    for (v1::CreateSessionResponse response; stream->Read(&response);) {
+    }
+    const grpc::Status created = stream->Finish();
+    EXPECT_EQ(created.error_code(),
+              id == good.session_id ? grpc::StatusCode::ALREADY_EXISTS : grpc::StatusCode::INVALID_ARGUMENT)
+        << created.error_message();
+  }
+}
+
+TEST(Cluster, WithoutRedisChangesAreRefusedNotLostAndTheServerLives) {
+  // A replica that cannot reach Redis at start says so and exits.
+  const int closed_port = test::free_port();
+  EXPECT_THROW(ServerProcess(FILIGREE_SERVER_BINARY, {"--redis", "127.0.0.1:" + std::to_string(closed_port)}),
+               std::runtime_error);
+
+  Cluster cluster;
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "store-down");
+  v1::DriveRequest request;
+  request.set_session_id(s.session_id);
+  request.set_pose_id(1);
+  const std::vector<float> p = pose(s.mesh, 1);
+  request.mutable_positions()->Add(p.begin(), p.end());
+  auto stub = v1::Filigree::NewStub(grpc::CreateChannel(cluster.lb(), grpc::InsecureChannelCredentials()));
+  {
+    grpc::ClientContext context;
+    set_session_metadata(context, s.session_id, s.editor_token);
+    v1::SubmitPoseResponse response;
+    ASSERT_TRUE(stub->SubmitPose(&context, request, &response).ok());
+  }
+  cluster.stop_redis();
+  grpc::ClientContext context;
+  set_session_metadata(context, s.session_id, s.editor_token);
+  v1::SubmitPoseResponse response;
+  request.set_pose_id(2);
+  const grpc::Status status = stub->SubmitPose(&context, request, &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_NE(status.error_message().find("Redis"), std::string::npos) << status.error_message();
+  // Every replica still answers.
+  for (int i = 0; i < kReplicas; ++i) EXPECT_NO_THROW(Client(cluster.address(i)).list()) << i;
 }
 
 TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {

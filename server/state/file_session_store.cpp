@@ -3,8 +3,6 @@
 #include <fstream>
 #include <sstream>
 
-#include <spdlog/spdlog.h>
-
 namespace filigree::server {
 
 FileSessionStore::FileSessionStore(std::filesystem::path dir) : dir_(std::move(dir)) {
@@ -56,8 +54,7 @@ std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
   try {
     return decode_session_record(bytes.str());
   } catch (const std::exception& e) {
-    spdlog::error("event=record_unreadable file={} error=\"{}\"", file.string(), e.what());
-    return std::nullopt;
+    throw SessionUnusable("the record " + file.string() + " is unreadable: " + e.what());
   }
 }
 

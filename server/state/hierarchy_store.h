@@ -12,7 +12,8 @@ class HierarchyStore {
   virtual ~HierarchyStore() = default;
   // The bytes stored under `key`, or nullopt. Throws StoreUnavailable.
   virtual std::optional<std::string> get(const std::string& key) = 0;
-  // Stores `bytes` under `key` (the same key always means the same bytes).
+  // Stores `bytes` under `key` (the same key always means the same bytes;
+  // a corrupt copy is replaced).
   virtual void put(const std::string& key, const std::string& bytes) = 0;
 };
 

@@ -14,7 +14,8 @@ std::optional<std::string> RedisHierarchyStore::get(const std::string& key) {
 }
 
 void RedisHierarchyStore::put(const std::string& key, const std::string& bytes) {
-  redis_->command({"SET", prefix_ + key, bytes, "NX"});
+  // Overwrites: the same key means the same bytes, unless the stored copy is corrupt.
+  redis_->command({"SET", prefix_ + key, bytes});
 }
 
 }  // namespace filigree::server

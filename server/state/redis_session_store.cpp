@@ -1,7 +1,5 @@
 #include "server/state/redis_session_store.h"
 
-#include <spdlog/spdlog.h>
-
 #include "server/state/redis_client.h"
 
 namespace filigree::server {
@@ -85,8 +83,7 @@ std::optional<SessionRecord> RedisSessionStore::load(const std::string& id) {
     if (!reply.elements[1].nil()) apply_session_progress(reply.elements[1].str, r);
     return r;
   } catch (const std::exception& e) {
-    spdlog::error("event=record_unreadable session={} error=\"{}\"", id, e.what());
-    return std::nullopt;
+    throw SessionUnusable("the stored record of session " + id + " is unreadable: " + e.what());
   }
 }
 

@@ -20,6 +20,12 @@ struct StoreUnavailable : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A stored record or hierarchy is unreadable (→ DATA_LOSS): retrying will
+// not help; the message says what is wrong.
+struct SessionUnusable : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 // This replica does not (or no longer) own the session: another replica's
 // lease holds it (→ UNAVAILABLE, naming the owner).
 struct SessionElsewhere : std::runtime_error {
@@ -56,6 +62,7 @@ class SessionStore {
   // Overwrites only what changes while the session runs (the journal of a
   // shared store); false if this replica no longer owns the session.
   virtual bool save_progress(const std::string& id, const SessionProgress& p) = 0;
+  // nullopt if there is none; throws SessionUnusable if it is unreadable.
   virtual std::optional<SessionRecord> load(const std::string& id) = 0;
   virtual bool exists(const std::string& id) = 0;
   // Deletes the record (and lease).
