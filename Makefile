@@ -4,7 +4,7 @@
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: all deps configure build test demo bench clean viewer serve
+.PHONY: all deps configure build test test-cluster demo bench clean viewer serve image test-container
 
 all: build viewer
 
@@ -26,6 +26,18 @@ viewer: deps
 test: build viewer
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
 
+# Only the replicas test (Redis, three replicas, nginx on loopback); `make test` runs it too.
+test-cluster: build
+	ctest --test-dir $(BUILD) --output-on-failure -R '^Cluster\.'
+
+# The container image (podman; base image from a debootstrap rootfs) and a
+# smoke test of a container from it: health check and a demo session on loopback.
+image:
+	bash docker/build-image.sh
+
+test-container:
+	bash docker/smoke-test.sh
+
 demo: build viewer
 	bash scripts/demo.sh $(BUILD)
 
@@ -37,6 +49,7 @@ bench: build
 	$(BUILD)/bench/filigree_bench_preprocess
 	$(BUILD)/bench/filigree_bench_runtime
 	$(BUILD)/bench/filigree_bench_service
+	$(BUILD)/bench/filigree_bench_cluster
 
 clean:
 	rm -rf $(BUILD) out

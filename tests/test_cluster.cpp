@@ -18,7 +18,7 @@
 
 #include "filigree/client.h"
 #include "server/state/redis_client.h"
-#include "support/child_process.h"
+#include "support/cluster.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
 
@@ -26,91 +26,10 @@ namespace filigree {
 namespace {
 
 namespace fs = std::filesystem;
-using test::ChildProcess;
 using test::ServerProcess;
 
 constexpr int kReplicas = 3;
-constexpr int kLeaseMs = 1500;
-
-// nginx: a plain-text HTTP/2 listener; calls with x-session-id hash to a
-// replica (consistently: removing a replica moves only its sessions); calls
-// without it (uploads that propose no id) spread at random.
-std::string nginx_conf(const fs::path& dir, int port, const std::vector<std::string>& replicas) {
-  std::string upstream;
-  for (const auto& r : replicas) upstream += "    server " + r + " max_fails=1 fail_timeout=5s;\n";
-  const std::string d = dir.string();
-  return "worker_processes 1;\nerror_log " + d + "/nginx-error.log warn;\npid " + d + "/nginx.pid;\n" +
-         "events { worker_connections 512; }\n"
-         "http {\n  access_log off;\n"
-         "  client_body_temp_path " + d + "/tmp/body;\n  proxy_temp_path " + d + "/tmp/proxy;\n" +
-         "  fastcgi_temp_path " + d + "/tmp/fastcgi;\n  uwsgi_temp_path " + d + "/tmp/uwsgi;\n" +
-         "  scgi_temp_path " + d + "/tmp/scgi;\n" +
-         "  map $http_x_session_id $filigree_route { \"\" $request_id; default $http_x_session_id; }\n"
-         "  upstream filigree {\n    hash $filigree_route consistent;\n" + upstream + "  }\n"
-         "  server {\n    listen 127.0.0.1:" + std::to_string(port) + " http2;\n    client_max_body_size 0;\n"
-         "    location / {\n      grpc_pass grpc://filigree;\n      grpc_next_upstream error timeout;\n"
-         "      grpc_connect_timeout 1s;\n      grpc_read_timeout 3600s;\n      grpc_send_timeout 3600s;\n    }\n  }\n}\n";
-}
-
-class Cluster {
- public:
-  Cluster() {
-    char tmpl[] = "/tmp/filigree-cluster-XXXXXX";
-    dir_ = mkdtemp(tmpl);
-    fs::create_directories(dir_ / "tmp");
-    fs::permissions(dir_, fs::perms::all);  // nginx workers run as nobody when the test runs as root
-    fs::permissions(dir_ / "tmp", fs::perms::all);
-    const int redis_port = test::free_port();
-    redis_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{"redis-server", "--bind", "127.0.0.1", "--port", std::to_string(redis_port), "--save", "",
-                                 "--appendonly", "no", "--dir", dir_.string()},
-        (dir_ / "redis.log").string());
-    redis_->wait_for_port(redis_port, 20);
-    redis_address_ = "127.0.0.1:" + std::to_string(redis_port);
-    for (int i = 0; i < kReplicas; ++i) {
-      ids_.push_back("replica-" + std::to_string(i + 1));
-      replicas_.push_back(std::make_unique<ServerProcess>(
-          FILIGREE_SERVER_BINARY,
-          std::vector<std::string>{"--redis", "127.0.0.1:" + std::to_string(redis_port), "--replica-id", ids_.back(),
-                                   "--data-dir", (dir_ / ids_.back()).string(), "--lease-ms", std::to_string(kLeaseMs)}));
-      addresses_.push_back(replicas_.back()->address());
-    }
-    const int lb_port = test::free_port();
-    std::ofstream(dir_ / "nginx.conf") << nginx_conf(dir_, lb_port, addresses_);
-    nginx_ = std::make_unique<ChildProcess>(
-        std::vector<std::string>{fs::exists("/usr/sbin/nginx") ? "/usr/sbin/nginx" : "nginx", "-p", dir_.string(), "-c",
-                                 (dir_ / "nginx.conf").string(), "-g", "daemon off;"},
-        (dir_ / "nginx.log").string());
-    nginx_->wait_for_port(lb_port, 20);
-    lb_ = "127.0.0.1:" + std::to_string(lb_port);
-  }
-  ~Cluster() {
-    nginx_.reset();
-    replicas_.clear();
-    redis_.reset();
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-
-  const std::string& lb() const { return lb_; }
-  const std::string& address(int i) const { return addresses_[i]; }
-  int index_of(const std::string& replica_id) const {
-    for (int i = 0; i < kReplicas; ++i)
-      if (ids_[i] == replica_id) return i;
-    return -1;
-  }
-  void kill(int i) { replicas_[i]->kill_now(); }
-  const std::string& redis_address() const { return redis_address_; }
-  void stop_redis() { redis_.reset(); }
-  fs::path data_dir(int i) const { return dir_ / ids_[i]; }
-
- private:
-  fs::path dir_;
-  std::unique_ptr<ChildProcess> redis_, nginx_;
-  std::vector<std::unique_ptr<ServerProcess>> replicas_;
-  std::vector<std::string> ids_, addresses_;
-  std::string lb_, redis_address_;
-};
+using test::Cluster;
 
 // A unary call to one replica as a load balancer would make it (no
 // x-filigree-route: the replica may take the session over).
@@ -147,7 +66,7 @@ double max_difference(const std::vector<float>& a, const std::vector<float>& b) 
 }
 
 TEST(Cluster, SessionsSpreadOverReplicasAndEachSessionsCallsReachItsReplica) {
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   constexpr int kSessions = 30;
   std::vector<SessionHandle> sessions;
@@ -187,7 +106,7 @@ TEST(Cluster, SessionsSpreadOverReplicasAndEachSessionsCallsReachItsReplica) {
 }
 
 TEST(Cluster, HierarchyBuiltByOneReplicaIsLoadedByAnother) {
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client first(cluster.address(0)), second(cluster.address(1));
   const SessionHandle a = first.create_session(bunny(), "obj", {}, "builder");
   EXPECT_FALSE(a.cached);
@@ -202,7 +121,7 @@ TEST(Cluster, HierarchyBuiltByOneReplicaIsLoadedByAnother) {
 }
 
 TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "direct");
   const v1::SessionLocation where = lb.locate(s.session_id);
@@ -235,7 +154,7 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
   // What happens when a load balancer's routing changes (a replica came back):
   // the replica that now gets the calls asks for the session, the owner hands
   // it over, and its streams end telling clients to reconnect.
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "moving");
   auto driver = lb.drive(s.session_id, s.editor_token, "moving");
@@ -273,7 +192,7 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
 }
 
 TEST(Cluster, BadSharedStateIsAClearErrorAndHarmsNoOtherSession) {
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client first(cluster.address(0));
   const SessionHandle good = first.create_session(bunny(), "obj", {}, "good");
   server::RedisClient redis(cluster.redis_address(), std::chrono::milliseconds(2000));
@@ -337,7 +256,7 @@ TEST(Cluster, WithoutRedisChangesAreRefusedNotLostAndTheServerLives) {
   EXPECT_THROW(ServerProcess(FILIGREE_SERVER_BINARY, {"--redis", "127.0.0.1:" + std::to_string(closed_port)}),
                std::runtime_error);
 
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "store-down");
   v1::DriveRequest request;
@@ -365,7 +284,7 @@ TEST(Cluster, WithoutRedisChangesAreRefusedNotLostAndTheServerLives) {
 }
 
 TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
-  Cluster cluster;
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "failover");
   const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());

@@ -1,0 +1,49 @@
+#pragma once
+// A Filigree deployment on loopback for tests and benchmarks (DESIGN §4):
+// Redis, N filigree-server replicas sharing it, and nginx as the gRPC load
+// balancer routing by x-session-id (consistent hash), each in its own
+// process, all in a temporary directory removed at the end.
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "support/child_process.h"
+#include "support/server_process.h"
+
+namespace filigree::test {
+
+class Cluster {
+ public:
+  // Needs redis-server and nginx (Debian packages). Replicas get --lease-ms `lease_ms`.
+  Cluster(const std::string& server_binary, int replicas, int lease_ms = 1500);
+  ~Cluster();
+  Cluster(const Cluster&) = delete;
+  Cluster& operator=(const Cluster&) = delete;
+
+  // nginx's address: what clients call.
+  const std::string& lb() const { return lb_; }
+  const std::string& address(int i) const { return addresses_[i]; }
+  const std::string& redis_address() const { return redis_address_; }
+  // Replica i is "replica-<i+1>"; -1 for an unknown id.
+  int index_of(const std::string& replica_id) const;
+  std::filesystem::path data_dir(int i) const;
+  // SIGKILL: the replica dies at once, its leases left to expire.
+  void kill(int i);
+  void stop_redis();
+
+ private:
+  std::filesystem::path dir_;
+  std::unique_ptr<ChildProcess> redis_, nginx_;
+  std::vector<std::unique_ptr<ServerProcess>> replicas_;
+  std::vector<std::string> ids_, addresses_;
+  std::string lb_, redis_address_;
+};
+
+// The nginx configuration of a cluster: plain-text HTTP/2 on 127.0.0.1:port,
+// `hash $filigree_route consistent` over `replicas` (the session id, or a
+// random key for calls without one), files under `dir`.
+std::string nginx_conf(const std::filesystem::path& dir, int port, const std::vector<std::string>& replicas);
+
+}  // namespace filigree::test
