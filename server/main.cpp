@@ -17,6 +17,7 @@
 
 #include "server/filigree_service.h"
 #include "server/http/http_server.h"
+#include "server/replica_router.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
 #include "server/state/redis_hierarchy_store.h"
@@ -139,6 +140,10 @@ int main(int argc, char** argv) {
       http_options.listen = http_listen;
       http_options.web_root = web_root(web_root_flag);
       http_options.grpc_web_services = {filigree::v1::Filigree::service_full_name()};
+      // Replicas: a browser's calls go to the replica that serves the session.
+      if (redis) http_options.route = [router = std::make_shared<ReplicaRouter>(registry)](const std::string& id) {
+        return router->channel_for(id);
+      };
       grpc::ChannelArguments channel_args;  // the server enforces --max-message-mib
       channel_args.SetMaxReceiveMessageSize(-1);
       channel_args.SetMaxSendMessageSize(-1);

@@ -16,6 +16,11 @@
 #include <set>
 #include <thread>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include "filigree/client.h"
 #include "server/state/redis_client.h"
 #include "support/cluster.h"
@@ -281,6 +286,85 @@ TEST(Cluster, WithoutRedisChangesAreRefusedNotLostAndTheServerLives) {
   EXPECT_NE(status.error_message().find("Redis"), std::string::npos) << status.error_message();
   // Every replica still answers.
   for (int i = 0; i < kReplicas; ++i) EXPECT_NO_THROW(Client(cluster.address(i)).list()) << i;
+}
+
+// A browser's gRPC-Web unary call (HTTP/1.1, Connection: close) to
+// `address`; returns the response body (gRPC-Web frames).
+std::string grpc_web_call(const std::string& address, const std::string& method, const std::string& session,
+                          const std::string& token, const std::string& message) {
+  const auto colon = address.rfind(':');
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(static_cast<std::uint16_t>(std::stoi(address.substr(colon + 1))));
+  inet_pton(AF_INET, address.substr(0, colon).c_str(), &a.sin_addr);
+  EXPECT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  std::string body(5, '\0');
+  body[1] = static_cast<char>(message.size() >> 24), body[2] = static_cast<char>(message.size() >> 16);
+  body[3] = static_cast<char>(message.size() >> 8), body[4] = static_cast<char>(message.size());
+  body += message;
+  const std::string request = "POST /filigree.v1.Filigree/" + method + " HTTP/1.1\r\nHost: " + address +
+                              "\r\nContent-Type: application/grpc-web+proto\r\nx-session-id: " + session +
+                              "\r\nx-filigree-token: " + token + "\r\nContent-Length: " + std::to_string(body.size()) +
+                              "\r\nConnection: close\r\n\r\n" + body;
+  EXPECT_EQ(write(fd, request.data(), request.size()), static_cast<ssize_t>(request.size()));
+  std::string response;
+  char buffer[65536];
+  for (ssize_t n; (n = read(fd, buffer, sizeof buffer)) > 0;) response.append(buffer, static_cast<std::size_t>(n));
+  close(fd);
+  const auto end_of_headers = response.find("\r\n\r\n");
+  if (end_of_headers == std::string::npos) return {};
+  const std::string headers = response.substr(0, end_of_headers);
+  std::string rest = response.substr(end_of_headers + 4), out;
+  if (headers.find("chunked") == std::string::npos) return rest;
+  // Chunked transfer coding: size line, data, CRLF; a zero size ends it.
+  for (std::size_t at = 0;;) {
+    const auto line_end = rest.find("\r\n", at);
+    if (line_end == std::string::npos) break;
+    const std::size_t size = std::stoul(rest.substr(at, line_end - at), nullptr, 16);
+    if (size == 0) break;
+    out += rest.substr(line_end + 2, size);
+    at = line_end + 2 + size + 2;
+  }
+  return out;
+}
+
+TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
+  // nginx hashes gRPC and HTTP calls on two rings (the replicas' ports
+  // differ), so a browser may reach another replica than the engines: that
+  // replica's gRPC-Web bridge calls the replica that serves the session.
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas, 1500, /*http=*/true);
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "engine");
+  auto driver = lb.drive(s.session_id, s.editor_token, "engine");
+  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
+  std::optional<v1::Frame> f;
+  while ((f = driver->read()) && f->pose_id() < 1) {
+  }
+  ASSERT_TRUE(f.has_value());
+  const std::string owner = lb.locate(s.session_id).replica_id();
+  const int other = (cluster.index_of(owner) + 1) % kReplicas;
+
+  v1::GetStateRequest request;
+  request.set_session_id(s.session_id);
+  const std::string body =
+      grpc_web_call(cluster.http_address(other), "GetState", s.session_id, s.viewer_token, request.SerializeAsString());
+  ASSERT_GE(body.size(), 5u);
+  ASSERT_EQ(body[0], 0) << "no data frame: " << body;
+  const std::size_t length = (std::size_t(std::uint8_t(body[1])) << 24) | (std::size_t(std::uint8_t(body[2])) << 16) |
+                             (std::size_t(std::uint8_t(body[3])) << 8) | std::size_t(std::uint8_t(body[4]));
+  v1::SessionState state;
+  ASSERT_TRUE(state.ParseFromString(body.substr(5, length)));
+  EXPECT_EQ(state.version(), f->version());
+  EXPECT_NE(body.find("grpc-status:0"), std::string::npos) << body;
+  // The session stayed where the engines' calls go; the engine's stream lives on.
+  EXPECT_EQ(lb.locate(s.session_id).replica_id(), owner);
+  ASSERT_TRUE(driver->send(2, pose(s.mesh, 2)));
+  while ((f = driver->read()) && f->pose_id() < 2) {
+  }
+  EXPECT_TRUE(f.has_value());
+  driver->writes_done();
+  EXPECT_TRUE(driver->finish().ok());
 }
 
 TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {

@@ -277,8 +277,9 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
 
 }  // namespace
 
-GrpcWebBridge::GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services)
-    : channel_(std::move(channel)), inflight_(std::make_shared<Inflight>()) {
+GrpcWebBridge::GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services,
+                             std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route)
+    : channel_(std::move(channel)), route_(std::move(route)), inflight_(std::make_shared<Inflight>()) {
   const auto* pool = google::protobuf::DescriptorPool::generated_pool();
   for (const std::string& name : services) {
     const google::protobuf::ServiceDescriptor* service = pool->FindServiceByName(name);
@@ -324,7 +325,10 @@ GrpcWebBridge::Started GrpcWebBridge::start(const GrpcWebRequest& request, GrpcW
 
   auto call = std::make_shared<BridgeCall>(inflight_, request.path, std::move(events));
   grpc::ClientContext& context = call->context();
+  std::shared_ptr<grpc::Channel> channel = channel_;
   for (const auto& [name, value] : request.headers) {
+    if (name == "x-session-id" && route_ && !value.empty())
+      if (auto routed = route_(value)) channel = std::move(routed);
     if (name == "grpc-timeout") {
       const auto timeout = parse_grpc_timeout(value);
       if (!timeout) return refuse(grpc::StatusCode::INVALID_ARGUMENT, "malformed grpc-timeout header '" + value + "'");
@@ -336,7 +340,7 @@ GrpcWebBridge::Started GrpcWebBridge::start(const GrpcWebRequest& request, GrpcW
     if (!printable_ascii(value)) return refuse(grpc::StatusCode::INVALID_ARGUMENT, "header " + name + " is not printable ASCII");
     context.AddMetadata(name, value);
   }
-  grpc::GenericStub stub(channel_);
+  grpc::GenericStub stub(channel);
   BridgeCall::start(call, stub, message);
   out.call = std::move(call);
   out.server_streaming = it->second == Kind::kServerStreaming;

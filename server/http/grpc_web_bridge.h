@@ -98,7 +98,10 @@ class GrpcWebBridge {
   // `services`: full names of the services exposed ("filigree.v1.Filigree");
   // their methods are looked up in the generated protobuf descriptor pool
   // (throws std::invalid_argument for an unknown service).
-  GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services);
+  // `route` (may be empty): the channel for a session's calls, or nullptr
+  // for `channel` (replicas: the one that serves the session).
+  GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services,
+                std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route = {});
   // Cancels the calls still running and waits for them (bounded).
   ~GrpcWebBridge();
   GrpcWebBridge(const GrpcWebBridge&) = delete;
@@ -128,6 +131,7 @@ class GrpcWebBridge {
  private:
   enum class Kind { kUnary, kServerStreaming, kClientStreaming, kBidiStreaming };
   std::shared_ptr<grpc::Channel> channel_;
+  std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route_;
   std::map<std::string, Kind, std::less<>> methods_;  // "/pkg.Service/Method"
   std::shared_ptr<Inflight> inflight_;
 };

@@ -68,7 +68,7 @@ class Connection;
 struct HttpServer::Impl {
   Impl(HttpOptions o, std::shared_ptr<grpc::Channel> channel)
       : options(std::move(o)), files(options.web_root),
-        bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services)),
+        bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services, options.route)),
         acceptor(net::make_strand(ioc)), accept_retry(acceptor.get_executor()) {}
 
   void accept();

@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -28,6 +29,10 @@ struct HttpOptions {
   // Largest request body; over it, gRPC-Web answers RESOURCE_EXHAUSTED, anything else 413.
   std::size_t max_request_bytes = 4u << 20;
   int threads = 1;
+  // Where a gRPC-Web call that names a session (x-session-id) goes: a
+  // channel to the replica that serves it, or nullptr for the in-process
+  // channel. Empty: always in-process (one machine).
+  std::function<std::shared_ptr<grpc::Channel>(const std::string& session_id)> route;
 };
 
 class HttpServer {

@@ -27,7 +27,7 @@ std::string nginx_conf(const fs::path& dir, int port, const std::vector<std::str
          "      grpc_connect_timeout 1s;\n      grpc_read_timeout 3600s;\n      grpc_send_timeout 3600s;\n    }\n  }\n}\n";
 }
 
-Cluster::Cluster(const std::string& server_binary, int replicas, int lease_ms) {
+Cluster::Cluster(const std::string& server_binary, int replicas, int lease_ms, bool http) {
   char tmpl[] = "/tmp/filigree-cluster-XXXXXX";
   dir_ = mkdtemp(tmpl);
   fs::create_directories(dir_ / "tmp");
@@ -45,7 +45,8 @@ Cluster::Cluster(const std::string& server_binary, int replicas, int lease_ms) {
     replicas_.push_back(std::make_unique<ServerProcess>(
         server_binary,
         std::vector<std::string>{"--redis", "127.0.0.1:" + std::to_string(redis_port), "--replica-id", ids_.back(),
-                                 "--data-dir", (dir_ / ids_.back()).string(), "--lease-ms", std::to_string(lease_ms)}));
+                                 "--data-dir", (dir_ / ids_.back()).string(), "--lease-ms", std::to_string(lease_ms)},
+        http));
     addresses_.push_back(replicas_.back()->address());
   }
   const int lb_port = test::free_port();

@@ -16,8 +16,9 @@ namespace filigree::test {
 
 class Cluster {
  public:
-  // Needs redis-server and nginx (Debian packages). Replicas get --lease-ms `lease_ms`.
-  Cluster(const std::string& server_binary, int replicas, int lease_ms = 1500);
+  // Needs redis-server and nginx (Debian packages). Replicas get --lease-ms
+  // `lease_ms`, and with `http` an HTTP port each (web viewer, gRPC-Web).
+  Cluster(const std::string& server_binary, int replicas, int lease_ms = 1500, bool http = false);
   ~Cluster();
   Cluster(const Cluster&) = delete;
   Cluster& operator=(const Cluster&) = delete;
@@ -25,6 +26,7 @@ class Cluster {
   // nginx's address: what clients call.
   const std::string& lb() const { return lb_; }
   const std::string& address(int i) const { return addresses_[i]; }
+  const std::string& http_address(int i) const { return replicas_[i]->http_address(); }
   const std::string& redis_address() const { return redis_address_; }
   // Replica i is "replica-<i+1>"; -1 for an unknown id.
   int index_of(const std::string& replica_id) const;

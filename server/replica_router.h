@@ -1,0 +1,32 @@
+#pragma once
+// Where a call for a session should go when replicas share state: nowhere
+// else if this replica serves it (or nobody does: it takes the session),
+// else a channel to the replica that does. The gRPC-Web bridge uses it, so a
+// browser whose HTTP load balancer picked another replica than the engines'
+// gRPC load balancer reaches the session without moving it.
+
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <grpcpp/channel.h>
+
+namespace filigree::server {
+
+class SessionRegistry;
+
+class ReplicaRouter {
+ public:
+  explicit ReplicaRouter(SessionRegistry& registry);
+  // nullptr: serve it here. Never throws (a store error serves it here,
+  // where the call then fails with its own clear status).
+  std::shared_ptr<grpc::Channel> channel_for(const std::string& session_id);
+
+ private:
+  SessionRegistry& registry_;
+  std::mutex mutex_;
+  std::map<std::string, std::shared_ptr<grpc::Channel>> channels_;  // by address
+};
+
+}  // namespace filigree::server
