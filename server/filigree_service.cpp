@@ -35,12 +35,15 @@ grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& c
                        Role needed, std::shared_ptr<Session>* session) {
   const std::string session_id = id.empty() ? metadata(context, "x-session-id") : id;
   if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "no session id (field session_id or x-session-id metadata)"};
+  // A client that routes itself does not pull sessions to the replica it calls.
+  const bool take_over = metadata(context, "x-filigree-route") != "direct";
   try {
-    // A client that routes itself does not pull sessions to the replica it calls.
-    *session = registry.find(session_id, metadata(context, "x-filigree-route") != "direct");
+    *session = registry.find(session_id, take_over);
   } catch (const SessionElsewhere& e) {
     if (!e.owner_address.empty()) context.AddTrailingMetadata("x-filigree-owner", e.owner_address);
     context.AddTrailingMetadata("x-filigree-retry-after-ms", std::to_string(e.retry_after_ms));
+    // A client routing itself must call the owner: gRPC's own retries of this replica would not help.
+    if (!take_over && !e.owner_address.empty()) context.AddTrailingMetadata("grpc-retry-pushback-ms", "-1");
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
   } catch (const StoreUnavailable& e) {
     return {grpc::StatusCode::UNAVAILABLE, e.what()};

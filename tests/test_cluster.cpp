@@ -153,6 +153,27 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   EXPECT_EQ(std::string(it->second.data(), it->second.size()), cluster.address(owner));
   // The owner still serves it.
   EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
+
+  // An engine routing itself with the client library: locate, then call the owner directly.
+  Client engine(where.address());
+  engine.set_routing(Routing::kDirect);
+  auto driver = engine.drive(s.session_id, s.editor_token, "engine");
+  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
+  std::optional<v1::Frame> f;
+  while ((f = driver->read()) && f->pose_id() < 1) {
+  }
+  EXPECT_TRUE(f.has_value());
+  driver->writes_done();
+  EXPECT_TRUE(driver->finish().ok());
+  Client wrong(cluster.address(other));
+  wrong.set_routing(Routing::kDirect);
+  try {
+    wrong.state(s.session_id, s.viewer_token);
+    ADD_FAILURE() << "a replica that does not serve the session answered";
+  } catch (const ClientError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::UNAVAILABLE);
+  }
+  EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
 }
 
 TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {

@@ -46,9 +46,9 @@ std::string new_session_id() {
 template <class Request, class Response>
 Response call(v1::Filigree::Stub& stub,
               grpc::Status (v1::Filigree::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-              const std::string& session_id, const std::string& token, const Request& request) {
+              const std::string& session_id, const std::string& token, const Request& request, Routing routing) {
   grpc::ClientContext context;
-  set_session_metadata(context, session_id, token);
+  set_session_metadata(context, session_id, token, routing);
   Response response;
   throw_if_error((stub.*method)(&context, request, &response));
   return response;
@@ -117,13 +117,13 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {
   v1::JoinSessionRequest request;
   request.set_session_id(session_id);
-  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request));
+  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_));
 }
 
 v1::SessionState Client::state(const std::string& session_id, const std::string& token) {
   v1::GetStateRequest request;
   request.set_session_id(session_id);
-  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request);
+  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_);
 }
 
 void Client::set_threshold(const std::string& session_id, const std::string& token, double threshold,
@@ -132,13 +132,13 @@ void Client::set_threshold(const std::string& session_id, const std::string& tok
   request.set_session_id(session_id);
   request.set_threshold(threshold);
   request.set_whole_mesh(whole_mesh);
-  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request);
+  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_);
 }
 
 void Client::close(const std::string& session_id, const std::string& token) {
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request);
+  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request, routing_);
 }
 
 std::vector<v1::ListSessionsResponse::Entry> Client::list() {
@@ -151,17 +151,17 @@ std::vector<v1::ListSessionsResponse::Entry> Client::list() {
 v1::SessionLocation Client::locate(const std::string& session_id) {
   v1::LocateSessionRequest request;
   request.set_session_id(session_id);
-  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request);
+  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request, routing_);
 }
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,
                                       const std::string& client_name) {
-  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name));
+  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name, routing_));
 }
 
 std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
                                        std::uint64_t after_version) {
-  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version));
+  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version, routing_));
 }
 
 }  // namespace filigree

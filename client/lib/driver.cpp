@@ -7,9 +7,9 @@
 namespace filigree {
 
 Driver::Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-               std::string client_name)
+               std::string client_name, Routing routing)
     : session_id_(session_id), client_name_(std::move(client_name)) {
-  set_session_metadata(context_, session_id, token);
+  set_session_metadata(context_, session_id, token, routing);
   stream_ = stub.Drive(&context_);
 }
 

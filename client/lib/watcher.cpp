@@ -5,8 +5,8 @@
 namespace filigree {
 
 Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-                 std::uint64_t after_version) {
-  set_session_metadata(context_, session_id, token);
+                 std::uint64_t after_version, Routing routing) {
+  set_session_metadata(context_, session_id, token, routing);
   v1::WatchRequest request;
   request.set_session_id(session_id);
   request.set_after_version(after_version);

@@ -87,11 +87,16 @@ class Client {
   std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token,
                                  std::uint64_t after_version = 0);
 
+  // Routing::kDirect for an engine that calls the replica locate() named
+  // instead of a load balancer (default: kLoadBalanced).
+  void set_routing(Routing routing) { routing_ = routing; }
+
   v1::Filigree::Stub& stub() { return *stub_; }
 
  private:
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::Filigree::Stub> stub_;
+  Routing routing_ = Routing::kLoadBalanced;
 };
 
 }  // namespace filigree

@@ -9,6 +9,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "filigree/call_metadata.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
@@ -49,7 +50,8 @@ class Driver {
 
  private:
   friend class Client;
-  Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::string client_name);
+  Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::string client_name,
+         Routing routing);
   bool write();
 
   grpc::ClientContext context_;  // declared before stream_: must outlive it

@@ -8,6 +8,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "filigree/call_metadata.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
@@ -38,7 +39,8 @@ class Watcher {
 
  private:
   friend class Client;
-  Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::uint64_t after_version);
+  Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::uint64_t after_version,
+          Routing routing);
 
   grpc::ClientContext context_;  // declared before stream_: must outlive it
   std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;
