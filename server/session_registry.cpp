@@ -43,6 +43,13 @@ Journal SessionRegistry::journal_for(const std::string& id) {
   };
 }
 
+void SessionRegistry::confirm_lease(const std::string& id) {
+  // Building a large session's first frame can outlast a lease: make sure
+  // it is still ours (and extended) before serving it.
+  const Claim claim = store_.claim(id, /*take_over=*/false);
+  if (!claim.acquired) throw SessionElsewhere(id, claim.owner_id, claim.owner_address, claim.lease_ms_left, false);
+}
+
 std::shared_ptr<Session> SessionRegistry::insert(std::shared_ptr<Session> s) {
   std::lock_guard lock(mutex_);
   const auto now = Clock::now();
@@ -70,7 +77,9 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.viewer_token = random_token();
   r.uploaded_ids = std::move(uploaded_ids);
   if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
-  auto s = insert(std::make_shared<Session>(std::move(r), std::move(h), journal_for(r.id)));
+  auto made = std::make_shared<Session>(std::move(r), std::move(h), journal_for(r.id));
+  confirm_lease(made->id());
+  auto s = insert(std::move(made));
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
   return s;
 }
@@ -135,6 +144,7 @@ std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_
                               ? std::string(e.what())
                               : "session " + id + " cannot be loaded: " + e.what());
   }
+  confirm_lease(id);
   s = insert(std::move(s));
   spdlog::info("event=session_loaded session={} version={}", s->id(), s->version());
   return s;

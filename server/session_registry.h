@@ -90,6 +90,8 @@ class SessionRegistry {
   };
   std::shared_ptr<Session> load(const std::string& id, bool take_over);
   std::shared_ptr<Session> insert(std::shared_ptr<Session> s);
+  // Throws SessionElsewhere if the lease passed to another replica meanwhile; extends it otherwise.
+  void confirm_lease(const std::string& id);
   // Removes the session from this process (not from the store), ending its streams with `why`.
   void drop(const std::string& id, const std::string& why);
   void persist(const Session& s);
