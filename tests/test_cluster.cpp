@@ -63,6 +63,16 @@ std::vector<float> pose(const SessionMesh& mesh, std::uint64_t i) {
   return p;
 }
 
+// Sends pose `id` and reads frames until the one that acknowledges it;
+// nullopt if the stream ended first.
+std::optional<v1::Frame> send_and_wait(Driver& driver, const SessionMesh& mesh, std::uint64_t id) {
+  if (!driver.send(id, pose(mesh, id))) return std::nullopt;
+  std::optional<v1::Frame> f;
+  while ((f = driver.read()) && f->pose_id() < id) {
+  }
+  return f;
+}
+
 double max_difference(const std::vector<float>& a, const std::vector<float>& b) {
   EXPECT_EQ(a.size(), b.size());
   double d = 0.0;
@@ -158,10 +168,7 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   Client engine(where.address());
   engine.set_routing(Routing::kDirect);
   auto driver = engine.drive(s.session_id, s.editor_token, "engine");
-  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
-  std::optional<v1::Frame> f;
-  while ((f = driver->read()) && f->pose_id() < 1) {
-  }
+  std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, 1);
   EXPECT_TRUE(f.has_value());
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
@@ -184,10 +191,7 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "moving");
   auto driver = lb.drive(s.session_id, s.editor_token, "moving");
-  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
-  std::optional<v1::Frame> f;
-  while ((f = driver->read()) && f->pose_id() < 1) {
-  }
+  std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, 1);
   ASSERT_TRUE(f.has_value());
   const std::uint64_t version = f->version();
   const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
@@ -358,10 +362,7 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "engine");
   auto driver = lb.drive(s.session_id, s.editor_token, "engine");
-  ASSERT_TRUE(driver->send(1, pose(s.mesh, 1)));
-  std::optional<v1::Frame> f;
-  while ((f = driver->read()) && f->pose_id() < 1) {
-  }
+  std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, 1);
   ASSERT_TRUE(f.has_value());
   const std::string owner = lb.locate(s.session_id).replica_id();
   const int other = (cluster.index_of(owner) + 1) % kReplicas;
@@ -380,10 +381,7 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   EXPECT_NE(body.find("grpc-status:0"), std::string::npos) << body;
   // The session stayed where the engines' calls go; the engine's stream lives on.
   EXPECT_EQ(lb.locate(s.session_id).replica_id(), owner);
-  ASSERT_TRUE(driver->send(2, pose(s.mesh, 2)));
-  while ((f = driver->read()) && f->pose_id() < 2) {
-  }
-  EXPECT_TRUE(f.has_value());
+  EXPECT_TRUE(send_and_wait(*driver, s.mesh, 2).has_value());
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
 }
@@ -472,14 +470,7 @@ TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
     auto driver = lb.drive(s.session_id, s.editor_token, "failover");
     bool broken = false;
     while (next <= kPoses && !broken) {
-      const std::vector<float> p = pose(s.mesh, next);
-      if (!driver->send(next, p)) {
-        broken = true;
-        break;
-      }
-      std::optional<v1::Frame> f;
-      while ((f = driver->read()) && f->pose_id() < next) {
-      }
+      const std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, next);
       if (!f) {
         broken = true;
         break;
