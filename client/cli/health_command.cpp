@@ -23,7 +23,10 @@ int check(const std::string& server, double timeout_seconds) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() +
                        std::chrono::milliseconds(static_cast<long>(timeout_seconds * 1000)));
-  grpc::ByteBuffer request, response;  // an empty request: the whole server
+  // An empty HealthCheckRequest (service ""): the whole server. gRPC wants a
+  // buffer with a slice, even an empty one.
+  grpc::Slice empty(std::string{});
+  grpc::ByteBuffer request(&empty, 1), response;
   std::promise<grpc::Status> done;
   stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &request, &response,
                  [&](grpc::Status s) { done.set_value(std::move(s)); });

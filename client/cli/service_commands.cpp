@@ -245,31 +245,60 @@ void watch(const WatchArgs& a) {
   Client client(a.server);
   const SessionMesh session = client.join(a.session, a.token);
   const FrameDecoder decoder(session.rest_positions);
-  auto watcher = client.watch(a.session, a.token, a.after);
   std::vector<std::vector<Vec3>> frames;
   int count = 0;
-  while (auto frame = watcher->read()) {
-    const DecodedFrame d = decoder.decode(*frame);
-    std::string changes;
-    for (const auto& c : d.changes)
-      changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
-                 std::to_string(c.vertex_count());
-    std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
-                static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
-                changes.empty() ? "-" : changes.c_str());
-    std::fflush(stdout);
-    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
-    if (a.frames > 0 && ++count >= a.frames) {
-      watcher->cancel();  // enough: the CANCELLED status below is ours
-      break;
+  std::uint64_t last_version = a.after;
+  // A stream that ends with UNAVAILABLE or CANCELLED (the server stopped, the session moved
+  // to another replica) is reopened from the last version seen, for up to a minute.
+  auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  std::chrono::milliseconds backoff(250);
+  while (true) {
+    auto watcher = client.watch(a.session, a.token, last_version);
+    bool enough = false;
+    while (auto frame = watcher->read()) {
+      const DecodedFrame d = decoder.decode(*frame);
+      last_version = d.version;
+      give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+      backoff = std::chrono::milliseconds(250);
+      std::string changes;
+      for (const auto& c : d.changes)
+        changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
+                   std::to_string(c.vertex_count());
+      std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
+                  static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
+                  changes.empty() ? "-" : changes.c_str());
+      std::fflush(stdout);
+      if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+      if (a.frames > 0 && ++count >= a.frames) {
+        watcher->cancel();  // enough: the CANCELLED status below is ours
+        enough = true;
+        break;
+      }
     }
-  }
-  const grpc::Status status = watcher->finish();
-  if (!(a.frames > 0 && count >= a.frames)) {
+    const grpc::Status status = watcher->finish();
+    if (enough) break;
+    // CANCELLED too: we did not cancel, so a server stopping did.
+    const bool retry = status.error_code() == grpc::StatusCode::UNAVAILABLE || status.error_code() == grpc::StatusCode::CANCELLED;
+    if (retry && std::chrono::steady_clock::now() < give_up) {
+      std::fprintf(stderr, "stream ended (%s); reconnecting after version %llu\n", status.error_message().c_str(),
+                   static_cast<unsigned long long>(last_version));
+      std::this_thread::sleep_for(backoff);  // retry backoff
+      backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
+      continue;
+    }
     throw_if_error(status);
     std::fprintf(stderr, "the session was closed\n");
+    break;
   }
   if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
+}
+
+void locate(const std::string& server, const std::string& session) {
+  Client client(server);
+  const v1::SessionLocation where = client.locate(session);
+  std::printf("session_id: %s\nreplica_id: %s\naddress: %s\nhere: %s\n", where.session_id().c_str(),
+              where.replica_id().empty() ? "-" : where.replica_id().c_str(),
+              where.address().empty() ? "-" : where.address().c_str(), where.here() ? "yes" : "no");
 }
 
 // ---------------------------------------------------------------- sessions
@@ -337,6 +366,12 @@ void add_service_commands(CLI::App& app) {
   wa->callback([w] { watch(*w); });
 
   auto server = std::make_shared<std::string>(kDefaultServer);
+  auto located = std::make_shared<std::pair<std::string, std::string>>(kDefaultServer, "");
+  CLI::App* loc = app.add_subcommand("locate", "Which replica serves a session (replicas sharing Redis)");
+  loc->add_option("--server", located->first, "Server address HOST:PORT (any replica, or the load balancer)");
+  loc->add_option("--session", located->second, "Session id")->required();
+  loc->callback([located] { locate(located->first, located->second); });
+
   CLI::App* ls = app.add_subcommand("sessions", "List the server's sessions");
   ls->add_option("--server", *server, "Server address HOST:PORT");
   ls->callback([server] { sessions(*server); });
