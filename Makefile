@@ -33,9 +33,10 @@ test-cluster: build
 # The container image (podman; base image from a debootstrap rootfs) and a
 # smoke test of a container from it: health check and a demo session on loopback.
 image:
+	bash scripts/install-deps.sh --container
 	bash docker/build-image.sh
 
-test-container:
+test-container: image
 	bash docker/smoke-test.sh
 
 demo: build viewer

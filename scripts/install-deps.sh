@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages Filigree builds and tests with.
+# Installs the Debian 12 packages Filigree builds and tests with; with
+# --container, those that build and run the container image instead (podman).
 # Idempotent: only packages that are not installed yet are fetched, and apt's
 # package lists are refreshed only when something is missing.
 set -euo pipefail
@@ -14,6 +15,12 @@ PACKAGES=(
   chromium fonts-liberation
 )
 
+container=false
+if [ "${1:-}" = "--container" ]; then
+  container=true
+  PACKAGES=(podman runc debootstrap curl ca-certificates uidmap)
+fi
+
 missing=()
 for p in "${PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -21,7 +28,7 @@ done
 
 # tests/node_client: node >= 18 and npm. Keep any node already there (NodeSource's
 # bundles npm and conflicts with Debian's npm package); else Debian's nodejs + npm.
-if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
+if ! $container && { ! command -v node >/dev/null || ! command -v npm >/dev/null; }; then
   missing+=(nodejs npm)
 fi
 
