@@ -379,6 +379,10 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   ASSERT_TRUE(state.ParseFromString(body.substr(5, length)));
   EXPECT_EQ(state.version(), f->version());
   EXPECT_NE(body.find("grpc-status:0"), std::string::npos) << body;
+  // Through nginx's HTTP port (the shipped configuration's second server block) too.
+  const std::string via_lb =
+      grpc_web_call(cluster.lb_http(), "GetState", s.session_id, s.viewer_token, request.SerializeAsString());
+  EXPECT_NE(via_lb.find("grpc-status:0"), std::string::npos) << via_lb;
   // The session stayed where the engines' calls go; the engine's stream lives on.
   EXPECT_EQ(lb.locate(s.session_id).replica_id(), owner);
   EXPECT_TRUE(send_and_wait(*driver, s.mesh, 2).has_value());

@@ -23,8 +23,9 @@ class Cluster {
   Cluster(const Cluster&) = delete;
   Cluster& operator=(const Cluster&) = delete;
 
-  // nginx's address: what clients call.
+  // nginx's addresses: gRPC, and HTTP (web viewer, gRPC-Web; replicas started with `http`).
   const std::string& lb() const { return lb_; }
+  const std::string& lb_http() const { return lb_http_; }
   const std::string& address(int i) const { return addresses_[i]; }
   const std::string& http_address(int i) const { return replicas_[i]->http_address(); }
   const std::string& redis_address() const { return redis_address_; }
@@ -40,12 +41,13 @@ class Cluster {
   std::unique_ptr<ChildProcess> redis_, nginx_;
   std::vector<std::unique_ptr<ServerProcess>> replicas_;
   std::vector<std::string> ids_, addresses_;
-  std::string lb_, redis_address_;
+  std::string lb_, lb_http_, redis_address_;
 };
 
-// The nginx configuration of a cluster: plain-text HTTP/2 on 127.0.0.1:port,
-// `hash $filigree_route consistent` over `replicas` (the session id, or a
-// random key for calls without one), files under `dir`.
-std::string nginx_conf(const std::filesystem::path& dir, int port, const std::vector<std::string>& replicas);
+// The shipped load balancer configuration (docker/nginx/nginx.conf) with the
+// compose host names replaced by `grpc_servers` and `http_servers`, its ports
+// by 127.0.0.1:grpc_port and :http_port, and its files put under `dir`.
+std::string nginx_conf(const std::filesystem::path& dir, int grpc_port, int http_port,
+                       const std::vector<std::string>& grpc_servers, const std::vector<std::string>& http_servers);
 
 }  // namespace filigree::test
