@@ -390,6 +390,76 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   EXPECT_TRUE(driver->finish().ok());
 }
 
+// A unary SubmitPose through `address`.
+grpc::Status submit_pose(const std::string& address, const SessionHandle& s, std::uint64_t id) {
+  auto stub = v1::Filigree::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  set_session_metadata(context, s.session_id, s.editor_token);
+  v1::DriveRequest request;
+  request.set_session_id(s.session_id);
+  request.set_pose_id(id);
+  const std::vector<float> p = pose(s.mesh, id);
+  request.mutable_positions()->Add(p.begin(), p.end());
+  v1::SubmitPoseResponse response;
+  return stub->SubmitPose(&context, request, &response);
+}
+
+// Waits (retrying with backoff) until `address` serves the session's state.
+v1::SessionState state_when_served(const std::string& address, const SessionHandle& s) {
+  v1::SessionState state;
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    const grpc::Status status = get_state(address, s, &state);
+    if (status.ok()) return state;
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // retry backoff
+  }
+  ADD_FAILURE() << "the session was never served at " << address;
+  return state;
+}
+
+TEST(Cluster, AReplicaThatWasFrozenPastItsLeaseCannotOverwriteTheNewOwner) {
+  // Split brain: the owner freezes (SIGSTOP) while a client still streams to
+  // it directly; another replica takes the session over and accepts a pose;
+  // the old owner wakes up with a pose in its socket. Its writes are fenced
+  // by the lease: that pose is never acknowledged and the new owner's stands.
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "frozen");
+  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  Client direct(cluster.address(owner));
+  direct.set_routing(Routing::kDirect);
+  auto driver = direct.drive(s.session_id, s.editor_token, "old-route");
+  ASSERT_TRUE(send_and_wait(*driver, s.mesh, 1).has_value());
+
+  cluster.pause(owner);
+  const int other = (owner + 1) % kReplicas;
+  state_when_served(cluster.address(other), s);  // takes the session over once the lease expires
+  ASSERT_TRUE(submit_pose(cluster.address(other), s, 5).ok());
+  ASSERT_TRUE(driver->send(2, pose(s.mesh, 2)));  // waits in the frozen replica's socket
+  cluster.resume(owner);
+
+  while (auto f = driver->read()) EXPECT_NE(f->pose_id(), 2u) << "the frozen replica acknowledged a pose";
+  EXPECT_EQ(driver->finish().error_code(), grpc::StatusCode::UNAVAILABLE);
+  const v1::SessionState state = state_when_served(cluster.address(other), s);
+  EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 5));
+  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id).replica_id(), "replica-" + std::to_string(other + 1));
+}
+
+TEST(Cluster, AStoppedReplicaHandsItsSessionsOverAtOnce) {
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "stopping");
+  ASSERT_TRUE(submit_pose(cluster.lb(), s, 3).ok());
+  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  EXPECT_EQ(cluster.terminate(owner), 0);
+  // SIGTERM released the lease: no replica holds it until the next call.
+  server::RedisClient redis(cluster.redis_address(), std::chrono::milliseconds(2000));
+  EXPECT_TRUE(redis.command({"GET", "filigree:lease:" + s.session_id}).nil());
+  const v1::SessionState state = lb.state(s.session_id, s.viewer_token);  // no UNAVAILABLE to wait out
+  EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 3));
+  EXPECT_NE(cluster.index_of(lb.locate(s.session_id).replica_id()), owner);
+}
+
 TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
   Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());

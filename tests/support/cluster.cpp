@@ -110,6 +110,9 @@ int Cluster::index_of(const std::string& replica_id) const {
 
 fs::path Cluster::data_dir(int i) const { return dir_ / ids_[i]; }
 void Cluster::kill(int i) { replicas_[i]->kill_now(); }
+void Cluster::pause(int i) { replicas_[i]->pause(); }
+void Cluster::resume(int i) { replicas_[i]->resume(); }
+int Cluster::terminate(int i) { return replicas_[i]->terminate(); }
 void Cluster::stop_redis() { redis_.reset(); }
 
 }  // namespace filigree::test

@@ -34,6 +34,10 @@ class Cluster {
   std::filesystem::path data_dir(int i) const;
   // SIGKILL: the replica dies at once, its leases left to expire.
   void kill(int i);
+  void pause(int i);
+  void resume(int i);
+  // SIGTERM and wait; the exit status.
+  int terminate(int i);
   void stop_redis();
 
  private:

@@ -68,6 +68,14 @@ void ServerProcess::kill_now() {
   pid_ = -1;
 }
 
+void ServerProcess::pause() {
+  if (pid_ > 0) kill(pid_, SIGSTOP);
+}
+
+void ServerProcess::resume() {
+  if (pid_ > 0) kill(pid_, SIGCONT);
+}
+
 int ServerProcess::terminate() {
   if (pid_ <= 0) return -1;
   kill(pid_, SIGTERM);

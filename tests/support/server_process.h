@@ -27,6 +27,9 @@ class ServerProcess {
   // Sends SIGKILL and waits: the process dies without a chance to clean up.
   void kill_now();
   bool running() const { return pid_ > 0; }
+  // SIGSTOP / SIGCONT: the process freezes (a long pause, a partition) and comes back.
+  void pause();
+  void resume();
 
  private:
   int pid_ = -1;
