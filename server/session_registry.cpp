@@ -77,7 +77,8 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.viewer_token = random_token();
   r.uploaded_ids = std::move(uploaded_ids);
   if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
-  auto made = std::make_shared<Session>(std::move(r), std::move(h), journal_for(r.id));
+  Journal journal = journal_for(r.id);
+  auto made = std::make_shared<Session>(std::move(r), std::move(h), std::move(journal));
   confirm_lease(made->id());
   auto s = insert(std::move(made));
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
