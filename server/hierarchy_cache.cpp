@@ -66,6 +66,42 @@ std::shared_ptr<const Hierarchy> HierarchyCache::fetch_shared(const std::string&
   return h;
 }
 
+void HierarchyCache::end_claim(const std::string& key) {
+  try {
+    shared_->end_build(key);
+  } catch (const std::exception& e) {  // it expires
+    spdlog::warn("event=build_claim_release_failed key={} error=\"{}\"", key, e.what());
+  }
+}
+
+std::shared_ptr<const Hierarchy> HierarchyCache::shared_or_claim(const std::string& key,
+                                                                 const std::function<void(double)>& progress) {
+  if (!shared_) return nullptr;
+  const auto fetch = [&]() -> std::shared_ptr<const Hierarchy> {
+    try {
+      return fetch_shared(key);
+    } catch (const HierarchyFileError& e) {
+      // We have the mesh: build it again, and replace the corrupt copy.
+      spdlog::warn("event=shared_hierarchy_corrupt key={} error=\"{}\"", key, e.what());
+      return nullptr;
+    }
+  };
+  while (true) {
+    if (auto h = fetch()) return h;
+    if (shared_->try_claim_build(key)) {
+      // Its builder may have finished between our look and our claim.
+      if (auto h = fetch()) {
+        end_claim(key);
+        return h;
+      }
+      return nullptr;
+    }
+    // Another replica is building it: wait for its result (its claim expires if it dies).
+    if (progress) progress(0.0);
+    std::this_thread::sleep_for(std::chrono::milliseconds(250));
+  }
+}
+
 std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mesh, const PreprocessOptions& options,
                                                               std::string* key_out, bool* built) {
   const std::string key = key_of(hash_mesh(mesh), options);
@@ -89,25 +125,37 @@ std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mes
   if (!we_build) return load(key);
 
   std::shared_ptr<const Hierarchy> h;
-  bool fetched = false;
+  bool fetched = false, claimed = false;
   try {
-    // Another replica may have built it already.
-    try {
-      h = fetch_shared(key);
-    } catch (const HierarchyFileError& e) {
-      // We have the mesh: build it again, and replace the corrupt copy.
-      spdlog::warn("event=shared_hierarchy_corrupt key={} error=\"{}\"", key, e.what());
-    }
+    // Another replica may have built it already, or be building it now.
+    h = shared_or_claim(key, options.progress);
     fetched = h != nullptr;
+    claimed = shared_ && !fetched;
     if (!h) {
-      h = std::make_shared<const Hierarchy>(preprocess(mesh, options));
+      PreprocessOptions o = options;
+      if (claimed) {
+        // Keep the build claim while the build reports progress (at most once a second).
+        o.progress = [this, &key, &options, last = std::chrono::steady_clock::now()](double f) mutable {
+          if (options.progress) options.progress(f);
+          if (std::chrono::steady_clock::now() - last < std::chrono::seconds(1)) return;
+          last = std::chrono::steady_clock::now();
+          try {
+            shared_->renew_build(key);
+          } catch (const std::exception& e) {  // the claim then expires: at worst another replica builds too
+            spdlog::warn("event=build_claim_renewal_failed key={} error=\"{}\"", key, e.what());
+          }
+        };
+      }
+      h = std::make_shared<const Hierarchy>(preprocess(mesh, o));
       if (!dir_.empty() || shared_) {
         const std::string bytes = serialize_hierarchy(*h);
         if (!dir_.empty()) write_file(file_of(key), bytes);
         if (shared_) shared_->put(key, bytes);
       }
+      if (claimed) end_claim(key);
     }
   } catch (...) {
+    if (claimed) end_claim(key);
     std::lock_guard lock(mutex_);
     promise.set_exception(std::current_exception());
     building_.erase(key);

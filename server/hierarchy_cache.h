@@ -28,7 +28,9 @@ class HierarchyCache {
   static std::string key_of(std::uint64_t mesh_hash, const PreprocessOptions& options);
 
   // Returns the hierarchy for `mesh` (already validated and repaired),
-  // building it at most once per key; `built` tells whether this call built it.
+  // building it at most once per key (with a shared store, across replicas:
+  // a build another replica runs is waited for); `built` tells whether this
+  // call built it.
   std::shared_ptr<const Hierarchy> get_or_build(const TriMesh& mesh, const PreprocessOptions& options,
                                                 std::string* key, bool* built);
   // A hierarchy by key from memory, disk or the shared store; throws if it
@@ -43,6 +45,10 @@ class HierarchyCache {
   std::filesystem::path file_of(const std::string& key) const;
   // From the shared store (kept on local disk too), or nullptr.
   std::shared_ptr<const Hierarchy> fetch_shared(const std::string& key);
+  // The shared copy, waiting while another replica builds it; nullptr when
+  // this process should build it (and then holds the shared build claim).
+  std::shared_ptr<const Hierarchy> shared_or_claim(const std::string& key, const std::function<void(double)>& progress);
+  void end_claim(const std::string& key);
   std::shared_ptr<const Hierarchy> remember(const std::string& key, std::shared_ptr<const Hierarchy> h);
 
   const std::filesystem::path dir_;

@@ -180,8 +180,11 @@ int main(int argc, char** argv) {
     sigwait(&signals, &signal);
     spdlog::info("event=shutdown signal={}", signal);
     if (http_server) http_server->stop_accepting();
-    // Drain: uploads finish, streams end with UNAVAILABLE, records are written.
+    // Drain: uploads finish (leases are still renewed meanwhile), then streams
+    // end with UNAVAILABLE, records are written and leases released.
     service.drain();
+    stopping = true;
+    maintenance.join();
     registry.shutdown();
     // Watch responses end with the streams just finished; idle connections close.
     if (http_server) {
@@ -190,8 +193,6 @@ int main(int argc, char** argv) {
     }
     // Streams are already finished; this only bounds unary calls still in flight.
     server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
-    stopping = true;
-    maintenance.join();
     registry.shutdown();
     spdlog::info("event=stopped");
     return 0;

@@ -135,6 +135,20 @@ TEST(Cluster, HierarchyBuiltByOneReplicaIsLoadedByAnother) {
   EXPECT_EQ(files, 1u);
 }
 
+TEST(Cluster, TwoReplicasGivenTheSameNewMeshAtOnceBuildItOnce) {
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
+  // The Armadillo (26k vertices) takes about a second to preprocess: the two
+  // uploads overlap, and one replica waits for the other's build.
+  const std::string armadillo = test::file_bytes(std::string(FILIGREE_REPO_DATA_DIR) + "/armadillo.off");
+  SessionHandle a, b;
+  std::thread first([&] { a = Client(cluster.address(0)).create_session(armadillo, "off", {}, "first"); });
+  std::thread second([&] { b = Client(cluster.address(1)).create_session(armadillo, "off", {}, "second"); });
+  first.join();
+  second.join();
+  EXPECT_NE(a.cached, b.cached) << "both replicas built the hierarchy, or neither did";
+  EXPECT_EQ(a.mesh.base_positions, b.mesh.base_positions);
+}
+
 TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());

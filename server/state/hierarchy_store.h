@@ -15,6 +15,14 @@ class HierarchyStore {
   // Stores `bytes` under `key` (the same key always means the same bytes;
   // a corrupt copy is replaced).
   virtual void put(const std::string& key, const std::string& bytes) = 0;
+
+  // So that two replicas given the same new mesh at once preprocess it once:
+  // try_claim_build is true if this process may build `key` now (it then
+  // holds the claim for a while), renew_build extends the claim during a long
+  // build, end_build drops it. A claim whose holder died expires.
+  virtual bool try_claim_build(const std::string& key) = 0;
+  virtual void renew_build(const std::string& key) = 0;
+  virtual void end_build(const std::string& key) = 0;
 };
 
 }  // namespace filigree::server
