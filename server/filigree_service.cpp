@@ -131,8 +131,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 
   grpc::Status check_proposed_id(const std::string& id) {
     if (id.empty()) return grpc::Status::OK;
-    if (id.size() != 20 || id.find_first_not_of("0123456789abcdef") != std::string::npos)
-      return {grpc::StatusCode::INVALID_ARGUMENT, "a proposed session id is 20 lowercase hex digits, not '" + id + "'"};
+    if (!is_session_id(id))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "a proposed session id is " + std::to_string(kSessionIdLength) +
+                                                      " lowercase hex digits, not '" + id + "'"};
     try {
       if (service_.registry().store().exists(id)) return {grpc::StatusCode::ALREADY_EXISTS, "session id " + id + " is taken"};
     } catch (const StoreUnavailable& e) {

@@ -104,12 +104,15 @@ int main(int argc, char** argv) {
     // (hierarchy files stay in --data-dir as a local cache).
     std::shared_ptr<RedisClient> redis;
     std::unique_ptr<SessionStore> store;
+    RedisSessionStore* redis_store = nullptr;
     std::unique_ptr<HierarchyStore> shared_hierarchies;
     if (!redis_address.empty()) {
       redis = std::make_shared<RedisClient>(redis_address, std::chrono::milliseconds(std::max(200, lease_ms / 3)));
       if (replica_id.empty()) replica_id = host_name() + "-" + std::to_string(getpid());
-      store = std::make_unique<RedisSessionStore>(redis, RedisSessionStoreOptions{redis_prefix, replica_id, "",
-                                                                                  std::chrono::milliseconds(lease_ms)});
+      auto made = std::make_unique<RedisSessionStore>(redis, RedisSessionStoreOptions{redis_prefix, replica_id, "",
+                                                                                      std::chrono::milliseconds(lease_ms)});
+      redis_store = made.get();
+      store = std::move(made);
       shared_hierarchies = std::make_unique<RedisHierarchyStore>(redis, redis_prefix);
       registry_limits.lease_seconds = lease_ms / 1000.0;
     } else {
@@ -156,7 +159,7 @@ int main(int argc, char** argv) {
     if (redis) {
       if (advertise.empty()) advertise = (host == "0.0.0.0" || host == "[::]" ? host_name() : host) + ":" + std::to_string(port);
       // The port is known only now (--listen HOST:0).
-      static_cast<RedisSessionStore&>(*store).set_advertise(advertise);
+      redis_store->set_advertise(advertise);
       spdlog::info("event=replica replica_id={} advertise={} redis={} lease_ms={}", replica_id, advertise, redis_address,
                    lease_ms);
     }

@@ -130,8 +130,7 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
     pending_ = true;
     seq = ++journal_seq_;
-    // The frame that will show this change: the next, or the one after the one computing.
-    if (journal_) progress = progress_locked(record_.version + 1 + (computing_ ? 1 : 0));
+    if (journal_) progress = progress_with_change_locked();
     touch();
   }
   wake_.notify_one();
@@ -205,7 +204,7 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
     pending_ = true;
     seq = ++journal_seq_;
-    if (journal_) progress = progress_locked(record_.version + 1 + (computing_ ? 1 : 0));
+    if (journal_) progress = progress_with_change_locked();
     touch();
   }
   wake_.notify_one();
@@ -242,8 +241,9 @@ std::string Session::failure() const {
   return failure_;
 }
 
-SessionProgress Session::progress_locked(std::uint64_t version) const {
-  return {record_.options, record_.pose, version};
+SessionProgress Session::progress_with_change_locked() const {
+  // The frame that will show a change made now: the next, or the one after the one computing.
+  return {record_.options, record_.pose, record_.version + 1 + (computing_ ? 1 : 0)};
 }
 
 void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
@@ -311,11 +311,13 @@ void Session::compute_once(bool keep_version) {
       seq = ++journal_seq_;
     }
     if (journal_) {
-      // Nothing is acknowledged (published) before it is journaled.
-      std::lock_guard lock(mutex_);
-      progress = progress_locked(keep_version ? record_.version : record_.version + 1);
+      // Nothing is acknowledged (published) before it is journaled: the pose of this frame.
+      progress.pose.resize(3 * m);
       for (std::size_t i = 0; i < m; ++i)
         for (int k = 0; k < 3; ++k) progress.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+      std::lock_guard lock(mutex_);
+      progress.options = record_.options;
+      progress.version = keep_version ? record_.version : record_.version + 1;
     }
     try {
       journal(progress, seq);

@@ -126,7 +126,8 @@ class Session {
   void touch();
   // Journals `progress` unless a later progress (by seq) already was.
   void journal(const SessionProgress& progress, std::uint64_t seq);
-  SessionProgress progress_locked(std::uint64_t version) const;
+  // The progress including a change just merged, under the version of the frame that will show it.
+  SessionProgress progress_with_change_locked() const;
 
   const std::shared_ptr<const Hierarchy> hierarchy_;
   std::unique_ptr<Deformer> deformer_;

@@ -6,6 +6,10 @@
 
 namespace filigree::server {
 
+bool is_session_id(const std::string& id) {
+  return id.size() == kSessionIdLength && id.find_first_not_of("0123456789abcdef") == std::string::npos;
+}
+
 std::string encode_session_record(const SessionRecord& r) {
   internal::SessionRecord p;
   p.set_format_version(1);

@@ -2,6 +2,7 @@
 // What is kept of a session beyond one process: enough to restart it, on this
 // replica after a restart or on another after a failover (DESIGN §4).
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -22,6 +23,11 @@ struct SessionRecord {
   std::uint64_t version = 0;
   std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
 };
+
+// Session ids are 20 lowercase hex digits (80 random bits): safe as file
+// names and Redis keys, and what a client may propose for a new session.
+inline constexpr std::size_t kSessionIdLength = 20;
+bool is_session_id(const std::string& id);
 
 // What changes while a session runs, journaled on every accepted change when
 // replicas share state (the rest of the record is written once).

@@ -11,11 +11,6 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
-constexpr std::size_t kIdLength = 20;
-bool is_session_id(const std::string& id) {
-  return id.size() == kIdLength && id.find_first_not_of("0123456789abcdef") == std::string::npos;
-}
-
 }  // namespace
 
 std::string random_token() {
@@ -66,11 +61,11 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
       throw TooManySessions("the server holds its maximum of " + std::to_string(limits_.max_sessions) + " sessions");
   }
   if (!proposed_id.empty() && !is_session_id(proposed_id))
-    throw BadSessionId("a proposed session id is " + std::to_string(kIdLength) + " lowercase hex digits, not '" +
+    throw BadSessionId("a proposed session id is " + std::to_string(kSessionIdLength) + " lowercase hex digits, not '" +
                            proposed_id + "'",
                        false);
   SessionRecord r;
-  r.id = proposed_id.empty() ? random_token().substr(0, kIdLength) : proposed_id;
+  r.id = proposed_id.empty() ? random_token().substr(0, kSessionIdLength) : proposed_id;
   r.hierarchy_key = hierarchy_key;
   r.options = options;
   r.editor_token = random_token();
@@ -86,13 +81,18 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
 }
 
 std::shared_ptr<Session> SessionRegistry::find(const std::string& id, bool take_over) {
+  std::shared_ptr<Session> failed;
   {
     std::lock_guard lock(mutex_);
     const auto it = sessions_.find(id);
-    if (it != sessions_.end() && it->second.session->failure().empty()) return it->second.session;
+    if (it != sessions_.end()) {
+      if (it->second.session->failure().empty()) return it->second.session;
+      // Its journal failed and it stopped computing: load it again from the store.
+      failed = it->second.session;
+      sessions_.erase(it);
+    }
   }
-  // A session whose journal failed stopped computing: load it again from the store.
-  drop(id, "the session is reloaded");
+  if (failed) failed->close_streams("the session is reloaded: reconnect");
   // Evicted, never loaded here, or another replica's.
   if (!is_session_id(id)) return nullptr;
   return load(id, take_over);

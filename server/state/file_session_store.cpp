@@ -10,8 +10,7 @@ FileSessionStore::FileSessionStore(std::filesystem::path dir) : dir_(std::move(d
 }
 
 std::filesystem::path FileSessionStore::file_of(const std::string& id) const {
-  if (dir_.empty() || id.empty() || id.size() > 64 || id.find_first_not_of("0123456789abcdef") != std::string::npos)
-    return {};
+  if (dir_.empty() || !is_session_id(id)) return {};
   return dir_ / (id + ".session");
 }
 

@@ -31,7 +31,7 @@ class FileSessionStore final : public SessionStore {
   void release(const std::string&) override {}
 
  private:
-  // Empty for an id that is not a session id (ids are hex: no path escapes).
+  // Empty for an id that is not a session id (hex only: no path escapes).
   std::filesystem::path file_of(const std::string& id) const;
   const std::filesystem::path dir_;
 };
