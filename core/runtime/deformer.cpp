@@ -4,11 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "geometry/best_fit_rotation.h"
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/cut.h"
+#include "runtime/deformer_model.h"
 #include "runtime/direct_recovery.h"
 #include "runtime/regions.h"
 #include "runtime/rotation_interpolation.h"
@@ -19,65 +21,122 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
+void check_threshold(double threshold) {
+  if (std::isnan(threshold) || threshold < 0.0) throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
+}
+
 }  // namespace
 
-struct Deformer::State {
-  CotangentLaplacian laplacian;
+// Region optimisation's per-session state, made when T first leaves 0 and
+// dropped when it returns there: a T = 0 session holds only its recovery
+// scratch.
+struct Deformer::Optimised {
   BaseRotations rotations;
-  std::vector<std::array<Index, 3>> maps_corners;  // per vertex: base-local corners of its MAPS face
-  DirectRecovery recovery;
   AdaptiveCut cut;
   RegionSolver solver;
-  std::vector<Vec3> positions;  // the last frame's result (rest before the first)
+  std::vector<Vec3> positions;  // the last frame's result (rest before the first): the cut scores it
   std::vector<Eigen::Quaterniond> base_q;
 
-  State(const Hierarchy& h, const DeformerOptions& o)
-      : laplacian(cotangent_laplacian(h.original_mesh())), rotations(h.base_mesh(), o.rotation), recovery(h), cut(h, laplacian),
-        solver(laplacian, h.laplacian), positions(h.rest_positions) {
-    std::vector<Index> base_local(h.vertex_count(), kNone);
-    for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
-    maps_corners.resize(h.vertex_count());
-    for (Index v = 0; v < h.vertex_count(); ++v) {
-      const Triangle& t = h.faces[h.base_faces[h.maps_face[v]]];
-      maps_corners[v] = {base_local[t[0]], base_local[t[1]], base_local[t[2]]};
-    }
+  Optimised(const DeformerModel& m, const DeformerOptions& o)
+      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.laplacian()),
+        solver(m.laplacian(), m.hierarchy().laplacian), positions(m.hierarchy().rest_positions) {
     cut.reset(o.threshold);
   }
 };
 
-Deformer::Deformer(const Hierarchy& h, const DeformerOptions& options) : h_(h), options_(options) {
-  if (std::isnan(options.threshold) || options.threshold < 0.0)
-    throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
+struct Deformer::State {
+  RecoveryWorkspace workspace;
+  std::unique_ptr<Optimised> optimised;
+  std::unique_ptr<CutState> full_cut;  // cut_state() at T = 0, made when asked
+};
+
+Deformer::Deformer(std::shared_ptr<const DeformerModel> model, const DeformerOptions& options)
+    : model_(std::move(model)), options_(options), s_(std::make_unique<State>()) {
+  if (!model_) throw std::invalid_argument("a deformer needs a model");
+  check_threshold(options.threshold);
   if (options.threads < 1) throw std::invalid_argument("threads must be ≥ 1");
   if (options.local_global_iterations < 0) throw std::invalid_argument("local-global iterations must be ≥ 0");
-  s_ = std::make_unique<State>(h, options_);
+  if (options_.threshold > 0.0) optimised();
 }
+
+Deformer::Deformer(const Hierarchy& h, const DeformerOptions& options)
+    : Deformer(DeformerModel::create(std::shared_ptr<const Hierarchy>(&h, [](const Hierarchy*) {})), options) {}
 
 Deformer::~Deformer() = default;
 
-std::size_t Deformer::base_vertex_count() const { return h_.base_vertices.size(); }
+std::size_t Deformer::base_vertex_count() const { return model_->hierarchy().base_vertices.size(); }
 
-const std::vector<Index>& Deformer::region_of_vertex() const { return s_->cut.regions().region_of; }
+std::size_t Deformer::vertex_count() const { return model_->hierarchy().vertex_count(); }
 
-const CutState& Deformer::cut_state() const { return s_->cut.state(); }
+Deformer::Optimised& Deformer::optimised() {
+  if (!s_->optimised) s_->optimised = std::make_unique<Optimised>(*model_, options_);
+  return *s_->optimised;
+}
+
+const std::vector<Index>& Deformer::region_of_vertex() const {
+  static const std::vector<Index> none;
+  return s_->optimised ? s_->optimised->cut.regions().region_of : none;
+}
+
+const CutState& Deformer::cut_state() const {
+  if (s_->optimised) return s_->optimised->cut.state();
+  if (!s_->full_cut) {
+    s_->full_cut = std::make_unique<CutState>(model_->hierarchy());
+    for (NodeId k : recovery_order(model_->hierarchy())) s_->full_cut->recover(k);
+  }
+  return *s_->full_cut;
+}
 
 void Deformer::set_threshold(double threshold) {
-  if (std::isnan(threshold) || threshold < 0.0) throw std::invalid_argument("threshold must be ≥ 0 (or ∞)");
+  check_threshold(threshold);
   options_.threshold = threshold;
-  s_->cut.set_threshold(threshold);
+  if (threshold <= 0.0) {
+    s_->optimised.reset();  // direct recovery only: free the cut and the factorisations
+  } else if (s_->optimised) {
+    s_->optimised->cut.set_threshold(threshold);
+  }
+}
+
+std::size_t Deformer::memory_bytes() const {
+  std::size_t bytes = s_->workspace.xyzw.capacity() * sizeof(float);
+  if (s_->optimised) bytes += s_->optimised->positions.capacity() * sizeof(Vec3);
+  return bytes;
 }
 
 DeformResult Deformer::deform(const Pose& pose) {
-  validate_pose(pose, h_.base_vertices.size());
+  DeformResult r;
+  r.positions.resize(vertex_count());
+  r.stats = deform(pose, r.positions);
+  return r;
+}
+
+FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
+  const Hierarchy& h = model_->hierarchy();
+  validate_pose(pose, h.base_vertices.size());
+  if (out.size() != h.vertex_count())
+    throw std::invalid_argument("output has room for " + std::to_string(out.size()) + " vertices, the mesh has " +
+                                std::to_string(h.vertex_count()));
   const auto start = Clock::now();
-  State& s = *s_;
+  const DirectRecovery& recovery = model_->recovery();
   FrameStats stats;
   stats.threshold = options_.threshold;
 
+  if (options_.threshold <= 0.0) {
+    // T = 0: every node recovered, straight into the caller's buffer.
+    const auto t = Clock::now();
+    recovery.recover(pose.positions, s_->workspace, out, options_.threads);
+    stats.recover_ms = ms_since(t);
+    stats.cut_nodes = h.node_count();
+    stats.cut_vertices = h.vertex_count();
+    stats.total_ms = ms_since(start);
+    return stats;
+  }
+
+  Optimised& s = optimised();
   // 1. Move the cut where the last frame deformed acutely (thesis §3.3).
   auto t = Clock::now();
   if (options_.update_cut) {
-    const std::size_t nodes = h_.node_count();
+    const std::size_t nodes = h.node_count();
     const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(2048, nodes / 32);
     const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(128, nodes / 256);
     stats.cut_moves = s.cut.update(s.positions, eval, moves);
@@ -87,9 +146,13 @@ DeformResult Deformer::deform(const Pose& pose) {
   // 2. Direct recovery of the cut, parents first (thesis eq. 3.10).
   t = Clock::now();
   std::vector<Vec3>& x = s.positions;
-  for (Index i = 0; i < h_.base_vertices.size(); ++i) x[h_.base_vertices[i]] = pose.positions[i];
   const CutState& cut = s.cut.state();
-  s.recovery.recover(cut, x, options_.threads);
+  if (cut.recovered_count() > 0) {
+    // Writes every vertex; the regions below overwrite theirs.
+    recovery.recover(pose.positions, s_->workspace, x, options_.threads);
+  } else {
+    for (Index i = 0; i < h.base_vertices.size(); ++i) x[h.base_vertices[i]] = pose.positions[i];
+  }
   stats.recover_ms = ms_since(t);
 
   // 3. Rotations of the base vertices; only regions use them, direct
@@ -101,35 +164,38 @@ DeformResult Deformer::deform(const Pose& pose) {
 
   // 4. Regions: Dirichlet solves with rotated differential coordinates.
   t = Clock::now();
+  const auto& corners = model_->maps_corners();
   auto interpolated = [&](Index v) {
-    const auto& c = s.maps_corners[v];
-    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h_.maps_bary[v]).toRotationMatrix();
+    const auto& c = corners[v];
+    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_bary[v]).toRotationMatrix();
   };
   stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
+  const CotangentLaplacian& laplacian = model_->laplacian();
   for (int it = 0; it < options_.local_global_iterations; ++it) {
     // Local step: the best-fit rotation of each region vertex's 1-ring on the
     // current result; global step: solve again (factorisations are cached).
     auto refit = [&](Index v) {
       Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      for (Index k = s.laplacian.offsets[v]; k < s.laplacian.offsets[v + 1]; ++k) {
-        const Index j = s.laplacian.neighbors[k];
-        cov += s.laplacian.weights[k] * (h_.rest_positions[j] - h_.rest_positions[v]) * (x[j] - x[v]).transpose();
+      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+        const Index j = laplacian.neighbors[k];
+        cov += laplacian.weights[k] * (h.rest_positions[j] - h.rest_positions[v]) * (x[j] - x[v]).transpose();
       }
       return best_fit_rotation(cov);
     };
     stats.factorizations += s.solver.solve(regions, x, options_.threads, refit);
   }
   stats.regions_ms = ms_since(t);
+  std::copy(x.begin(), x.end(), out.begin());
 
   stats.cut_nodes = cut.recovered_count();
-  stats.cut_vertices = h_.base_vertices.size() + stats.cut_nodes;
+  stats.cut_vertices = h.base_vertices.size() + stats.cut_nodes;
   stats.regions = regions.count();
   for (std::size_t r = 0; r < regions.count(); ++r) stats.region_sizes.push_back(regions.size(r));
   std::sort(stats.region_sizes.rbegin(), stats.region_sizes.rend());
   stats.region_vertices = regions.vertices.size();
   stats.performance_estimate = regions.performance_estimate();
   stats.total_ms = ms_since(start);
-  return {x, std::move(stats)};
+  return stats;
 }
 
 }  // namespace filigree

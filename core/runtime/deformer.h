@@ -5,6 +5,7 @@
 
 #include <limits>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "runtime/base_rotations.h"
@@ -14,6 +15,7 @@ namespace filigree {
 
 struct Hierarchy;
 class CutState;
+class DeformerModel;
 
 struct DeformerOptions {
   // Performance threshold T on Σ (n_i² + c_i²) (thesis eq. 3.12): 0 = direct
@@ -57,29 +59,50 @@ struct DeformResult {
   FrameStats stats;
 };
 
+// One deformation stream (a session): the per-mesh data lives in a shared
+// DeformerModel; a Deformer holds only its own state (recovery scratch, and
+// for T > 0 the cut, the region factorisations and the last frame). Not
+// thread-safe: one deform() at a time per Deformer; many Deformers may share
+// a model across threads.
 class Deformer {
  public:
-  // `h` must outlive the deformer. Throws std::invalid_argument on bad options.
+  // Throws std::invalid_argument on bad options or a null model.
+  Deformer(std::shared_ptr<const DeformerModel> model, const DeformerOptions& options = {});
+  // A deformer with a model of its own; `h` must outlive it.
   Deformer(const Hierarchy& h, const DeformerOptions& options = {});
   ~Deformer();
   Deformer(const Deformer&) = delete;
   Deformer& operator=(const Deformer&) = delete;
 
-  // Throws PoseError (wrong length, NaN/Inf) without changing any state.
+  // Writes every original vertex's position, in original order, into `out`
+  // (the caller's buffer, reused frame after frame: no allocation in the
+  // steady state at T = 0). Throws PoseError (wrong length, NaN/Inf) or
+  // std::invalid_argument (out.size() is not the vertex count) without
+  // changing any state.
+  FrameStats deform(const Pose& pose, std::span<Vec3> out);
+  // The same into a new vector (tests, tools).
   DeformResult deform(const Pose& pose);
 
   // Changes T live; the cut adapts over the next frames (0 and ∞ take effect at once).
   void set_threshold(double threshold);
   const DeformerOptions& options() const { return options_; }
   std::size_t base_vertex_count() const;
-  // Per-vertex region id of the last frame (kNone for cut vertices), for overlays.
+  std::size_t vertex_count() const;
+  // Per-vertex region id of the last frame (kNone for cut vertices), for
+  // overlays; empty when every vertex is in the cut (T = 0).
   const std::vector<Index>& region_of_vertex() const;
   // The cut of the last frame (its alive faces are the cut mesh), for overlays.
   const CutState& cut_state() const;
+  const DeformerModel& model() const { return *model_; }
+  // Heap bytes this deformer holds of its own (not the shared model).
+  std::size_t memory_bytes() const;
 
  private:
   struct State;
-  const Hierarchy& h_;
+  struct Optimised;
+  Optimised& optimised();
+
+  std::shared_ptr<const DeformerModel> model_;
   DeformerOptions options_;
   std::unique_ptr<State> s_;
 };

@@ -2,99 +2,414 @@
 
 #include <algorithm>
 #include <barrier>
+#include <cmath>
+#include <cstring>
+#include <stdexcept>
+#include <string>
+#include <tuple>
 #include <thread>
 
-#include "geometry/ring_frame.h"
-#include "hierarchy/cut_state.h"
+#include "hierarchy/hierarchy.h"
+#include "mesh/vertex_order.h"
 
 namespace filigree {
 namespace {
-constexpr std::size_t kPrefetchDistance = 8;
-constexpr std::size_t kNodesPerThread = 100000;
-}  // namespace
 
-DirectRecovery::DirectRecovery(const Hierarchy& h) {
-  std::vector<std::size_t> level(h.node_count(), 0);
-  std::size_t depth = 0;
-  for (std::size_t k = h.node_count(); k-- > 0;) {
-    for (NodeId p : h.parents_of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
-    depth = std::max(depth, level[k] + 1);
+constexpr std::size_t W = DirectRecovery::kLanes;
+// The simplifier never removes a vertex of valence > 32; a hierarchy with a
+// larger ring is refused when the layout is built (kernel scratch is fixed).
+constexpr std::size_t kMaxRing = 64;
+constexpr std::uint8_t kOpenRing = 0x80;
+
+struct Block {
+  const std::uint32_t* slot;  // [ring slot][lane]
+  const float* weight;        // [ring slot][lane]
+  std::size_t ring;           // ring slots (the block's largest ring)
+  const float* offset;        // [xyz][lane]
+  const std::uint8_t* meta;   // [lane]: ring size | kOpenRing
+  const float* error;         // [xyz][lane]: rest error (see the header)
+  const Index* vertex;        // [lane]: original id, kPadding for padding lanes
+  std::size_t out;            // traversal slot of lane 0
+};
+
+// Where results go besides the workspace: the caller's buffer, in its order.
+struct Output {
+  double* xyz;                // 3 doubles per original vertex
+  double ox, oy, oz;          // the workspace's origin
+};
+constexpr Index kPaddingLane = 0xffffffffu;
+
+// Eight float lanes (GCC vector extensions): one lane per node of a block.
+// Compiled for AVX2 each is one register; for the baseline, two SSE ones.
+using F8 [[gnu::vector_size(32)]] = float;
+using I8 [[gnu::vector_size(32)]] = std::int32_t;
+using U8 [[gnu::vector_size(8)]] = std::uint8_t;
+using F4 [[gnu::vector_size(16)]] = float;
+using D4 [[gnu::vector_size(32)]] = double;
+static_assert(W == 8, "the kernel's vectors hold one block");
+
+[[gnu::always_inline]] inline F8 splat(float x) { return F8{} + x; }
+[[gnu::always_inline]] inline F8 load8(const float* p) {
+  F8 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+// Per lane; with -fno-math-errno (set for this file) it becomes one vsqrtps.
+[[gnu::always_inline]] inline F8 sqrt8(F8 v) {
+  F8 r;
+  for (std::size_t l = 0; l < W; ++l) r[l] = __builtin_sqrtf(v[l]);
+  return r;
+}
+[[gnu::always_inline]] inline F8 select(I8 mask, F8 a, F8 b) { return mask ? a : b; }
+
+// One block of W nodes, lane-parallel: the frame of geometry/ring_frame.cpp
+// written out (centre, mean radius, vector-area normal, tangent towards
+// ring[0]) and eq. 3.10. Padding ring slots repeat ring[0] with weight 0, so
+// the edge from a ring's last vertex to the first padding slot is the
+// closing edge and padding–padding edges vanish (a × a = 0); masks drop the
+// padding from the radius and the closing edge of open rings.
+[[gnu::always_inline]] inline void recover_block(const Block& b, float* __restrict p, const Output& o) {
+  F8 ax[kMaxRing], ay[kMaxRing], az[kMaxRing];
+  F8 cx{}, cy{}, cz{};
+  for (std::size_t i = 0; i < b.ring; ++i) {
+    // Gather eight xyzw rows and transpose them to x, y, z lanes: pairs of
+    // rows per register, then in-register shuffles (fewer instructions than
+    // inserting 24 scalars).
+    const std::uint32_t* slot = b.slot + i * W;
+    F4 r[W];
+    for (std::size_t l = 0; l < W; ++l) std::memcpy(&r[l], p + 4 * static_cast<std::size_t>(slot[l]), sizeof(F4));
+    const F8 a0 = __builtin_shufflevector(r[0], r[4], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a1 = __builtin_shufflevector(r[1], r[5], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a2 = __builtin_shufflevector(r[2], r[6], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a3 = __builtin_shufflevector(r[3], r[7], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 t0 = __builtin_shufflevector(a0, a1, 0, 8, 1, 9, 4, 12, 5, 13);    // x0 x1 y0 y1 | x4 x5 y4 y5
+    const F8 t1 = __builtin_shufflevector(a2, a3, 0, 8, 1, 9, 4, 12, 5, 13);    // x2 x3 y2 y3 | x6 x7 y6 y7
+    const F8 t2 = __builtin_shufflevector(a0, a1, 2, 10, 3, 11, 6, 14, 7, 15);  // z0 z1 w0 w1 | z4 z5 w4 w5
+    const F8 t3 = __builtin_shufflevector(a2, a3, 2, 10, 3, 11, 6, 14, 7, 15);
+    const F8 x = __builtin_shufflevector(t0, t1, 0, 1, 8, 9, 4, 5, 12, 13);
+    const F8 y = __builtin_shufflevector(t0, t1, 2, 3, 10, 11, 6, 7, 14, 15);
+    const F8 z = __builtin_shufflevector(t2, t3, 0, 1, 8, 9, 4, 5, 12, 13);
+    const F8 w = load8(b.weight + i * W);
+    ax[i] = x, ay[i] = y, az[i] = z;
+    cx += w * x, cy += w * y, cz += w * z;
   }
-  std::vector<std::vector<NodeId>> buckets(depth);
-  for (std::size_t k = 0; k < h.node_count(); ++k) buckets[level[k]].push_back(static_cast<NodeId>(k));
-  // Within a level, nodes go in Morton order of their rest position, so that
-  // consecutive nodes share ring vertices and their loads hit the cache.
-  Vec3 lo = h.rest_positions[0], hi = lo;
-  for (const Vec3& p : h.rest_positions) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
-  const Vec3 scale = (hi - lo).cwiseMax(1e-300).cwiseInverse() * 1023.0;
-  auto morton = [&](NodeId k) {
-    const Vec3 q = (h.rest_positions[h.node_vertex[k]] - lo).cwiseProduct(scale);
-    std::uint64_t code = 0;
-    for (int bit = 9; bit >= 0; --bit)
-      for (int axis = 0; axis < 3; ++axis) code = code << 1 | ((static_cast<std::uint64_t>(q[axis]) >> bit) & 1u);
-    return code;
-  };
-  for (auto& bucket : buckets) {
-    std::vector<std::pair<std::uint64_t, NodeId>> keyed;
-    for (NodeId k : bucket) keyed.emplace_back(morton(k), k);
-    std::sort(keyed.begin(), keyed.end());
-    for (std::size_t i = 0; i < keyed.size(); ++i) bucket[i] = keyed[i].second;
-    for (NodeId k : bucket) {
-      node_.push_back(k);
-      vertex_.push_back(h.node_vertex[k]);
-      closed_.push_back(h.node_closed[k]);
-      offset_.push_back(h.node_offset[k]);
-      weights_.insert(weights_.end(), h.weights(k).begin(), h.weights(k).end());
-    }
-    level_offsets_.push_back(static_cast<Index>(node_.size()));
+  U8 meta;
+  std::memcpy(&meta, b.meta, sizeof meta);
+  const F8 size = __builtin_convertvector(__builtin_convertvector(meta & 0x7f, I8), F8);
+  const F8 edges = size - __builtin_convertvector(__builtin_convertvector(meta >> 7, I8), F8);  // open rings lose the closing edge
+  for (std::size_t i = 0; i < b.ring; ++i) ax[i] -= cx, ay[i] -= cy, az[i] -= cz;
+  F8 nx{}, ny{}, nz{}, radius{};
+  const F8 zero{}, one = splat(1.0f);
+  for (std::size_t i = 0; i < b.ring; ++i) {
+    const std::size_t j = i + 1 == b.ring ? 0 : i + 1;
+    const F8 fi = splat(static_cast<float>(i));
+    radius += select(fi < size, sqrt8(ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i]), zero);
+    const F8 e = select(fi < edges, one, zero);
+    nx += e * (ay[i] * az[j] - az[i] * ay[j]);
+    ny += e * (az[i] * ax[j] - ax[i] * az[j]);
+    nz += e * (ax[i] * ay[j] - ay[i] * ax[j]);
   }
-  // Private order: base vertices first, then node i's vertex at base + i.
-  base_vertices_ = h.base_vertices;
-  std::vector<Index> private_index(h.vertex_count(), kNone);
-  for (Index i = 0; i < base_vertices_.size(); ++i) private_index[base_vertices_[i]] = i;
-  for (Index i = 0; i < node_.size(); ++i) private_index[vertex_[i]] = static_cast<Index>(base_vertices_.size() + i);
-  for (NodeId k : node_) {
-    for (Index v : h.ring(k)) ring_.push_back(private_index[v]);
-    ring_offsets_.push_back(static_cast<Index>(ring_.size()));
+  F8 s = radius / size;
+  s = select(s > 1e-30f, s, one);  // a degenerate ring keeps scale 1, as ring_frame does
+  const F8 nn = sqrt8(nx * nx + ny * ny + nz * nz);
+  const I8 has_normal = nn > 1e-30f;
+  const F8 inv_n = select(has_normal, one / nn, zero);
+  const F8 n0 = nx * inv_n, n1 = ny * inv_n, n2 = select(has_normal, nz * inv_n, one);
+  // Tangent: ring[0]'s direction in the tangent plane; when ring[0] lies on
+  // the normal axis, X or Y projected instead (deterministic, as ring_frame).
+  const F8 d0 = n0 * ax[0] + n1 * ay[0] + n2 * az[0];
+  F8 t0 = ax[0] - n0 * d0, t1 = ay[0] - n1 * d0, t2 = az[0] - n2 * d0;
+  const F8 tiny = 1e-6f * s;
+  const I8 on_axis = t0 * t0 + t1 * t1 + t2 * t2 <= tiny * tiny;
+  const F8 f0 = select(n0 < 0.9f && n0 > -0.9f, one, zero), f1 = one - f0;
+  const F8 df = n0 * f0 + n1 * f1;
+  t0 = select(on_axis, f0 - n0 * df, t0);
+  t1 = select(on_axis, f1 - n1 * df, t1);
+  t2 = select(on_axis, zero - n2 * df, t2);
+  const F8 inv_t = one / sqrt8(t0 * t0 + t1 * t1 + t2 * t2);
+  t0 *= inv_t, t1 *= inv_t, t2 *= inv_t;
+  const F8 b0 = n1 * t2 - n2 * t1, b1 = n2 * t0 - n0 * t2, b2 = n0 * t1 - n1 * t0;
+  const F8 o0 = load8(b.offset) * s, o1 = load8(b.offset + W) * s, o2 = load8(b.offset + 2 * W) * s;
+  const F8 px = cx + t0 * o0 + b0 * o1 + n0 * o2;
+  const F8 py = cy + t1 * o0 + b1 * o1 + n1 * o2;
+  const F8 pz = cz + t2 * o0 + b2 * o1 + n2 * o2;
+  // The workspace rows of the eight lanes are consecutive: transpose back to
+  // xyz0 rows and store them whole.
+  const F8 zero8{};
+  const F8 u0 = __builtin_shufflevector(px, py, 0, 8, 1, 9, 4, 12, 5, 13);      // x0 y0 x1 y1 | x4 y4 x5 y5
+  const F8 u1 = __builtin_shufflevector(px, py, 2, 10, 3, 11, 6, 14, 7, 15);    // x2 y2 x3 y3 | x6 y6 x7 y7
+  const F8 u2 = __builtin_shufflevector(pz, zero8, 0, 8, 1, 9, 4, 12, 5, 13);   // z0 0 z1 0 | z4 0 z5 0
+  const F8 u3 = __builtin_shufflevector(pz, zero8, 2, 10, 3, 11, 6, 14, 7, 15);
+  const F8 r04 = __builtin_shufflevector(u0, u2, 0, 1, 8, 9, 4, 5, 12, 13);     // row 0 | row 4
+  const F8 r15 = __builtin_shufflevector(u0, u2, 2, 3, 10, 11, 6, 7, 14, 15);
+  const F8 r26 = __builtin_shufflevector(u1, u3, 0, 1, 8, 9, 4, 5, 12, 13);
+  const F8 r37 = __builtin_shufflevector(u1, u3, 2, 3, 10, 11, 6, 7, 14, 15);
+  const F8 rows[4] = {__builtin_shufflevector(r04, r15, 0, 1, 2, 3, 8, 9, 10, 11), __builtin_shufflevector(r26, r37, 0, 1, 2, 3, 8, 9, 10, 11),
+                      __builtin_shufflevector(r04, r15, 4, 5, 6, 7, 12, 13, 14, 15), __builtin_shufflevector(r26, r37, 4, 5, 6, 7, 12, 13, 14, 15)};
+  std::memcpy(p + 4 * b.out, rows, sizeof rows);
+
+  // The caller's doubles: origin + float result + the rest error. Written
+  // once, straight into the caller's order: a scattered store does not stall
+  // the way a scattered load in a later pass would.
+  const F8 ex = load8(b.error), ey = load8(b.error + W), ez = load8(b.error + 2 * W);
+  const D4 dx[2] = {__builtin_convertvector(__builtin_shufflevector(px, px, 0, 1, 2, 3), D4) + o.ox +
+                        __builtin_convertvector(__builtin_shufflevector(ex, ex, 0, 1, 2, 3), D4),
+                    __builtin_convertvector(__builtin_shufflevector(px, px, 4, 5, 6, 7), D4) + o.ox +
+                        __builtin_convertvector(__builtin_shufflevector(ex, ex, 4, 5, 6, 7), D4)};
+  const D4 dy[2] = {__builtin_convertvector(__builtin_shufflevector(py, py, 0, 1, 2, 3), D4) + o.oy +
+                        __builtin_convertvector(__builtin_shufflevector(ey, ey, 0, 1, 2, 3), D4),
+                    __builtin_convertvector(__builtin_shufflevector(py, py, 4, 5, 6, 7), D4) + o.oy +
+                        __builtin_convertvector(__builtin_shufflevector(ey, ey, 4, 5, 6, 7), D4)};
+  const D4 dz[2] = {__builtin_convertvector(__builtin_shufflevector(pz, pz, 0, 1, 2, 3), D4) + o.oz +
+                        __builtin_convertvector(__builtin_shufflevector(ez, ez, 0, 1, 2, 3), D4),
+                    __builtin_convertvector(__builtin_shufflevector(pz, pz, 4, 5, 6, 7), D4) + o.oz +
+                        __builtin_convertvector(__builtin_shufflevector(ez, ez, 4, 5, 6, 7), D4)};
+  for (std::size_t l = 0; l < W; ++l) {
+    if (b.vertex[l] == kPaddingLane) continue;
+    double* d = o.xyz + 3 * static_cast<std::size_t>(b.vertex[l]);
+    d[0] = dx[l / 4][l % 4], d[1] = dy[l / 4][l % 4], d[2] = dz[l / 4][l % 4];
   }
-  work_.resize(h.vertex_count());
 }
 
-void DirectRecovery::recover(const CutState& cut, std::vector<Vec3>& x, int threads) const {
-  if (cut.recovered_count() == 0) return;  // whole-mesh optimisation: nothing to place
-  // A barrier per level costs tens of microseconds on a busy machine: below
-  // ~100k nodes per thread one thread is faster.
-  const int t = std::clamp(static_cast<int>(node_.size() / kNodesPerThread), 1, std::max(1, threads));
-  const std::size_t m = base_vertices_.size();
-  for (std::size_t i = 0; i < m; ++i) work_[i] = x[base_vertices_[i]];
-  // One team for all levels, a barrier between levels: spawning threads per
-  // level would cost more than a small level's work.
-  std::barrier sync(t);
-  auto work = [&](int id) {
-    for (std::size_t l = 0; l + 1 < level_offsets_.size(); ++l) {
-      const std::size_t begin = level_offsets_[l], size = level_offsets_[l + 1] - begin;
-      const std::size_t from = begin + size * id / t, to = begin + size * (id + 1) / t;
-      for (std::size_t i = from; i < to; ++i) {
-        // Ring positions are scattered: prefetch a few nodes ahead so their
-        // loads overlap instead of stalling one by one.
-        const std::size_t ahead = i + kPrefetchDistance;
-        if (ahead < to && cut.recovered(node_[ahead]))
-          for (Index j = ring_offsets_[ahead]; j < ring_offsets_[ahead + 1]; ++j) __builtin_prefetch(&work_[ring_[j]]);
-        if (!cut.recovered(node_[i])) continue;
-        const std::span<const Index> ring(ring_.data() + ring_offsets_[i], ring_offsets_[i + 1] - ring_offsets_[i]);
-        const std::span<const double> w(weights_.data() + ring_offsets_[i], ring.size());
-        work_[m + i] = ring_frame(ring, w, work_, closed_[i] != 0).from_local(offset_[i]);
+struct Layout {
+  const std::uint32_t* block_ring;
+  const std::uint32_t* ring_slot;
+  const float* ring_weight;
+  const float* offset;
+  const std::uint8_t* lane_ring;
+  const float* rest_error;
+  const Index* vertex_of_slot;
+  std::size_t base;
+};
+
+[[gnu::always_inline]] inline void recover_blocks(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& out) {
+  const Output o = out;  // a local copy: stores through o.xyz cannot alias it
+  for (std::size_t k = first; k < end; ++k) {
+    const std::size_t r = t.block_ring[k] * W;
+    const Block b{t.ring_slot + r,         t.ring_weight + r,       t.block_ring[k + 1] - t.block_ring[k],
+                  t.offset + 3 * W * k,    t.lane_ring + W * k,     t.rest_error + 3 * W * k,
+                  t.vertex_of_slot + W * k, t.base + W * k};
+    recover_block(b, p, o);
+  }
+}
+
+// The same code compiled for AVX2 (8 float lanes, hardware gathers) where the
+// processor has it, chosen at run time so one binary runs everywhere.
+#if defined(__x86_64__) && defined(__GNUC__)
+[[gnu::target("avx2")]] void recover_blocks_avx2(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) {
+  recover_blocks(t, first, end, p, o);
+}
+void recover_blocks_baseline(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) {
+  recover_blocks(t, first, end, p, o);
+}
+using BlocksFn = void (*)(const Layout&, std::size_t, std::size_t, float*, const Output&);
+BlocksFn pick_blocks_fn() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") ? recover_blocks_avx2 : recover_blocks_baseline;
+}
+const BlocksFn kRecoverBlocks = pick_blocks_fn();
+#else
+void kRecoverBlocks(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) { recover_blocks(t, first, end, p, o); }
+#endif
+
+
+}  // namespace
+
+DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
+    : base_count_(h.base_vertices.size()), node_count_(h.node_count()), base_vertices_(h.base_vertices) {
+  const std::size_t n_nodes = h.node_count();
+  // Level = 1 + the deepest parent's level. Parents have larger ids (they
+  // were removed later), so one descending pass sees them first.
+  std::vector<std::uint32_t> level(n_nodes, 0);
+  for (std::size_t k = n_nodes; k-- > 0;)
+    for (NodeId p : h.parents_of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
+
+  // Tiles: runs of kTileVertices consecutive vertices along a Morton curve
+  // (for the service's sessions, whose vertex order is that curve, runs of
+  // ids). A tile's nodes run together, so their ring reads and output writes
+  // stay within a cache-sized window instead of every level sweeping the
+  // whole mesh. Partitions (for threads) are contiguous runs of tiles.
+  const std::vector<Index> curve = locality_order(h.rest_positions);
+  std::vector<Index> rank(h.vertex_count());
+  for (Index i = 0; i < curve.size(); ++i) rank[curve[i]] = i;
+  const std::size_t tiles = h.vertex_count() / kTileVertices + 1;
+  partitions_ = partitions ? partitions
+                           : std::clamp<std::size_t>(n_nodes / kNodesPerThread, 1,
+                                                     std::min<std::size_t>(kMaxPartitions, std::max(1u, std::thread::hardware_concurrency())));
+  // A node runs in its own partition, in the first phase after every parent
+  // of another partition (phases are separated by a barrier); within a
+  // partition and phase, by (tile, level), its tile raised to its parents'
+  // there so that the order stays valid.
+  std::vector<std::uint32_t> tile(n_nodes), part(n_nodes), phase(n_nodes, 0);
+  for (std::size_t k = n_nodes; k-- > 0;) {
+    tile[k] = static_cast<std::uint32_t>(rank[h.node_vertex[k]] / kTileVertices);
+    part[k] = static_cast<std::uint32_t>(tile[k] * partitions_ / tiles);
+    for (NodeId p : h.parents_of(static_cast<NodeId>(k))) phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u));
+    for (NodeId p : h.parents_of(static_cast<NodeId>(k)))
+      if (part[p] == part[k] && phase[p] == phase[k]) tile[k] = std::max(tile[k], tile[p]);
+  }
+  const std::size_t phases = n_nodes ? *std::max_element(phase.begin(), phase.end()) + 1 : 1;
+  std::vector<NodeId> sorted(n_nodes);
+  for (std::size_t k = 0; k < n_nodes; ++k) sorted[k] = static_cast<NodeId>(k);
+  auto key = [&](NodeId k) { return std::tuple(phase[k], part[k], tile[k], level[k], rank[h.node_vertex[k]]); };
+  std::sort(sorted.begin(), sorted.end(), [&](NodeId a, NodeId b) { return key(a) < key(b); });
+
+  // Blocks of W nodes of one (phase, partition, tile, level): never dependent
+  // on each other. Segment phase·partitions + partition is a run of blocks.
+  std::vector<NodeId> order;  // nodes in traversal order, kNone for padding lanes
+  order.reserve(n_nodes + n_nodes / 4);
+  segment_blocks_.assign(1, 0);
+  auto segment_of = [&](NodeId k) { return phase[k] * partitions_ + part[k]; };
+  for (std::size_t i = 0; i < n_nodes; ++i) {
+    const NodeId k = sorted[i];
+    order.push_back(k);
+    const bool last = i + 1 == n_nodes;
+    const NodeId next = last ? k : sorted[i + 1];
+    if (last || segment_of(next) != segment_of(k) || tile[next] != tile[k] || level[next] != level[k])
+      while (order.size() % W) order.push_back(kNone);
+    if (last || segment_of(next) != segment_of(k))
+      while (segment_blocks_.size() <= segment_of(k) + 1) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
+  }
+  while (segment_blocks_.size() < phases * partitions_ + 1) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
+  phases_ = phases;
+
+  slot_of_vertex_.assign(h.vertex_count(), 0);
+  for (Index i = 0; i < base_count_; ++i) slot_of_vertex_[h.base_vertices[i]] = i;
+  vertex_of_slot_.assign(order.size(), kPadding);
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    if (order[i] == kNone) continue;
+    vertex_of_slot_[i] = h.node_vertex[order[i]];
+    slot_of_vertex_[h.node_vertex[order[i]]] = static_cast<Index>(base_count_ + i);
+  }
+
+  const std::size_t blocks = order.size() / W;
+  block_ring_.assign(1, 0);
+  offset_.assign(3 * W * blocks, 0.0f);
+  lane_ring_.assign(W * blocks, 0);
+  for (std::size_t blk = 0; blk < blocks; ++blk) {
+    std::size_t ring = 1;
+    for (std::size_t l = 0; l < W; ++l)
+      if (const NodeId k = order[blk * W + l]; k != kNone) ring = std::max(ring, h.ring(k).size());
+    if (ring > kMaxRing)
+      throw std::invalid_argument("hierarchy has a ring of " + std::to_string(ring) + " vertices; the runtime supports at most " +
+                                  std::to_string(kMaxRing));
+    const std::size_t first = ring_slot_.size();
+    // Padding lanes read slot 0 with weight 1: a finite result nobody reads.
+    ring_slot_.resize(first + ring * W, 0);
+    ring_weight_.resize(first + ring * W, 0.0f);
+    for (std::size_t l = 0; l < W; ++l) {
+      const NodeId k = order[blk * W + l];
+      if (k == kNone) {
+        ring_weight_[first + l] = 1.0f;
+        lane_ring_[blk * W + l] = 1;
+        continue;
       }
+      const auto r = h.ring(k);
+      const auto w = h.weights(k);
+      for (std::size_t i = 0; i < ring; ++i) {
+        const bool real = i < r.size();
+        ring_slot_[first + i * W + l] = slot_of_vertex_[r[real ? i : 0]];
+        ring_weight_[first + i * W + l] = real ? static_cast<float>(w[i]) : 0.0f;
+      }
+      for (int c = 0; c < 3; ++c) offset_[(3 * blk + c) * W + l] = static_cast<float>(h.node_offset[k][c]);
+      lane_ring_[blk * W + l] = static_cast<std::uint8_t>(r.size() | (h.node_closed[k] ? 0 : kOpenRing));
+    }
+    block_ring_.push_back(static_cast<std::uint32_t>(ring_slot_.size() / W));
+  }
+
+  std::vector<Vec3> base_rest(base_count_);
+  Vec3 centroid = Vec3::Zero();
+  for (std::size_t i = 0; i < base_count_; ++i) centroid += base_rest[i] = h.rest_positions[h.base_vertices[i]];
+  if (base_count_ > 0) centroid /= static_cast<double>(base_count_);
+  rest_origin_ = {centroid.x(), centroid.y(), centroid.z()};
+  origin_step_ = std::max(bounding_box_diagonal(h.rest_positions), 1e-300);
+  // The float error of the rest pose, kept per node (see the header).
+  rest_error_.assign(offset_.size(), 0.0f);
+  RecoveryWorkspace ws;
+  std::vector<Vec3> recovered(h.vertex_count());
+  recover(base_rest, ws, recovered, 1);
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    if (order[i] == kNone) continue;
+    const std::size_t blk = i / W, l = i % W;
+    const Index v = h.node_vertex[order[i]];
+    for (int c = 0; c < 3; ++c) rest_error_[(3 * blk + c) * W + l] = static_cast<float>(h.rest_positions[v][c] - recovered[v][c]);
+  }
+}
+
+std::array<double, 3> DirectRecovery::origin_for(std::span<const Vec3> base) const {
+  // The rest base centroid, unless the pose's centroid is a mesh size or more
+  // away: then moved by whole steps, so that small motions keep exactly the
+  // rest's floats where the pose does not move.
+  Vec3 centroid = Vec3::Zero();
+  for (const Vec3& q : base) centroid += q;
+  if (!base.empty()) centroid /= static_cast<double>(base.size());
+  std::array<double, 3> origin = rest_origin_;
+  for (int c = 0; c < 3; ++c) origin[c] += origin_step_ * std::round((centroid[c] - rest_origin_[c]) / origin_step_);
+  return origin;
+}
+
+void DirectRecovery::recover(std::span<const Vec3> base, RecoveryWorkspace& ws, std::span<Vec3> out, int threads) const {
+  if (base.size() != base_count_)
+    throw std::invalid_argument("direct recovery needs " + std::to_string(base_count_) + " base positions, got " +
+                                std::to_string(base.size()));
+  if (out.size() != slot_of_vertex_.size())
+    throw std::invalid_argument("output has room for " + std::to_string(out.size()) + " vertices, the mesh has " +
+                                std::to_string(slot_of_vertex_.size()));
+  ws.xyzw.resize(4 * (base_count_ + vertex_of_slot_.size()));
+  float* p = ws.xyzw.data();
+  ws.origin = origin_for(base);
+  for (std::size_t i = 0; i < base_count_; ++i) {
+    out[base_vertices_[i]] = base[i];
+    for (int c = 0; c < 3; ++c) p[4 * i + c] = static_cast<float>(base[i][c] - ws.origin[c]);
+  }
+
+  const Layout layout{block_ring_.data(), ring_slot_.data(),  ring_weight_.data(),    offset_.data(),
+                      lane_ring_.data(),  rest_error_.data(), vertex_of_slot_.data(), base_count_};
+  const Output o{out.data()->data(), ws.origin[0], ws.origin[1], ws.origin[2]};
+  const std::size_t t = std::min<std::size_t>(std::max(threads, 1), partitions_);
+  if (t == 1) {
+    kRecoverBlocks(layout, 0, segment_blocks_.back(), p, o);
+    return;
+  }
+  // Thread `id` runs its partitions of every phase; a barrier between phases.
+  std::barrier sync(static_cast<std::ptrdiff_t>(t));
+  auto work = [&](std::size_t id) {
+    const std::size_t first = partitions_ * id / t, last = partitions_ * (id + 1) / t;
+    for (std::size_t ph = 0; ph < phases_; ++ph) {
+      kRecoverBlocks(layout, segment_blocks_[ph * partitions_ + first], segment_blocks_[ph * partitions_ + last], p, o);
       sync.arrive_and_wait();
     }
-    // Back to the caller's order.
-    const std::size_t n = node_.size();
-    for (std::size_t i = n * id / t; i < n * (id + 1) / t; ++i)
-      if (cut.recovered(node_[i])) x[vertex_[i]] = work_[m + i];
   };
   std::vector<std::jthread> team;
-  for (int id = 1; id < t; ++id) team.emplace_back(work, id);
+  for (std::size_t id = 1; id < t; ++id) team.emplace_back(work, id);
   work(0);
+}
+
+std::size_t DirectRecovery::critical_blocks() const {
+  std::size_t blocks = 0;
+  for (std::size_t ph = 0; ph < phases_; ++ph) {
+    std::size_t busiest = 0;
+    for (std::size_t q = 0; q < partitions_; ++q)
+      busiest = std::max<std::size_t>(busiest, segment_blocks_[ph * partitions_ + q + 1] - segment_blocks_[ph * partitions_ + q]);
+    blocks += busiest;
+  }
+  return blocks;
+}
+
+std::size_t DirectRecovery::bytes_per_frame() const {
+  const std::size_t slots = base_count_ + vertex_of_slot_.size();
+  return ring_slot_.size() * sizeof(std::uint32_t) + ring_weight_.size() * sizeof(float) + offset_.size() * sizeof(float) +
+         rest_error_.size() * sizeof(float) + vertex_of_slot_.size() * sizeof(Index) + lane_ring_.size() +
+         block_ring_.size() * sizeof(std::uint32_t)  // the layout, read once
+         + slots * 4 * sizeof(float)                 // every slot written once
+         + slot_of_vertex_.size() * sizeof(Vec3);    // every result written once
+}
+
+std::size_t DirectRecovery::memory_bytes() const {
+  return base_vertices_.capacity() * sizeof(Index) + slot_of_vertex_.capacity() * sizeof(Index) +
+         vertex_of_slot_.capacity() * sizeof(Index) +
+         segment_blocks_.capacity() * 4 + block_ring_.capacity() * 4 + ring_slot_.capacity() * 4 + ring_weight_.capacity() * 4 +
+         offset_.capacity() * 4 + lane_ring_.capacity() + rest_error_.capacity() * 4;
 }
 
 }  // namespace filigree

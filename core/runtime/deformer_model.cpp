@@ -1,0 +1,55 @@
+#include "runtime/deformer_model.h"
+
+#include "geometry/cotangent_laplacian.h"
+#include "hierarchy/hierarchy.h"
+#include "runtime/direct_recovery.h"
+
+namespace filigree {
+
+struct DeformerModel::Optimisation {
+  CotangentLaplacian laplacian;
+  std::vector<std::array<Index, 3>> maps_corners;
+};
+
+std::shared_ptr<const DeformerModel> DeformerModel::create(std::shared_ptr<const Hierarchy> h) {
+  if (!h) throw std::invalid_argument("a deformer model needs a hierarchy");
+  return std::shared_ptr<const DeformerModel>(new DeformerModel(std::move(h)));
+}
+
+DeformerModel::DeformerModel(std::shared_ptr<const Hierarchy> h)
+    : h_(std::move(h)), recovery_(std::make_unique<const DirectRecovery>(*h_)) {}
+
+DeformerModel::~DeformerModel() = default;
+
+const DeformerModel::Optimisation& DeformerModel::optimisation() const {
+  std::call_once(optimisation_once_, [this] {
+    const Hierarchy& h = *h_;
+    auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.original_mesh()), {}});
+    std::vector<Index> base_local(h.vertex_count(), kNone);
+    for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
+    o->maps_corners.resize(h.vertex_count());
+    for (Index v = 0; v < h.vertex_count(); ++v) {
+      const Triangle& t = h.faces[h.base_faces[h.maps_face[v]]];
+      o->maps_corners[v] = {base_local[t[0]], base_local[t[1]], base_local[t[2]]};
+    }
+    optimisation_ = std::move(o);
+    optimisation_built_.store(true, std::memory_order_release);
+  });
+  return *optimisation_;
+}
+
+const CotangentLaplacian& DeformerModel::laplacian() const { return optimisation().laplacian; }
+
+const std::vector<std::array<Index, 3>>& DeformerModel::maps_corners() const { return optimisation().maps_corners; }
+
+std::size_t DeformerModel::memory_bytes() const {
+  std::size_t bytes = recovery_->memory_bytes();
+  if (optimisation_built_.load(std::memory_order_acquire)) {
+    const Optimisation& o = *optimisation_;
+    bytes += o.laplacian.offsets.capacity() * sizeof(Index) + o.laplacian.neighbors.capacity() * sizeof(Index) +
+             o.laplacian.weights.capacity() * sizeof(double) + o.maps_corners.capacity() * sizeof(o.maps_corners[0]);
+  }
+  return bytes;
+}
+
+}  // namespace filigree

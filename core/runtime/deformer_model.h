@@ -1,0 +1,55 @@
+#pragma once
+// What the runtime derives once from a hierarchy (DESIGN §3.1): the traversal
+// layout of direct recovery and, when a deformer first optimises regions
+// (T > 0), the cotangent Laplacian and the MAPS corners. Immutable once
+// built (the lazy parts are built once, thread-safely) and shared read-only by
+// every Deformer and every thread of that mesh; a Deformer owns only its
+// session's state.
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "mesh/tri_mesh.h"
+
+namespace filigree {
+
+struct Hierarchy;
+struct CotangentLaplacian;
+class DirectRecovery;
+
+class DeformerModel {
+ public:
+  // The model keeps `h` alive. Throws std::invalid_argument if the hierarchy
+  // cannot be laid out (a ring larger than the runtime supports).
+  static std::shared_ptr<const DeformerModel> create(std::shared_ptr<const Hierarchy> h);
+  ~DeformerModel();
+  DeformerModel(const DeformerModel&) = delete;
+  DeformerModel& operator=(const DeformerModel&) = delete;
+
+  const Hierarchy& hierarchy() const { return *h_; }
+  const std::shared_ptr<const Hierarchy>& shared_hierarchy() const { return h_; }
+  const DirectRecovery& recovery() const { return *recovery_; }
+  // Region optimisation's data: built by the first caller, then shared.
+  const CotangentLaplacian& laplacian() const;
+  // Per vertex: the base-order corners of its MAPS face (thesis §3.1.2).
+  const std::vector<std::array<Index, 3>>& maps_corners() const;
+  // Heap bytes held now, excluding the hierarchy (lazy parts once built).
+  std::size_t memory_bytes() const;
+
+ private:
+  explicit DeformerModel(std::shared_ptr<const Hierarchy> h);
+  struct Optimisation;
+  const Optimisation& optimisation() const;
+
+  std::shared_ptr<const Hierarchy> h_;
+  std::unique_ptr<const DirectRecovery> recovery_;
+  mutable std::once_flag optimisation_once_;
+  mutable std::unique_ptr<const Optimisation> optimisation_;
+  mutable std::atomic<bool> optimisation_built_{false};  // lets memory_bytes() look without building
+};
+
+}  // namespace filigree
