@@ -56,25 +56,13 @@ std::uint32_t automatic_bits(const std::vector<Vec3>& deltas, double diagonal) {
 
 }  // namespace
 
-Session::Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy, Journal journal)
-    : hierarchy_(std::move(hierarchy)), record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
-  const Hierarchy& h = *hierarchy_;
-  const TriMesh base = h.base_mesh();
-  for (const Vec3& p : base.positions)
-    for (int k = 0; k < 3; ++k) base_.add_positions(static_cast<float>(p[k]));
-  for (const Triangle& f : base.faces)
-    for (Index v : f) base_.add_faces(v);
-  for (Index v : h.base_vertices) base_.add_original_ids(v);
-  rest_.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
-  for (const Vec3& p : h.rest_positions)
-    for (int k = 0; k < 3; ++k) rest_.add_positions(static_cast<float>(p[k]));
-  for (FaceId f = 0; f < h.original_face_count; ++f)
-    for (Index v : h.faces[f]) rest_.add_faces(v);
-  for (Index v : record_.uploaded_ids) rest_.add_uploaded_ids(v);
-  if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base_.positions().begin(), base_.positions().end());
-  rest_diagonal_ = bounding_box_diagonal(h.rest_positions);
+Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, Journal journal)
+    : assets_(std::move(assets)), record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
+  const Hierarchy& h = assets_->hierarchy();
+  const v1::BaseMesh& base = assets_->base;
+  if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base.positions().begin(), base.positions().end());
 
-  deformer_ = std::make_unique<Deformer>(h, deformer_options(record_.options));
+  deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
   handle_solver_ = std::make_unique<HandleSolver>(h.base_mesh());
   // The current frame exists from the start: the rest mesh, or after a
   // restart the latest pose, under the version it had.
@@ -102,7 +90,7 @@ void Session::touch() { last_activity_ = Clock::now(); }
 
 void Session::submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
                      std::span<const std::uint32_t> indices, std::span<const float> positions) {
-  const std::size_t m = hierarchy_->base_vertices.size();
+  const std::size_t m = assets_->hierarchy().base_vertices.size();
   const std::size_t count = indices.empty() ? m : indices.size();
   if (positions.size() != 3 * count)
     throw PoseError("pose has " + std::to_string(positions.size()) + " coordinates for " + std::to_string(count) +
@@ -168,9 +156,9 @@ void Session::driver_left(std::uint64_t driver) {
 
 std::size_t Session::set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles) {
   for (const auto& [v, target] : handles) {
-    if (v >= hierarchy_->vertex_count())
+    if (v >= assets_->hierarchy().vertex_count())
       throw PoseError("handle vertex " + std::to_string(v) + " is out of range: the mesh has " +
-                      std::to_string(hierarchy_->vertex_count()) + " vertices");
+                      std::to_string(assets_->hierarchy().vertex_count()) + " vertices");
     if (!target.allFinite()) throw PoseError("handle target of vertex " + std::to_string(v) + " is not finite");
   }
   std::size_t count = 0;
@@ -266,7 +254,7 @@ void Session::run() {
 }
 
 void Session::compute_once(bool keep_version) {
-  const Hierarchy& h = *hierarchy_;
+  const Hierarchy& h = assets_->hierarchy();
   const std::size_t m = h.base_vertices.size();
   // Buffers reused frame to frame; only this session's worker computes.
   Pose& pose = scratch_pose_;
@@ -342,15 +330,20 @@ void Session::compute_once(bool keep_version) {
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
     bool at_rest = true;
     for (std::size_t i = 0; i < m && at_rest; ++i)
-      for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == base_.positions(static_cast<int>(3 * i + k));
-    // Deform anyway so the cut, regions and stats (overlays) follow this frame.
-    DeformResult r = deformer_->deform(pose);
-    if (at_rest) r.positions = h.rest_positions;
-    const auto t = Clock::now();
-    std::vector<Vec3>& deltas = scratch_deltas_;
+      for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
+    // Deform anyway so the cut, regions and stats (overlays) follow this
+    // frame; the deformer writes straight into the frame buffer, which then
+    // becomes the deltas in place.
+    std::vector<Vec3>& deltas = frame_;
     deltas.resize(h.vertex_count());
-    for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] = r.positions[i] - h.rest_positions[i];
-    const EncodedDeltas enc = encode_deltas(deltas, bits ? bits : automatic_bits(deltas, rest_diagonal_));
+    const FrameStats stats = deformer_->deform(pose, deltas);
+    const auto t = Clock::now();
+    if (at_rest) {
+      std::fill(deltas.begin(), deltas.end(), Vec3::Zero());
+    } else {
+      for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] -= h.rest_positions[i];
+    }
+    const EncodedDeltas enc = encode_deltas(deltas, bits ? bits : automatic_bits(deltas, assets_->rest_diagonal));
     const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
 
     auto published = std::make_shared<PublishedFrame>();
@@ -362,7 +355,7 @@ void Session::compute_once(bool keep_version) {
     f.set_delta_range(enc.range);
     f.set_max_error(enc.max_error);
     for (auto& [name, change] : changes) *f.add_changes() = change;
-    fill_stats(r.stats, encode_ms, enc.bytes.size(), *f.mutable_stats());
+    fill_stats(stats, encode_ms, enc.bytes.size(), *f.mutable_stats());
     published->pose_of_driver = std::move(pose_of_driver);
 
     // Overlays only while a viewer asks for them: they are O(n) per frame.
@@ -440,8 +433,9 @@ v1::SessionInfo Session::info() const {
   std::lock_guard lock(mutex_);
   info.set_session_id(record_.id);
   info.set_mesh_hash(record_.hierarchy_key.substr(0, 16));
-  *info.mutable_base() = base_;
-  *info.mutable_rest() = rest_;
+  *info.mutable_base() = assets_->base;
+  *info.mutable_rest() = assets_->rest;
+  info.mutable_rest()->mutable_uploaded_ids()->Add(record_.uploaded_ids.begin(), record_.uploaded_ids.end());
   *info.mutable_options() = record_.options;
   info.set_version(record_.version);
   return info;

@@ -25,6 +25,7 @@
 #include "filigree/v1/filigree.pb.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/pose.h"
+#include "server/session_assets.h"
 #include "server/session_record.h"
 
 namespace filigree {
@@ -64,7 +65,7 @@ using Journal = std::function<void(const SessionProgress&)>;
 class Session {
  public:
   // Computes the current frame, then starts the worker.
-  Session(SessionRecord record, std::shared_ptr<const Hierarchy> hierarchy, Journal journal = {});
+  Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, Journal journal = {});
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
@@ -108,6 +109,7 @@ class Session {
   v1::SessionInfo info() const;
   v1::SessionState state() const;
   SessionRecord record() const;
+  const SessionAssets& assets() const { return *assets_; }
   std::shared_ptr<const PublishedFrame> current_frame() const;
   std::size_t subscriber_count() const;
   // Seconds since the last request or frame.
@@ -129,14 +131,11 @@ class Session {
   // The progress including a change just merged, under the version of the frame that will show it.
   SessionProgress progress_with_change_locked() const;
 
-  const std::shared_ptr<const Hierarchy> hierarchy_;
+  const std::shared_ptr<const SessionAssets> assets_;  // shared by every session of the mesh
   std::unique_ptr<Deformer> deformer_;
   std::unique_ptr<HandleSolver> handle_solver_;
-  v1::BaseMesh base_;
-  v1::RestMesh rest_;
-  double rest_diagonal_ = 1.0;
-  Pose scratch_pose_;                // compute_once's buffers (worker thread only)
-  std::vector<Vec3> scratch_deltas_;
+  Pose scratch_pose_;       // compute_once's buffers (worker thread only)
+  std::vector<Vec3> frame_;  // positions, then deltas in place
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;

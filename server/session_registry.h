@@ -14,6 +14,7 @@
 
 #include "server/hierarchy_cache.h"
 #include "server/session.h"
+#include "server/session_assets.h"
 #include "server/state/session_store.h"
 
 namespace filigree::server {
@@ -81,6 +82,8 @@ class SessionRegistry {
   void shutdown();
 
   SessionStore& store() { return store_; }
+  // Meshes whose shared session assets (model, base and rest meshes) are alive.
+  std::size_t live_meshes() const { return assets_.live(); }
 
  private:
   struct Entry {
@@ -98,6 +101,7 @@ class SessionRegistry {
   Journal journal_for(const std::string& id);
 
   HierarchyCache& cache_;
+  SessionAssetsCache assets_;
   SessionStore& store_;
   const RegistryLimits limits_;
   mutable std::mutex mutex_;

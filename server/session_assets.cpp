@@ -1,0 +1,54 @@
+#include "server/session_assets.h"
+
+#include "hierarchy/hierarchy.h"
+#include "runtime/deformer_model.h"
+
+namespace filigree::server {
+namespace {
+
+std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hierarchy>& hierarchy) {
+  auto a = std::make_shared<SessionAssets>();
+  a->model = DeformerModel::create(hierarchy);
+  const Hierarchy& h = *hierarchy;
+  const TriMesh base = h.base_mesh();
+  for (const Vec3& p : base.positions)
+    for (int k = 0; k < 3; ++k) a->base.add_positions(static_cast<float>(p[k]));
+  for (const Triangle& f : base.faces)
+    for (Index v : f) a->base.add_faces(v);
+  for (Index v : h.base_vertices) a->base.add_original_ids(v);
+  a->rest.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
+  a->rest.mutable_positions()->Reserve(static_cast<int>(3 * h.vertex_count()));
+  for (const Vec3& p : h.rest_positions)
+    for (int k = 0; k < 3; ++k) a->rest.add_positions(static_cast<float>(p[k]));
+  a->rest.mutable_faces()->Reserve(static_cast<int>(3 * h.original_face_count));
+  for (FaceId f = 0; f < h.original_face_count; ++f)
+    for (Index v : h.faces[f]) a->rest.add_faces(v);
+  a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
+  return a;
+}
+
+}  // namespace
+
+const Hierarchy& SessionAssets::hierarchy() const { return model->hierarchy(); }
+
+std::shared_ptr<const SessionAssets> SessionAssetsCache::get(const std::shared_ptr<const Hierarchy>& h) {
+  std::lock_guard lock(mutex_);
+  std::erase_if(assets_, [](const auto& entry) { return entry.second.expired(); });
+  if (auto it = assets_.find(h.get()); it != assets_.end())
+    if (auto live = it->second.lock()) return live;
+  // Built under the lock: a second session of a mesh being set up waits for
+  // the first instead of building a copy (building is O(n), well under the
+  // preprocessing that precedes it).
+  auto made = make_assets(h);
+  assets_[h.get()] = made;
+  return made;
+}
+
+std::size_t SessionAssetsCache::live() const {
+  std::lock_guard lock(mutex_);
+  std::size_t n = 0;
+  for (const auto& [h, weak] : assets_) n += weak.expired() ? 0 : 1;
+  return n;
+}
+
+}  // namespace filigree::server

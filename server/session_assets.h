@@ -1,0 +1,43 @@
+#pragma once
+// What every session of one mesh shares (DESIGN §3.1): the deformer model
+// (hierarchy, traversal layout, lazily the Laplacian) and the base and rest
+// meshes as clients receive them. Built once per hierarchy, read-only, and
+// freed when the last session holding it goes.
+
+#include <map>
+#include <memory>
+#include <mutex>
+
+#include "filigree/v1/filigree.pb.h"
+
+namespace filigree {
+struct Hierarchy;
+class DeformerModel;
+}  // namespace filigree
+
+namespace filigree::server {
+
+struct SessionAssets {
+  std::shared_ptr<const DeformerModel> model;
+  v1::BaseMesh base;
+  v1::RestMesh rest;  // positions and faces; a session adds its upload's ids when it answers
+  double rest_diagonal = 1.0;
+
+  const Hierarchy& hierarchy() const;
+};
+
+class SessionAssetsCache {
+ public:
+  // The assets of `h`: the ones live sessions already share, or new ones.
+  std::shared_ptr<const SessionAssets> get(const std::shared_ptr<const Hierarchy>& h);
+  // Hierarchies with live assets (for tests and stats).
+  std::size_t live() const;
+
+ private:
+  mutable std::mutex mutex_;
+  // By address: live assets keep their hierarchy alive, so an address is
+  // reused only after its entry has expired.
+  std::map<const Hierarchy*, std::weak_ptr<const SessionAssets>> assets_;
+};
+
+}  // namespace filigree::server
