@@ -116,8 +116,9 @@ void validate_hierarchy(const Hierarchy& h) {
   }
   for (std::size_t f = h.original_face_count; f < face_total; ++f)
     if (creator[f] == kNone) fail("face " + str(f) + " was created by no node");
+  std::vector<NodeId> kids;  // reused: one allocation, not one per node
   for (std::size_t k = 0; k < nodes; ++k) {
-    std::vector<NodeId> kids;
+    kids.clear();
     for (FaceId f : h.removed_faces_of(static_cast<NodeId>(k))) {
       if (f >= face_total || remover[f] != kNone) fail("node " + str(k) + " removes an invalid face " + str(f));
       if (creator[f] != kNone && creator[f] >= k) fail("node " + str(k) + " removes face " + str(f) + " before it exists");
