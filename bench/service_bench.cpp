@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 
 #include <grpcpp/grpcpp.h>
@@ -128,9 +129,38 @@ std::string obj_bytes(const TriMesh& mesh) {
   return s.str();
 }
 
-}  // namespace
+// The server's resident memory (VmRSS), in bytes.
+double resident_bytes(int pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(in, line))
+    if (line.rfind("VmRSS:", 0) == 0) return 1024.0 * std::stod(line.substr(6));
+  return 0.0;
+}
 
-int main(int argc, char** argv) {
+v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::string& bytes) {
+  grpc::ClientContext ctx;
+  auto up = stub.CreateSession(&ctx);
+  v1::CreateSessionRequest begin;
+  begin.mutable_begin()->set_format("obj");
+  begin.mutable_begin()->set_total_bytes(bytes.size());
+  up->Write(begin);
+  for (std::size_t at = 0; at < bytes.size(); at += 1 << 20) {
+    v1::CreateSessionRequest chunk;
+    chunk.set_chunk(bytes.substr(at, 1 << 20));
+    up->Write(chunk);
+  }
+  up->WritesDone();
+  v1::CreateSessionResponse r;
+  v1::CreateSessionResponse::Created created;
+  while (up->Read(&r))
+    if (r.has_created()) created = r.created();
+  const grpc::Status status = up->Finish();
+  if (!status.ok()) throw std::runtime_error("upload failed: " + status.error_message());
+  return created;
+}
+
+int main_impl(int argc, char** argv) {
   const std::string server_binary = argc > 1 ? argv[1] : FILIGREE_SERVER_BINARY;
   const std::string repo = FILIGREE_REPO_DATA_DIR;
   const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_data_" + std::to_string(::getpid()));
@@ -160,29 +190,16 @@ int main(int argc, char** argv) {
 
   std::printf("| mesh | vertices | watchers | p50 ms | p99 ms | core compute+encode p50 / p99 ms | p99 / compute p99 | frames/s | bytes/vertex/frame | vs raw float32 | max error / diag | watcher frames |\n");
   std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  struct Memory {
+    std::string name;
+    std::size_t vertices;
+    double first, further;  // bytes per vertex the first session, and each further one, added
+  };
+  std::vector<Memory> memory;
   for (const Case& c : cases) {
     const std::string bytes = obj_bytes(c.mesh);
-    grpc::ClientContext ctx;
-    auto up = stub->CreateSession(&ctx);
-    v1::CreateSessionRequest begin;
-    begin.mutable_begin()->set_format("obj");
-    begin.mutable_begin()->set_total_bytes(bytes.size());
-    up->Write(begin);
-    for (std::size_t at = 0; at < bytes.size(); at += 1 << 20) {
-      v1::CreateSessionRequest chunk;
-      chunk.set_chunk(bytes.substr(at, 1 << 20));
-      up->Write(chunk);
-    }
-    up->WritesDone();
-    v1::CreateSessionResponse r;
-    v1::CreateSessionResponse::Created created;
-    while (up->Read(&r))
-      if (r.has_created()) created = r.created();
-    const grpc::Status status = up->Finish();
-    if (!status.ok()) {
-      std::fprintf(stderr, "upload of %s failed: %s\n", c.name.c_str(), status.error_message().c_str());
-      return 1;
-    }
+    const double empty = resident_bytes(server.pid());
+    const v1::CreateSessionResponse::Created created = upload(*stub, bytes);
     for (int watchers : {1, 8}) {
       const Result res = run(*stub, created, watchers, 120);
       std::printf("| %s | %zu | %d | %.2f | %.2f | %.2f / %.2f | %.2f | %.1f | %.2f | %.1fx smaller | %.2e | %zu |\n", c.name.c_str(),
@@ -190,8 +207,30 @@ int main(int argc, char** argv) {
                   res.fps, res.bytes_per_vertex, 12.0 / res.bytes_per_vertex, res.max_error_rel, res.watcher_frames);
       std::fflush(stdout);
     }
+    // Further sessions of the now cached mesh, each driven a few frames:
+    // what a session holds of its own (issue 10: ≤ 64 bytes per vertex).
+    const double one = resident_bytes(server.pid());
+    constexpr int kFurther = 3;
+    for (int i = 0; i < kFurther; ++i) run(*stub, upload(*stub, bytes), 0, 5);
+    const double n = static_cast<double>(c.mesh.vertex_count());
+    memory.push_back({c.name, c.mesh.vertex_count(), (one - empty) / n, (resident_bytes(server.pid()) - one) / kFurther / n});
   }
+  std::printf("\nServer resident memory (VmRSS), bytes per vertex: the first session of a mesh (hierarchy, model, its own "
+              "state, after 240 frames) and each further session of the same mesh (its own state, after 5 frames).\n\n"
+              "| mesh | vertices | first session | each further session |\n|---|---:|---:|---:|\n");
+  for (const Memory& m : memory) std::printf("| %s | %zu | %.0f | %.0f |\n", m.name.c_str(), m.vertices, m.first, m.further);
   server.terminate();
   std::filesystem::remove_all(data_dir);
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return main_impl(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "filigree_bench_service: %s\n", e.what());
+    return 1;
+  }
 }

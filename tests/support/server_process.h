@@ -27,6 +27,7 @@ class ServerProcess {
   // Sends SIGKILL and waits: the process dies without a chance to clean up.
   void kill_now();
   bool running() const { return pid_ > 0; }
+  int pid() const { return pid_; }
   // SIGSTOP / SIGCONT: the process freezes (a long pause, a partition) and comes back.
   void pause();
   void resume();
