@@ -101,7 +101,7 @@ void deform(const DeformArgs& a) {
 
 void animate(const AnimateArgs& a) {
   const auto motion = parse_motion(a.motion);
-  if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave or bump, not '" + a.motion + "'");
+  if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
   const Hierarchy h = load_hierarchy(a.hierarchy);
   const std::vector<Vec3> base_rest = h.base_mesh().positions;
   Deformer deformer(h, options_of(a));
@@ -145,7 +145,7 @@ void add_deform_commands(CLI::App& app) {
   auto an = std::make_shared<AnimateArgs>();
   CLI::App* animate_cmd = app.add_subcommand("animate", "Deform along a procedural base motion; .glb: one morph target per frame, else a file per frame");
   add_runtime_options(animate_cmd, *an);
-  animate_cmd->add_option("--motion", an->motion, "bend, twist, wave or bump");
+  animate_cmd->add_option("--motion", an->motion, "bend, twist, wave, bump or fold");
   animate_cmd->add_option("--frames", an->frames, "Number of frames")->check(CLI::Range(1, 100000));
   animate_cmd->add_option("--fps", an->fps, "Frame rate of the glTF animation")->check(CLI::PositiveNumber);
   animate_cmd->callback([an] { animate(*an); });

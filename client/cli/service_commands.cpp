@@ -147,7 +147,7 @@ std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh
   std::vector<std::vector<float>> out;
   if (!a.motion.empty()) {
     const auto motion = parse_motion(a.motion);
-    if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave or bump, not '" + a.motion + "'");
+    if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
     const std::vector<Vec3> rest = to_vec3(session.base_positions);
     const int n = a.frames > 0 ? a.frames : 120;
     for (int f = 0; f < n; ++f) {
@@ -343,7 +343,7 @@ void add_service_commands(CLI::App& app) {
   auto d = std::make_shared<DriveArgs>();
   CLI::App* dr = app.add_subcommand("drive", "Drive a session with poses and report latency and frame size");
   add_session_options(dr, *d, "Write the received frames: .glb animation, other formats the last frame");
-  auto* m = dr->add_option("--motion", d->motion, "Procedural motion: bend, twist, wave or bump");
+  auto* m = dr->add_option("--motion", d->motion, "Procedural motion: bend, twist, wave, bump or fold");
   auto* p = dr->add_option("--poses", d->poses, "Pose files (.pose or a posed base mesh), sent in turn")
                 ->check(CLI::ExistingFile)
                 ->excludes(m);
