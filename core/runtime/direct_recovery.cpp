@@ -22,7 +22,7 @@ constexpr std::size_t kMaxRing = 64;
 constexpr std::uint8_t kOpenRing = 0x80;
 
 struct Block {
-  const std::uint32_t* slot;  // [ring slot][lane]
+  const std::uint32_t* slot;  // [ring slot][lane]: 4 × the traversal slot (a float index)
   const float* weight;        // [ring slot][lane]
   std::size_t ring;           // ring slots (the block's largest ring)
   const float* offset;        // [xyz][lane]
@@ -77,7 +77,7 @@ static_assert(W == 8, "the kernel's vectors hold one block");
     // inserting 24 scalars).
     const std::uint32_t* slot = b.slot + i * W;
     F4 r[W];
-    for (std::size_t l = 0; l < W; ++l) std::memcpy(&r[l], p + 4 * static_cast<std::size_t>(slot[l]), sizeof(F4));
+    for (std::size_t l = 0; l < W; ++l) std::memcpy(&r[l], p + slot[l], sizeof(F4));
     const F8 a0 = __builtin_shufflevector(r[0], r[4], 0, 1, 2, 3, 4, 5, 6, 7);
     const F8 a1 = __builtin_shufflevector(r[1], r[5], 0, 1, 2, 3, 4, 5, 6, 7);
     const F8 a2 = __builtin_shufflevector(r[2], r[6], 0, 1, 2, 3, 4, 5, 6, 7);
@@ -273,6 +273,8 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
   while (segment_blocks_.size() < phases * partitions_ + 1) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
   phases_ = phases;
 
+  if (base_count_ + order.size() >= (std::size_t{1} << 30))
+    throw std::invalid_argument("hierarchy too large for the runtime's 32-bit ring indices (" + std::to_string(h.vertex_count()) + " vertices)");
   slot_of_vertex_.assign(h.vertex_count(), 0);
   for (Index i = 0; i < base_count_; ++i) slot_of_vertex_[h.base_vertices[i]] = i;
   vertex_of_slot_.assign(order.size(), kPadding);
@@ -308,7 +310,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
       const auto w = h.weights(k);
       for (std::size_t i = 0; i < ring; ++i) {
         const bool real = i < r.size();
-        ring_slot_[first + i * W + l] = slot_of_vertex_[r[real ? i : 0]];
+        ring_slot_[first + i * W + l] = 4 * slot_of_vertex_[r[real ? i : 0]];  // the float index: no shift per load
         ring_weight_[first + i * W + l] = real ? static_cast<float>(w[i]) : 0.0f;
       }
       for (int c = 0; c < 3; ++c) offset_[(3 * blk + c) * W + l] = static_cast<float>(h.node_offset[k][c]);

@@ -99,7 +99,7 @@ class DirectRecovery {
   // Segment phase·partitions_ + partition is blocks [segment_blocks_[s], segment_blocks_[s+1]).
   std::vector<std::uint32_t> segment_blocks_;
   std::vector<std::uint32_t> block_ring_;       // block b's ring slots start at block_ring_[b]·kLanes; size blocks+1
-  std::vector<std::uint32_t> ring_slot_;        // [ring slot][lane]: traversal slot of the ring vertex
+  std::vector<std::uint32_t> ring_slot_;        // [ring slot][lane]: 4 × the ring vertex's traversal slot
   std::vector<float> ring_weight_;              // [ring slot][lane]: weight (0 on padding)
   std::vector<float> offset_;                   // [block][xyz][lane]: the node's local offset
   std::vector<std::uint8_t> lane_ring_;         // [block][lane]: ring size, | kOpenRing for open rings
