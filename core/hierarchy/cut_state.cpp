@@ -1,38 +1,77 @@
 #include "hierarchy/cut_state.h"
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 
 namespace filigree {
 
 CutState::CutState(const Hierarchy& h)
-    : h_(&h), recovered_(h.node_count(), false), missing_parents_(h.node_count()),
-      recovered_children_(h.node_count(), 0), face_alive_(h.faces.size(), false) {
-  for (NodeId k = 0; k < h.node_count(); ++k) missing_parents_[k] = static_cast<Index>(h.parents_of(k).size());
+    : h_(&h), recovered_(h.node_count(), false), face_alive_(h.faces.size(), false) {
   for (FaceId f : h.base_faces) face_alive_[f] = true;
   alive_faces_ = h.base_faces.size();
 }
 
+CutState CutState::full(const Hierarchy& h) {
+  // Every node recovered is the original mesh: a node's recovery kills the
+  // faces it created and no original face stays deleted, so the alive faces
+  // are exactly the original ones (tests compare it with node-by-node recovery).
+  CutState cut(h);
+  cut.recovered_.assign(h.node_count(), true);
+  cut.recovered_count_ = h.node_count();
+  cut.face_alive_.assign(h.faces.size(), false);
+  std::fill_n(cut.face_alive_.begin(), h.original_face_count, true);
+  cut.alive_faces_ = h.original_face_count;
+  return cut;
+}
+
+bool CutState::parents_recovered(NodeId k) const {
+  const auto parents = h_->parents_of(k);
+  return std::all_of(parents.begin(), parents.end(), [&](NodeId p) { return recovered_[p]; });
+}
+
+bool CutState::child_recovered(NodeId k) const {
+  const auto children = h_->children_of(k);
+  return std::any_of(children.begin(), children.end(), [&](NodeId c) { return recovered_[c]; });
+}
+
+void CutState::count_blockers() {
+  blockers_.assign(h_->node_count(), 0);
+  for (NodeId k = 0; k < h_->node_count(); ++k) {
+    Index n = 0;
+    if (recovered_[k]) {
+      for (NodeId c : h_->children_of(k)) n += recovered_[c] ? 1 : 0;
+    } else {
+      for (NodeId p : h_->parents_of(k)) n += recovered_[p] ? 0 : 1;
+    }
+    blockers_[k] = n;
+  }
+}
+
 void CutState::recover(NodeId k) {
   if (!can_recover(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be recovered: already recovered or a parent is not");
+  if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = false;
   for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = true;
   alive_faces_ += h_->removed_faces_of(k).size() - h_->created_faces_of(k).size();
   recovered_[k] = true;
   ++recovered_count_;
-  for (NodeId c : h_->children_of(k)) --missing_parents_[c];
-  for (NodeId p : h_->parents_of(k)) ++recovered_children_[p];
+  // k's children are not recovered (k was not): one parent fewer missing.
+  // k's parents are recovered: one recovered child more.
+  for (NodeId c : h_->children_of(k)) --blockers_[c];
+  for (NodeId p : h_->parents_of(k)) ++blockers_[p];
 }
 
 void CutState::remove(NodeId k) {
   if (!can_remove(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be removed: not recovered or a child is");
+  if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = false;
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = true;
   alive_faces_ -= h_->removed_faces_of(k).size() - h_->created_faces_of(k).size();
   recovered_[k] = false;
   --recovered_count_;
-  for (NodeId c : h_->children_of(k)) ++missing_parents_[c];
-  for (NodeId p : h_->parents_of(k)) --recovered_children_[p];
+  for (NodeId c : h_->children_of(k)) ++blockers_[c];
+  for (NodeId p : h_->parents_of(k)) --blockers_[p];
 }
 
 bool CutState::vertex_present(Index v) const {
@@ -57,6 +96,10 @@ TriMesh CutState::mesh(std::vector<Index>* original_ids) const {
     m.faces.push_back({local[t[0]], local[t[1]], local[t[2]]});
   }
   return m;
+}
+
+std::size_t CutState::memory_bytes() const {
+  return (recovered_.capacity() + face_alive_.capacity()) / 8 + blockers_.capacity() * sizeof(Index);
 }
 
 std::vector<NodeId> recovery_order(const Hierarchy& h) {

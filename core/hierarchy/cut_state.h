@@ -13,12 +13,20 @@ class CutState {
  public:
   // Starts at the empty cut (the base mesh). `h` must outlive the CutState.
   explicit CutState(const Hierarchy& h);
+  // The full cut (the original mesh) in O(n), without recovering node by node.
+  static CutState full(const Hierarchy& h);
 
   bool recovered(NodeId k) const { return recovered_[k]; }
   // Not recovered and every parent recovered.
-  bool can_recover(NodeId k) const { return !recovered_[k] && missing_parents_[k] == 0; }
+  bool can_recover(NodeId k) const {
+    if (recovered_[k]) return false;
+    return blockers_.empty() ? parents_recovered(k) : blockers_[k] == 0;
+  }
   // Recovered and no child recovered.
-  bool can_remove(NodeId k) const { return recovered_[k] && recovered_children_[k] == 0; }
+  bool can_remove(NodeId k) const {
+    if (!recovered_[k]) return false;
+    return blockers_.empty() ? !child_recovered(k) : blockers_[k] == 0;
+  }
 
   // Puts node k's vertex back: its created faces go, its fan returns.
   // Throws std::logic_error unless can_recover(k).
@@ -37,11 +45,28 @@ class CutState {
   // each output vertex. For the full cut this is exactly the original mesh.
   TriMesh mesh(std::vector<Index>* original_ids = nullptr) const;
 
+  // Starts loading what can_recover(k) and can_remove(k) read (callers that
+  // test many scattered nodes issue these ahead).
+  void prefetch(NodeId k) const {
+    if (!blockers_.empty()) __builtin_prefetch(&blockers_[k]);
+  }
+
+  // Heap bytes held (a cut that never changed holds two bits per node and one
+  // per face).
+  std::size_t memory_bytes() const;
+
  private:
+  bool parents_recovered(NodeId k) const;
+  bool child_recovered(NodeId k) const;
+  void count_blockers();
+
   const Hierarchy* h_;
   std::vector<bool> recovered_;
-  std::vector<Index> missing_parents_;     // parents not yet recovered
-  std::vector<Index> recovered_children_;  // children currently recovered
+  // Per node, made on the first change (a cut that never changes, such as
+  // T = 0's full one, needs none): for a recovered node its recovered
+  // children, else its parents not recovered. A node changes state only when
+  // this is 0, and it is 0 again after the change, so one count serves both.
+  std::vector<Index> blockers_;
   std::vector<bool> face_alive_;
   std::size_t recovered_count_ = 0;
   std::size_t alive_faces_ = 0;

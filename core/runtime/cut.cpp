@@ -1,67 +1,99 @@
 #include "runtime/cut.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
-
-#include <Eigen/Geometry>
+#include <thread>
 
 #include "geometry/cotangent_laplacian.h"
-#include "geometry/triangle_geometry.h"
 
 namespace filigree {
 namespace {
-
-// Singular values (Γ ≥ γ) of the affine map taking rest triangle p to q
-// (thesis §3.3.1, eq. 3.7).
-std::pair<double, double> stretch(const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& q0, const Vec3& q1,
-                                  const Vec3& q2) {
-  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
-  const double l1 = e1.norm();
-  const Vec3 n = e1.cross(e2);
-  if (!(l1 > 0.0) || !(n.norm() > 0.0)) return {1.0, 1.0};
-  const Vec3 u = e1 / l1, w = n.normalized().cross(u);
-  Eigen::Matrix2d rest;
-  rest << l1, e2.dot(u), 0.0, e2.dot(w);
-  Eigen::Matrix<double, 3, 2> posed;
-  posed.col(0) = q1 - q0;
-  posed.col(1) = q2 - q0;
-  const Eigen::Matrix<double, 3, 2> j = posed * rest.inverse();
-  const Eigen::Matrix2d jtj = j.transpose() * j;
-  const double tr = jtj.trace(), det = jtj.determinant();
-  const double disc = std::sqrt(std::max(0.25 * tr * tr - det, 0.0));
-  return {std::sqrt(std::max(0.5 * tr + disc, 0.0)), std::sqrt(std::max(0.5 * tr - disc, 0.0))};
-}
-
-double dihedral(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
-  // Angle between the normals of (a, b, c) and (b, a, d), which share edge ab.
-  const Vec3 n1 = (b - a).cross(c - a), n2 = (a - b).cross(d - b);
-  return std::atan2(n1.cross(n2).norm(), n1.dot(n2));
-}
 
 // A swap must improve the acuteness handed to optimisation by this factor.
 constexpr double kSwapGain = 1.5;
 // Weight of the fraction of a node's mesh neighbours that are optimised.
 constexpr double kGrowthBonus = 4.0;
 
+// One triangle of a scored patch: its corners, rest and posed normals
+// (length twice the area).
+struct PatchFace {
+  Index v[3];
+  Vec3 rest_normal, posed_normal;
+};
+
+// Σ over the patch of area·((Γ−1)² + (γ−1)²), with Γ ≥ γ the singular values
+// of the affine map taking the rest triangle to the posed one (thesis §3.3.1,
+// eq. 3.7), and the patch's rest area. With G_p, G_x the Gram matrices of the
+// rest and posed edge vectors, Γ² + γ² = tr(G_p⁻¹ G_x) and Γγ = |n_x| / |n_p|,
+// so Γ + γ = √(Γ² + γ² + 2Γγ): no SVD, two square roots.
+void add_stretch(const PatchFace& f, const std::vector<Vec3>& p, const std::vector<Vec3>& x, double& stretch_sum,
+                 double& area_sum) {
+  const double rest_area2 = f.rest_normal.squaredNorm();  // det G_p
+  if (!(rest_area2 > 0.0)) return;                        // a degenerate rest triangle has no area to weigh
+  const Vec3 e1 = p[f.v[1]] - p[f.v[0]], e2 = p[f.v[2]] - p[f.v[0]];
+  const Vec3 g1 = x[f.v[1]] - x[f.v[0]], g2 = x[f.v[2]] - x[f.v[0]];
+  const double a = e1.squaredNorm(), b = e1.dot(e2), c = e2.squaredNorm();
+  const double trace = (c * g1.squaredNorm() - 2.0 * b * g1.dot(g2) + a * g2.squaredNorm()) / rest_area2;
+  const double product = std::sqrt(f.posed_normal.squaredNorm() / rest_area2);
+  const double sum = std::sqrt(std::max(trace + 2.0 * product, 0.0));
+  const double area = 0.5 * std::sqrt(rest_area2);
+  stretch_sum += area * std::max(trace - 2.0 * sum + 2.0, 0.0);
+  area_sum += area;
+}
+
+// Angle between two face normals.
+double angle(const Vec3& n1, const Vec3& n2) { return std::atan2(n1.cross(n2).norm(), n1.dot(n2)); }
+
+// Largest patch scored without a heap allocation; the simplifier's rings
+// hold at most 32 vertices.
+constexpr std::size_t kPatchFaces = 64;
+
 }  // namespace
 
-AdaptiveCut::AdaptiveCut(const Hierarchy& h, const CotangentLaplacian& laplacian)
-    : h_(h), laplacian_(laplacian), cut_(h), score_(h.node_count(), 0.0), stamp_(h.node_count(), 0) {
-  reset(kInfinity);
+AdaptiveCut::AdaptiveCut(const Hierarchy& h, const CotangentLaplacian& laplacian, double threshold)
+    : h_(h), laplacian_(laplacian), cut_(h), recoverable_(place_), removable_(place_) {
+  reset(threshold);
+}
+
+void AdaptiveCut::release_queues() {
+  // Swapped with empty vectors: assigning {} would keep the capacity.
+  recoverable_.release();
+  removable_.release();
+  std::vector<float>().swap(score_);
+  std::vector<Index>().swap(place_);
+  std::vector<Index>().swap(uf_parent_);
+  std::vector<double>().swap(uf_size_);
+  std::vector<double>().swap(uf_constraints_);
+  std::vector<Index>().swap(changed_);
+  std::vector<bool>().swap(moved_);
+  moved_id_ = MovedIds();
+  next_block_ = 0;
+  estimate_ = 0.0;
 }
 
 void AdaptiveCut::reset(double threshold) {
   threshold_ = threshold;
-  cut_ = CutState(h_);
-  if (threshold < kInfinity)
-    for (NodeId k : recovery_order(h_)) cut_.recover(k);
-  in_cut_.assign(h_.vertex_count(), false);
-  for (Index v = 0; v < h_.vertex_count(); ++v) in_cut_[v] = cut_.vertex_present(v);
-  recoverable_ = {};
-  removable_ = {};
-  std::fill(score_.begin(), score_.end(), 0.0);
-  for (NodeId k = 0; k < h_.node_count(); ++k) enqueue(k);
-  rebuild_regions();
+  release_queues();
+  regions_ = Regions{};
+  const std::size_t n = h_.vertex_count();
+  if (threshold == kInfinity) {
+    cut_ = CutState(h_);
+    in_cut_.assign(n, false);
+    for (Index v : h_.base_vertices) in_cut_[v] = true;
+    regions_ = find_regions(laplacian_, in_cut_);
+    return;
+  }
+  cut_ = CutState::full(h_);
+  in_cut_.assign(n, true);
+  if (!adaptive()) return;
+  // The full cut: exactly the nodes without children may leave it, and none
+  // may be recovered; all score 0, so the removable queue is in node order.
+  score_.assign(h_.node_count(), 0.0f);
+  place_.assign(h_.node_count(), kNone);
+  for (NodeId k = 0; k < h_.node_count(); ++k)
+    if (h_.children_of(k).empty()) removable_.push(k, 0.0f);
+  moved_.assign(n, false);
 }
 
 void AdaptiveCut::set_threshold(double threshold) {
@@ -73,7 +105,7 @@ void AdaptiveCut::set_threshold(double threshold) {
   }
 }
 
-double AdaptiveCut::evaluate(NodeId k, const std::vector<Vec3>& x) const {
+double AdaptiveCut::evaluate(NodeId k, Index v, const std::vector<Vec3>& x) const {
   std::span<const FaceId> faces;
   if (cut_.can_recover(k)) {
     faces = h_.created_faces_of(k);
@@ -83,23 +115,34 @@ double AdaptiveCut::evaluate(NodeId k, const std::vector<Vec3>& x) const {
     return -1.0;
   }
   const auto& p = h_.rest_positions;
+  PatchFace local[kPatchFaces];
+  std::vector<PatchFace> heap;
+  PatchFace* patch = local;
+  if (faces.size() > kPatchFaces) {
+    heap.resize(faces.size());
+    patch = heap.data();
+  }
   double stretch_sum = 0.0, area_sum = 0.0, bend = 0.0, edge_sum = 0.0;
   for (std::size_t i = 0; i < faces.size(); ++i) {
     const Triangle& t = h_.faces[faces[i]];
-    const double area = triangle_area(p[t[0]], p[t[1]], p[t[2]]);
-    const auto [big, small] = stretch(p[t[0]], p[t[1]], p[t[2]], x[t[0]], x[t[1]], x[t[2]]);
-    stretch_sum += area * ((big - 1.0) * (big - 1.0) + (small - 1.0) * (small - 1.0));
-    area_sum += area;
-    // Normal difference (thesis §3.3.2, eq. 3.8) on edges shared inside the patch.
+    PatchFace& f = patch[i];
+    f.v[0] = t[0], f.v[1] = t[1], f.v[2] = t[2];
+    f.rest_normal = (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]);
+    f.posed_normal = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]);
+    add_stretch(f, p, x, stretch_sum, area_sum);
+  }
+  // Normal difference (thesis §3.3.2, eq. 3.8) on edges shared inside the
+  // patch: the change of the dihedral angle, weighed by the rest edge length.
+  for (std::size_t i = 0; i < faces.size(); ++i) {
+    const PatchFace& t = patch[i];
     for (std::size_t j = i + 1; j < faces.size(); ++j) {
-      const Triangle& s = h_.faces[faces[j]];
+      const PatchFace& s = patch[j];
       for (int c = 0; c < 3; ++c) {
-        const Index a = t[c], b = t[(c + 1) % 3];
+        const Index a = t.v[c], b = t.v[(c + 1) % 3];
         for (int e = 0; e < 3; ++e) {
-          if (s[e] != b || s[(e + 1) % 3] != a) continue;
-          const Index tc = t[(c + 2) % 3], sd = s[(e + 2) % 3];
+          if (s.v[e] != b || s.v[(e + 1) % 3] != a) continue;
           const double len = (p[a] - p[b]).norm();
-          bend += len * std::abs(dihedral(x[a], x[b], x[tc], x[sd]) - dihedral(p[a], p[b], p[tc], p[sd]));
+          bend += len * std::abs(angle(t.posed_normal, s.posed_normal) - angle(t.rest_normal, s.rest_normal));
           edge_sum += len;
         }
       }
@@ -110,45 +153,136 @@ double AdaptiveCut::evaluate(NodeId k, const std::vector<Vec3>& x) const {
   // them grows regions instead of scattering one-vertex regions that the cut
   // pins in place (percolation, DESIGN §2.2.4); recovering isolated ones
   // first removes exactly those useless islands.
-  const Index v = h_.node_vertex[k];
   double free_neighbours = 0.0;
   const double degree = static_cast<double>(laplacian_.offsets[v + 1] - laplacian_.offsets[v]);
   for (Index i = laplacian_.offsets[v]; i < laplacian_.offsets[v + 1]; ++i) free_neighbours += in_cut_[laplacian_.neighbors[i]] ? 0.0 : 1.0;
   return acuteness * (1.0 + kGrowthBonus * free_neighbours / std::max(degree, 1.0));
 }
 
-void AdaptiveCut::enqueue(NodeId k) {
-  ++stamp_[k];
-  if (cut_.can_recover(k)) recoverable_.push({score_[k], k, stamp_[k]});
-  if (cut_.can_remove(k)) removable_.push({score_[k], k, stamp_[k]});
-}
-
-void AdaptiveCut::enqueue_neighbours(NodeId k) {
-  enqueue(k);
-  for (NodeId p : h_.parents_of(k)) enqueue(p);
-  for (NodeId c : h_.children_of(k)) enqueue(c);
-}
-
-NodeId AdaptiveCut::top_recoverable() {
-  while (!recoverable_.empty()) {
-    const Entry& e = recoverable_.top();
-    if (e.stamp == stamp_[e.node] && cut_.can_recover(e.node)) return e.node;
-    recoverable_.pop();
+std::size_t AdaptiveCut::block_at(std::size_t ordinal) const {
+  // Blocks b ≡ p (mod kPhases) come at positions [start_p, start_p + count_p).
+  const std::size_t block_count = (h_.vertex_count() + kScoreBlock - 1) / kScoreBlock;
+  for (std::size_t p = 0, start = 0; p < kPhases; ++p) {
+    const std::size_t count = p < block_count ? (block_count - p + kPhases - 1) / kPhases : 0;
+    if (ordinal < start + count) return (p + kPhases * (ordinal - start)) * kScoreBlock;
+    start += count;
   }
-  return kNone;
+  return 0;  // not reached: ordinal < block_count
 }
 
-NodeId AdaptiveCut::top_removable() {
-  while (!removable_.empty()) {
-    const Entry& e = removable_.top();
-    if (e.stamp == stamp_[e.node] && cut_.can_remove(e.node)) return e.node;
-    removable_.pop();
+void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::vector<Vec3>& x, float* out) const {
+  // Scoring waits on memory: a node's cut state, its faces, their corners and
+  // its ring lie scattered. Each pass below issues the independent loads the
+  // next one needs, so that many are in flight at once and the scoring pass
+  // finds its data in cache.
+  NodeId node[kScoreBlock];
+  Index vertex[kScoreBlock];
+  for (std::size_t i = 0; i < count; ++i) {
+    vertex[i] = static_cast<Index>(first + i);
+    node[i] = h_.vertex_node[vertex[i]];
+    if (node[i] != kNone) cut_.prefetch(node[i]);
   }
-  return kNone;
+  std::uint16_t frontier[kScoreBlock];
+  std::span<const FaceId> faces[kScoreBlock];
+  std::size_t m = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    out[i] = -1.0f;
+    const NodeId k = node[i];
+    if (k == kNone) continue;
+    if (cut_.can_recover(k)) {
+      faces[m] = h_.created_faces_of(k);
+    } else if (cut_.can_remove(k)) {
+      faces[m] = h_.removed_faces_of(k);
+    } else {
+      continue;
+    }
+    frontier[m++] = static_cast<std::uint16_t>(i);
+  }
+  for (std::size_t j = 0; j < m; ++j) {
+    __builtin_prefetch(faces[j].data());
+    __builtin_prefetch(&laplacian_.offsets[vertex[frontier[j]]]);
+  }
+  for (std::size_t j = 0; j < m; ++j) {
+    for (FaceId f : faces[j]) __builtin_prefetch(&h_.faces[f]);
+    __builtin_prefetch(&laplacian_.neighbors[laplacian_.offsets[vertex[frontier[j]]]]);
+  }
+  for (std::size_t j = 0; j < m; ++j)
+    for (FaceId f : faces[j])
+      for (Index c : h_.faces[f]) {
+        __builtin_prefetch(&h_.rest_positions[c]);
+        __builtin_prefetch(&x[c]);
+      }
+  for (std::size_t j = 0; j < m; ++j) {
+    const std::size_t i = frontier[j];
+    out[i] = static_cast<float>(evaluate(node[i], vertex[i], x));
+  }
+}
+
+void AdaptiveCut::place(NodeId k) {
+  auto move_to = [&](auto& into, auto& other) {
+    if (other.contains(k)) other.erase(k);
+    if (into.contains(k)) {
+      into.update(k, score_[k]);
+    } else {
+      into.push(k, score_[k]);
+    }
+  };
+  if (cut_.can_recover(k)) {
+    move_to(recoverable_, removable_);
+  } else if (cut_.can_remove(k)) {
+    move_to(removable_, recoverable_);
+  } else if (recoverable_.contains(k)) {
+    recoverable_.erase(k);
+  } else if (removable_.contains(k)) {
+    removable_.erase(k);
+  }
+}
+
+void AdaptiveCut::place_around(NodeId k) {
+  place(k);
+  for (NodeId p : h_.parents_of(k)) place(p);
+  for (NodeId c : h_.children_of(k)) place(c);
+}
+
+void AdaptiveCut::note_change(Index v) {
+  if (moved_[v]) return;
+  moved_[v] = true;
+  changed_.push_back(v);
+}
+
+void AdaptiveCut::MovedIds::set(Index v, Index id) {
+  if (2 * (used_ + 1) > slots_.size()) {
+    std::vector<std::pair<Index, Index>> old(std::max<std::size_t>(64, 2 * slots_.size()), {kNone, kNone});
+    old.swap(slots_);
+    used_ = 0;
+    for (const auto& [u, i] : old)
+      if (u != kNone) set(u, i);
+  }
+  const std::size_t s = find(v);
+  if (slots_[s].first == kNone) ++used_;
+  slots_[s] = {v, id};
+}
+
+Index AdaptiveCut::MovedIds::get(Index v) const {
+  if (slots_.empty()) return kNone;
+  const std::size_t s = find(v);
+  return slots_[s].first == v ? slots_[s].second : kNone;
+}
+
+std::size_t AdaptiveCut::MovedIds::find(Index v) const {
+  const std::size_t mask = slots_.size() - 1;
+  std::size_t s = (static_cast<std::size_t>(v) * 0x9E3779B97F4A7C15ull >> 20) & mask;
+  while (slots_[s].first != kNone && slots_[s].first != v) s = (s + 1) & mask;
+  return s;
+}
+
+void AdaptiveCut::MovedIds::clear() {
+  if (used_ > 0) std::fill(slots_.begin(), slots_.end(), std::pair<Index, Index>{kNone, kNone});
+  used_ = 0;
 }
 
 Index AdaptiveCut::region_root(Index v) {
-  Index r = est_region_[v];
+  Index r = moved_[v] ? moved_id_.get(v) : regions_.region_of[v];
   while (uf_parent_[r] != r) r = uf_parent_[r] = uf_parent_[uf_parent_[r]];
   return r;
 }
@@ -182,10 +316,11 @@ void AdaptiveCut::recover(NodeId k) {
   estimate_ += n2 * n2 + c2 * c2 - n * n - c * c;
   uf_size_[r] = n2;
   uf_constraints_[r] = c2;
-  est_region_[v] = kNone;
+  note_change(v);
+  moved_id_.set(v, kNone);
   cut_.recover(k);
   in_cut_[v] = true;
-  enqueue_neighbours(k);
+  place_around(k);
 }
 
 void AdaptiveCut::unrecover(NodeId k) {
@@ -207,42 +342,83 @@ void AdaptiveCut::unrecover(NodeId k) {
     uf_size_[fresh] += uf_size_[r];
     uf_constraints_[fresh] += uf_constraints_[r] - 1.0;
   }
-  est_region_[v] = fresh;
+  note_change(v);
+  moved_id_.set(v, fresh);
   cut_.remove(k);
   in_cut_[v] = false;
-  enqueue_neighbours(k);
+  place_around(k);
 }
 
 void AdaptiveCut::rebuild_regions() {
-  regions_ = find_regions(laplacian_, in_cut_);
+  // Vertices that moved and came back (undone moves) change no region.
+  const bool any_region = !regions_.region_of.empty();
+  std::erase_if(changed_, [&](Index v) {
+    moved_[v] = false;
+    return in_cut_[v] != (any_region && regions_.region_of[v] != kNone);
+  });
+  update_regions(laplacian_, in_cut_, changed_, regions_);
+  changed_.clear();
+  moved_id_.clear();
   estimate_ = regions_.performance_estimate();
-  est_region_ = regions_.region_of;
-  uf_parent_.resize(regions_.count());
-  uf_size_.resize(regions_.count());
-  uf_constraints_.resize(regions_.count());
-  for (Index r = 0; r < regions_.count(); ++r) {
+  const std::size_t count = regions_.count();
+  uf_parent_.resize(count);
+  uf_size_.resize(count);
+  uf_constraints_.resize(count);
+  for (Index r = 0; r < count; ++r) {
     uf_parent_[r] = r;
     uf_size_[r] = static_cast<double>(regions_.size(r));
     uf_constraints_[r] = static_cast<double>(regions_.constraints[r]);
   }
 }
 
-std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t eval_budget, std::size_t move_budget) {
+std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t eval_budget, std::size_t move_budget,
+                                int threads) {
   const std::size_t nodes = h_.node_count();
-  if (nodes == 0 || threshold_ <= 0.0 || threshold_ == kInfinity) return 0;
-  for (std::size_t i = 0; i < std::min(eval_budget, nodes); ++i) {
-    const NodeId k = static_cast<NodeId>(next_eval_);
-    next_eval_ = (next_eval_ + 1) % nodes;
-    const double s = evaluate(k, positions);
-    if (s < 0.0) continue;
-    score_[k] = s;
-    enqueue(k);
+  if (nodes == 0 || !adaptive()) return 0;
+  // Rescoring reads the cut and writes only its own slots, so blocks are
+  // scored in parallel; the queues are then updated in the visiting order.
+  const std::size_t n = h_.vertex_count();
+  const std::size_t block_count = (n + kScoreBlock - 1) / kScoreBlock;
+  const std::size_t blocks = std::min(block_count, (eval_budget + kScoreBlock - 1) / kScoreBlock);
+  std::vector<float> scores(blocks * kScoreBlock);
+  std::vector<std::size_t> firsts(blocks);
+  for (std::size_t b = 0; b < blocks; ++b) firsts[b] = block_at((next_block_ + b) % block_count);
+  next_block_ = (next_block_ + blocks) % block_count;
+  auto block_size = [&](std::size_t b) { return std::min(kScoreBlock, n - firsts[b]); };
+  {
+    constexpr std::size_t kChunk = 8;  // blocks per hand-out
+    std::atomic<std::size_t> next{0};
+    auto work = [&] {
+      for (std::size_t begin = next.fetch_add(kChunk); begin < blocks; begin = next.fetch_add(kChunk))
+        for (std::size_t b = begin; b < std::min(begin + kChunk, blocks); ++b)
+          score_block(firsts[b], block_size(b), positions, scores.data() + b * kScoreBlock);
+    };
+    const int t = std::max(1, std::min<int>(threads, static_cast<int>((blocks + kChunk - 1) / kChunk)));
+    std::vector<std::jthread> pool;
+    for (int i = 1; i < t; ++i) pool.emplace_back(work);
+    work();
+  }
+  for (std::size_t b = 0; b < blocks; ++b) {
+    const float* block_scores = scores.data() + b * kScoreBlock;
+    const std::size_t size = block_size(b);
+    for (std::size_t i = 0; i < size; ++i) {
+      if (i + 8 < size && block_scores[i + 8] >= 0.0f) {  // the queue slot lies scattered
+        const NodeId ahead = h_.vertex_node[firsts[b] + i + 8];
+        __builtin_prefetch(&place_[ahead]);
+        __builtin_prefetch(&score_[ahead]);
+      }
+      if (block_scores[i] < 0.0f) continue;
+      const NodeId k = h_.vertex_node[firsts[b] + i];
+      score_[k] = block_scores[i];
+      place(k);
+    }
   }
 
+  auto top = [](const auto& queue) { return queue.empty() ? kNone : queue.top().node; };
   std::size_t moves = 0;
   // Over budget: recover the mildest nodes until the estimate fits.
   while (estimate_ > threshold_) {
-    const NodeId a = top_recoverable();
+    const NodeId a = top(recoverable_);
     if (a == kNone) break;
     recover(a);
     ++moves;
@@ -250,7 +426,7 @@ std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t 
   // Under budget: give the most acute node to optimisation, alone if it fits,
   // else paired with recovering the mildest (thesis §3.3 pair moves).
   while (moves < move_budget) {
-    const NodeId b = top_removable();
+    const NodeId b = top(removable_);
     if (b == kNone) break;
     const double grow = delta_unrecover(b);
     if (estimate_ + grow <= threshold_) {
@@ -260,26 +436,34 @@ std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t 
     }
     // Swap only for a clear gain, so that scores that shift a little from
     // frame to frame do not make the cut oscillate.
-    const NodeId a = top_recoverable();
+    const NodeId a = top(recoverable_);
     if (a == kNone || !(score_[b] > kSwapGain * score_[a] + 1e-9)) break;
+    // An undone move is no move: it leaves the cut, the regions and their
+    // factorisations as they were.
     const double before = estimate_;
     unrecover(b);
     if (!cut_.can_recover(a)) {  // b was a's parent: undo and stop
       recover(b);
-      ++moves;
       break;
     }
     recover(a);
-    moves += 2;
     if (estimate_ > threshold_) {  // the pair does not fit after all: undo it
       unrecover(a);
       recover(b);
       estimate_ = std::max(estimate_, before);
       break;
     }
+    moves += 2;
   }
-  if (moves > 0) rebuild_regions();
+  if (!changed_.empty()) rebuild_regions();
   return moves;
+}
+
+std::size_t AdaptiveCut::memory_bytes() const {
+  return cut_.memory_bytes() + in_cut_.capacity() / 8 + regions_.memory_bytes() + score_.capacity() * sizeof(float) +
+         place_.capacity() * sizeof(Index) + recoverable_.memory_bytes() + removable_.memory_bytes() +
+         uf_parent_.capacity() * sizeof(Index) + (uf_size_.capacity() + uf_constraints_.capacity()) * sizeof(double) +
+         changed_.capacity() * sizeof(Index) + moved_.capacity() / 8 + moved_id_.memory_bytes();
 }
 
 }  // namespace filigree

@@ -2,7 +2,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <exception>
+#include <mutex>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 #include <Eigen/CholmodSupport>
@@ -13,6 +17,12 @@
 #include "util/content_hash.h"
 
 namespace filigree {
+namespace {
+
+// region_of of a vertex whose region is being searched again.
+constexpr Index kPending = kNone - 1;
+
+}  // namespace
 
 double Regions::performance_estimate() const {
   double t = 0.0;
@@ -23,46 +33,204 @@ double Regions::performance_estimate() const {
   return t;
 }
 
+std::size_t Regions::memory_bytes() const {
+  return (offsets.capacity() + vertices.capacity() + constraints.capacity() + region_of.capacity()) * sizeof(Index);
+}
+
 Regions find_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut) {
-  const std::size_t n = laplacian.vertex_count();
+  // From "every vertex in the cut", every free vertex has changed.
+  std::vector<Index> free;
+  for (Index v = 0; v < laplacian.vertex_count(); ++v)
+    if (!in_cut[v]) free.push_back(v);
   Regions out;
-  out.region_of.assign(n, kNone);
-  out.local_index.assign(n, kNone);
-  std::vector<Index> stack, touched_cut;
-  std::vector<Index> seen_cut(n, kNone);  // region that last counted this cut vertex
-  for (Index seed = 0; seed < n; ++seed) {
-    if (in_cut[seed] || out.region_of[seed] != kNone) continue;
-    const Index r = static_cast<Index>(out.count());
-    const std::size_t begin = out.vertices.size();
-    Index constraints = 0;
-    stack.assign(1, seed);
-    out.region_of[seed] = r;
-    while (!stack.empty()) {
-      const Index v = stack.back();
-      stack.pop_back();
-      out.vertices.push_back(v);
-      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
-        const Index j = laplacian.neighbors[k];
-        if (in_cut[j]) {
-          if (seen_cut[j] != r) seen_cut[j] = r, ++constraints;
-        } else if (out.region_of[j] == kNone) {
-          out.region_of[j] = r;
-          stack.push_back(j);
-        }
-      }
-    }
-    std::sort(out.vertices.begin() + static_cast<std::ptrdiff_t>(begin), out.vertices.end());
-    for (std::size_t i = begin; i < out.vertices.size(); ++i) out.local_index[out.vertices[i]] = static_cast<Index>(i - begin);
-    out.offsets.push_back(static_cast<Index>(out.vertices.size()));
-    out.constraints.push_back(constraints);
-  }
+  out.region_of.assign(laplacian.vertex_count(), kNone);
+  update_regions(laplacian, in_cut, free, out);
   return out;
 }
 
+void update_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut,
+                    std::span<const Index> changed, Regions& regions) {
+  if (changed.empty()) return;
+  std::vector<Index>& of = regions.region_of;
+  if (of.empty()) of.assign(laplacian.vertex_count(), kNone);
+  const Index old_count = static_cast<Index>(regions.count());
+
+  // 1. A region that neither contains nor borders a changed vertex keeps its
+  // vertices, its cut neighbours and so its constraints: it is still a
+  // component. The others are searched again.
+  std::vector<std::uint8_t> dirty(old_count, 0);
+  auto mark = [&](Index u) {
+    if (of[u] != kNone) dirty[of[u]] = 1;
+  };
+  for (Index v : changed) {
+    mark(v);
+    for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) mark(laplacian.neighbors[k]);
+  }
+  // 2. Pending: the free vertices of those regions and the changed vertices
+  // now free. Every free vertex a search can reach is one of them.
+  std::vector<Index> seeds;
+  auto pend = [&](Index v) {
+    if (in_cut[v]) {
+      of[v] = kNone;
+    } else if (of[v] != kPending) {
+      of[v] = kPending;
+      seeds.push_back(v);
+    }
+  };
+  for (Index r = 0; r < old_count; ++r)
+    if (dirty[r])
+      for (Index i = regions.offsets[r]; i < regions.offsets[r + 1]; ++i) pend(regions.vertices[i]);
+  for (Index v : changed) pend(v);
+
+  // 3. Search from the pending vertices; new regions get provisional ids
+  // after the old ones. Breadth first, with the region's own vertex list as
+  // the queue: the rows of the vertices a few places ahead are fetched early,
+  // as a search over a large mesh otherwise waits on each row in turn.
+  struct Found {
+    Index begin, end, constraints;
+  };
+  std::vector<Found> found;
+  std::vector<Index> found_vertices, cut_neighbours;
+  for (Index seed : seeds) {
+    if (of[seed] != kPending) continue;
+    const Index id = old_count + static_cast<Index>(found.size());
+    const std::size_t begin = found_vertices.size();
+    cut_neighbours.clear();
+    found_vertices.push_back(seed);
+    of[seed] = id;
+    for (std::size_t head = begin; head < found_vertices.size(); ++head) {
+      if (head + 4 < found_vertices.size()) {
+        const Index ahead = found_vertices[head + 4];
+        __builtin_prefetch(&laplacian.neighbors[laplacian.offsets[ahead]]);
+      }
+      if (head + 2 < found_vertices.size()) {
+        const Index ahead = found_vertices[head + 2];
+        for (Index k = laplacian.offsets[ahead]; k < laplacian.offsets[ahead + 1]; ++k)
+          __builtin_prefetch(&of[laplacian.neighbors[k]]);
+      }
+      const Index v = found_vertices[head];
+      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+        const Index j = laplacian.neighbors[k];
+        if (in_cut[j]) {
+          cut_neighbours.push_back(j);
+        } else if (of[j] == kPending) {
+          of[j] = id;
+          found_vertices.push_back(j);
+          __builtin_prefetch(&laplacian.offsets[j]);
+        }
+      }
+    }
+    std::sort(cut_neighbours.begin(), cut_neighbours.end());
+    const auto distinct = std::unique(cut_neighbours.begin(), cut_neighbours.end()) - cut_neighbours.begin();
+    found.push_back(
+        {static_cast<Index>(begin), static_cast<Index>(found_vertices.size()), static_cast<Index>(distinct)});
+  }
+  // Each found region's vertices in ascending order: sorted one by one, or,
+  // when most of the mesh was searched (a cut made from scratch), bucketed by
+  // one sweep over the vertices, which is already in order.
+  if (found_vertices.size() > of.size() / 8) {
+    std::vector<Index> cursor(found.size());
+    for (std::size_t i = 0; i < found.size(); ++i) cursor[i] = found[i].begin;
+    for (Index v = 0; v < of.size(); ++v)
+      if (of[v] != kNone && of[v] >= old_count) found_vertices[cursor[of[v] - old_count]++] = v;
+  } else {
+    for (const Found& f : found) std::sort(found_vertices.begin() + f.begin, found_vertices.begin() + f.end);
+  }
+
+  // 4. Renumber every region by its smallest vertex, as find_regions does:
+  // the kept regions are in that order already, so the found ones (sorted)
+  // are merged in. Only vertices whose region id changes are rewritten.
+  std::vector<Index> found_order(found.size());
+  for (Index i = 0; i < found.size(); ++i) found_order[i] = i;
+  auto first_found = [&](Index i) { return found_vertices[found[i].begin]; };
+  std::sort(found_order.begin(), found_order.end(), [&](Index a, Index b) { return first_found(a) < first_found(b); });
+  Regions out;
+  std::size_t kept = 0, total = found_vertices.size();
+  for (Index r = 0; r < old_count; ++r)
+    if (!dirty[r]) ++kept, total += regions.size(r);
+  out.offsets.reserve(kept + found.size() + 1);
+  out.constraints.reserve(kept + found.size());
+  out.vertices.reserve(total);
+  auto append = [&](const Index* first, const Index* last, Index constraints, bool rewrite) {
+    const Index id = static_cast<Index>(out.count());
+    if (rewrite)
+      for (const Index* v = first; v != last; ++v) of[*v] = id;
+    out.vertices.insert(out.vertices.end(), first, last);
+    out.offsets.push_back(static_cast<Index>(out.vertices.size()));
+    out.constraints.push_back(constraints);
+  };
+  std::size_t next_found = 0;
+  auto append_found_before = [&](Index limit) {
+    for (; next_found < found_order.size() && first_found(found_order[next_found]) < limit; ++next_found) {
+      const Found& f = found[found_order[next_found]];
+      append(found_vertices.data() + f.begin, found_vertices.data() + f.end, f.constraints, true);
+    }
+  };
+  for (Index r = 0; r < old_count; ++r) {
+    if (dirty[r]) continue;
+    const Index* first = regions.vertices.data() + regions.offsets[r];
+    append_found_before(*first);
+    append(first, regions.vertices.data() + regions.offsets[r + 1], regions.constraints[r], out.count() != r);
+  }
+  append_found_before(kNone);
+  out.region_of = std::move(of);
+  regions = std::move(out);
+}
+
+// ---- RegionSolver
+
+namespace {
+
+// Dense Cholesky, packed by rows: L[i][j] (j ≤ i) at i(i+1)/2 + j, with
+// 1/L[i][i] in place of the diagonal so that solves only multiply.
+std::size_t packed(std::size_t i, std::size_t j) { return i * (i + 1) / 2 + j; }
+
+// Factorises the packed lower triangle of A in place (Cholesky–Banachiewicz).
+bool dense_cholesky(double* l, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) {
+    double* li = l + packed(i, 0);
+    for (std::size_t j = 0; j <= i; ++j) {
+      const double* lj = l + packed(j, 0);
+      double s = li[j];
+      for (std::size_t k = 0; k < j; ++k) s -= li[k] * lj[k];
+      if (j < i) {
+        li[j] = s * lj[j];
+      } else {
+        if (!(s > 0.0)) return false;
+        li[i] = 1.0 / std::sqrt(s);
+      }
+    }
+  }
+  return true;
+}
+
+// Solves L Lᵀ y = b in place, three columns at once.
+void dense_solve(const double* l, std::size_t n, Vec3* y) {
+  for (std::size_t i = 0; i < n; ++i) {
+    const double* li = l + packed(i, 0);
+    Vec3 s = y[i];
+    for (std::size_t k = 0; k < i; ++k) s -= li[k] * y[k];
+    y[i] = s * li[i];
+  }
+  for (std::size_t i = n; i-- > 0;) {
+    Vec3 s = y[i];
+    for (std::size_t k = i + 1; k < n; ++k) s -= l[packed(k, i)] * y[k];
+    y[i] = s * l[packed(i, i)];
+  }
+}
+
+[[noreturn]] void not_factorisable(std::size_t n) {
+  throw std::runtime_error("region of " + std::to_string(n) + " vertices could not be factorised");
+}
+
+}  // namespace
+
 struct RegionSolver::Factor {
   std::vector<Index> vertices;
-  Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower> cholesky;
+  std::vector<double> dense;  // n ≤ kDenseMax: the packed dense factor
+  std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>> sparse;
   bool used = false;
+  bool made = false;  // factorised (a new factor is factorised by its region's task)
 };
 
 RegionSolver::RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta)
@@ -70,83 +238,222 @@ RegionSolver::RegionSolver(const CotangentLaplacian& laplacian, const std::vecto
 
 RegionSolver::~RegionSolver() = default;
 
-RegionSolver::Factor& RegionSolver::factor_for(const Regions& regions, std::size_t r, std::size_t& made) {
+void RegionSolver::factorize(const Regions& regions, std::size_t r, Factor& f) const {
   const Index* first = regions.vertices.data() + regions.offsets[r];
   const std::size_t n = regions.size(r);
-  // Keyed by a hash of the vertex list; on a collision, probe the next key.
-  std::uint64_t key = hash_bytes(first, n * sizeof(Index));
-  for (auto it = cache_.find(key); it != cache_.end(); it = cache_.find(++key)) {
-    if (it->second->vertices.size() == n && std::equal(first, first + n, it->second->vertices.begin())) {
-      it->second->used = true;
-      return *it->second;
-    }
-  }
+  const Index self = static_cast<Index>(r);
   // L_RR: the rows of the region, columns restricted to it; the diagonal keeps
   // every weight, so the constraints make it strictly diagonally dominant (SPD).
-  std::vector<Eigen::Triplet<double>> entries;
-  for (std::size_t i = 0; i < n; ++i) {
-    const Index v = first[i];
-    double diagonal = 0.0;
-    for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
-      const Index j = laplacian_.neighbors[k];
-      diagonal += laplacian_.weights[k];
-      if (regions.region_of[j] == r && regions.local_index[j] < i)
-        entries.emplace_back(static_cast<int>(i), static_cast<int>(regions.local_index[j]), -laplacian_.weights[k]);
+  auto local = [&](Index j) { return static_cast<std::size_t>(std::lower_bound(first, first + n, j) - first); };
+  if (n <= kDenseMax) {
+    f.dense.assign(n * (n + 1) / 2, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Index v = first[i];
+      double diagonal = 0.0;
+      for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
+        const Index j = laplacian_.neighbors[k];
+        diagonal += laplacian_.weights[k];
+        if (j < v && regions.region_of[j] == self) f.dense[packed(i, local(j))] = -laplacian_.weights[k];
+      }
+      f.dense[packed(i, i)] = diagonal;
     }
-    entries.emplace_back(static_cast<int>(i), static_cast<int>(i), diagonal);
+    if (!dense_cholesky(f.dense.data(), n)) not_factorisable(n);
+  } else {
+    std::vector<Eigen::Triplet<double>> entries;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Index v = first[i];
+      double diagonal = 0.0;
+      for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
+        const Index j = laplacian_.neighbors[k];
+        diagonal += laplacian_.weights[k];
+        if (j < v && regions.region_of[j] == self)
+          entries.emplace_back(static_cast<int>(i), static_cast<int>(local(j)), -laplacian_.weights[k]);
+      }
+      entries.emplace_back(static_cast<int>(i), static_cast<int>(i), diagonal);
+    }
+    Eigen::SparseMatrix<double> a(static_cast<int>(n), static_cast<int>(n));
+    a.setFromTriplets(entries.begin(), entries.end());
+    f.sparse = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>>();
+    f.sparse->compute(a);
+    if (f.sparse->info() != Eigen::Success) not_factorisable(n);
   }
-  Eigen::SparseMatrix<double> a(static_cast<int>(n), static_cast<int>(n));
-  a.setFromTriplets(entries.begin(), entries.end());
-  auto f = std::make_unique<Factor>();
-  f->vertices.assign(first, first + n);
-  f->cholesky.compute(a);
-  if (f->cholesky.info() != Eigen::Success)
-    throw std::runtime_error("region of " + std::to_string(n) + " vertices could not be factorised");
-  f->used = true;
-  ++made;
-  Factor& ref = *f;
-  cache_[key] = std::move(f);
-  return ref;
+  f.made = true;
 }
 
-void RegionSolver::solve_region(const Regions& regions, std::size_t r, Factor& f, std::vector<Vec3>& x,
-                                const std::vector<Eigen::Matrix3d>& rotations) const {
+void RegionSolver::solve_region(const Regions& regions, std::size_t r, const Factor* f, std::vector<Vec3>& x,
+                                const Calls& calls) const {
   const std::size_t n = regions.size(r);
-  Eigen::MatrixX3d b(static_cast<Eigen::Index>(n), 3);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Index v = f.vertices[i];
-    Vec3 rhs = rotations[v] * delta_[v];
+  const Index* first = regions.vertices.data() + regions.offsets[r];
+  const Index self = static_cast<Index>(r);
+  if (!f) {
+    // A tiny region: its matrix comes from the same rows as its right-hand
+    // side, so factorising it here costs less than finding a cached factor.
+    // Membership is looked up in its own few vertices, not in region_of.
+    double l[kDirectMax * (kDirectMax + 1) / 2];
+    std::fill_n(l, n * (n + 1) / 2, 0.0);
+    Vec3 y[kDirectMax];
+    for (std::size_t i = 0; i < n; ++i) {
+      const Index v = first[i];
+      Vec3 rhs = calls.rotation(calls.context, v) * delta_[v];
+      double diagonal = 0.0;
+      for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
+        const Index j = laplacian_.neighbors[k];
+        const double w = laplacian_.weights[k];
+        diagonal += w;
+        const std::size_t local = static_cast<std::size_t>(std::find(first, first + n, j) - first);
+        if (local == n) {
+          rhs += w * x[j];
+        } else if (local < i) {
+          l[packed(i, local)] = -w;
+        }
+      }
+      l[packed(i, i)] = diagonal;
+      y[i] = rhs;
+    }
+    if (!dense_cholesky(l, n)) not_factorisable(n);
+    dense_solve(l, n, y);
+    for (std::size_t i = 0; i < n; ++i) x[first[i]] = y[i];
+    return;
+  }
+  auto rhs_of = [&](std::size_t i) {
+    const Index v = first[i];
+    Vec3 rhs = calls.rotation(calls.context, v) * delta_[v];
     for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
       const Index j = laplacian_.neighbors[k];
-      if (regions.region_of[j] != r) rhs += laplacian_.weights[k] * x[j];
+      if (regions.region_of[j] != self) rhs += laplacian_.weights[k] * x[j];
     }
-    b.row(static_cast<Eigen::Index>(i)) = rhs.transpose();
+    return rhs;
+  };
+  if (!f->dense.empty()) {
+    Vec3 y[kDenseMax];
+    for (std::size_t i = 0; i < n; ++i) y[i] = rhs_of(i);
+    dense_solve(f->dense.data(), n, y);
+    for (std::size_t i = 0; i < n; ++i) x[first[i]] = y[i];
+    return;
   }
-  const Eigen::MatrixX3d sol = f.cholesky.solve(b);
-  for (std::size_t i = 0; i < n; ++i) x[f.vertices[i]] = sol.row(static_cast<Eigen::Index>(i)).transpose();
+  Eigen::MatrixX3d b(static_cast<Eigen::Index>(n), 3);
+  for (std::size_t i = 0; i < n; ++i) b.row(static_cast<Eigen::Index>(i)) = rhs_of(i).transpose();
+  const Eigen::MatrixX3d sol = f->sparse->solve(b);
+  for (std::size_t i = 0; i < n; ++i) x[first[i]] = sol.row(static_cast<Eigen::Index>(i)).transpose();
 }
 
-void RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x, int threads,
-                             const std::vector<Eigen::Matrix3d>& rotations, std::size_t& made) {
+void RegionSolver::prefetch(const Regions& regions, std::size_t r, int step, const std::vector<Vec3>& x,
+                            const Calls& calls) const {
+  if (regions.size(r) > kDirectMax) return;
+  for (Index i = regions.offsets[r]; i < regions.offsets[r + 1]; ++i) {
+    const Index v = regions.vertices[i];
+    if (step == 0) {
+      __builtin_prefetch(&laplacian_.offsets[v]);
+      __builtin_prefetch(&delta_[v]);
+      if (calls.prefetch) calls.prefetch(calls.context, v);
+    } else if (step == 1) {
+      __builtin_prefetch(&laplacian_.neighbors[laplacian_.offsets[v]]);
+      __builtin_prefetch(&laplacian_.weights[laplacian_.offsets[v]]);
+    } else {
+      for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k)
+        __builtin_prefetch(&x[laplacian_.neighbors[k]]);
+    }
+  }
+}
+
+std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x, int threads, const Calls& calls) {
+  const std::size_t count = regions.count();
+  // Find each larger region's factorisation, or make a place for a new one
+  // (keyed by a hash of the vertex list; on a collision, probe the next key).
   for (auto& [key, f] : cache_) f->used = false;
-  std::vector<Factor*> factors(regions.count());
-  for (std::size_t r = 0; r < regions.count(); ++r) factors[r] = &factor_for(regions, r, made);
+  std::vector<Index> large;
+  std::vector<Factor*> factors;
+  std::vector<std::pair<std::uint64_t, std::unique_ptr<Factor>>> fresh;
+  for (std::size_t r = 0; r < count; ++r) {
+    const std::size_t n = regions.size(r);
+    if (n <= kDirectMax) continue;
+    const Index* first = regions.vertices.data() + regions.offsets[r];
+    std::uint64_t key = hash_bytes(first, n * sizeof(Index));
+    Factor* found = nullptr;
+    for (auto it = cache_.find(key); it != cache_.end(); it = cache_.find(++key)) {
+      if (it->second->vertices.size() == n && std::equal(first, first + n, it->second->vertices.begin())) {
+        found = it->second.get();
+        break;
+      }
+    }
+    if (!found) {
+      auto f = std::make_unique<Factor>();
+      f->vertices.assign(first, first + n);
+      found = f.get();
+      fresh.emplace_back(key, std::move(f));
+    }
+    found->used = true;
+    large.push_back(static_cast<Index>(r));
+    factors.push_back(found);
+  }
   // Factorisations of regions that no longer exist are dropped.
   std::erase_if(cache_, [](const auto& entry) { return !entry.second->used; });
 
-  // Largest regions first, handed out dynamically; each region writes only its
-  // own vertices, so the result does not depend on the schedule.
-  std::vector<std::size_t> order(regions.count());
-  for (std::size_t r = 0; r < order.size(); ++r) order[r] = r;
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return regions.size(a) > regions.size(b); });
+  // Tasks, handed out dynamically: the larger regions one by one, largest
+  // first, then the tiny ones in blocks. A task makes its region's
+  // factorisation if new, then solves, writing only its region's vertices, so
+  // the result does not depend on the schedule.
+  std::vector<std::size_t> order(large.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return regions.size(large[a]) > regions.size(large[b]); });
+  constexpr std::size_t kBlock = 256;
+  const std::size_t tasks = order.size() + (count + kBlock - 1) / kBlock;
   std::atomic<std::size_t> next{0};
+  std::exception_ptr failure;
+  std::mutex failure_mutex;
   auto work = [&] {
-    for (std::size_t i = next++; i < order.size(); i = next++) solve_region(regions, order[i], *factors[order[i]], x, rotations);
+    try {
+      for (std::size_t task = next++; task < tasks; task = next++) {
+        if (task < order.size()) {
+          const std::size_t i = order[task];
+          Factor& f = *factors[i];
+          if (!f.made) factorize(regions, large[i], f);
+          solve_region(regions, large[i], &f, x, calls);
+          continue;
+        }
+        // Tiny regions lie scattered over the mesh, so their solves wait on
+        // memory: fetch the rows of the regions a few ahead, in the steps
+        // the loads depend on each other by, so that the loads overlap.
+        const std::size_t begin = (task - order.size()) * kBlock, end = std::min(begin + kBlock, count);
+        for (std::size_t r = begin; r < end; ++r) {
+          if (r + 12 < end) prefetch(regions, r + 12, 0, x, calls);
+          if (r + 6 < end) prefetch(regions, r + 6, 1, x, calls);
+          if (r + 3 < end) prefetch(regions, r + 3, 2, x, calls);
+          if (regions.size(r) <= kDirectMax) solve_region(regions, r, nullptr, x, calls);
+        }
+      }
+    } catch (...) {
+      std::lock_guard lock(failure_mutex);
+      if (!failure) failure = std::current_exception();
+      next = tasks;
+    }
   };
-  const int t = std::max(1, std::min<int>(threads, static_cast<int>(order.size())));
-  std::vector<std::jthread> pool;
-  for (int k = 1; k < t; ++k) pool.emplace_back(work);
-  work();
+  const int t = std::max(1, std::min<int>(threads, static_cast<int>(tasks)));
+  {
+    std::vector<std::jthread> pool;
+    for (int k = 1; k < t; ++k) pool.emplace_back(work);
+    work();
+  }
+  if (failure) std::rethrow_exception(failure);
+
+  const std::size_t made = fresh.size();
+  for (auto& [key, f] : fresh) {
+    std::uint64_t k = key;
+    while (cache_.count(k)) ++k;
+    cache_.emplace(k, std::move(f));
+  }
+  return made;
+}
+
+std::size_t RegionSolver::memory_bytes() const {
+  std::size_t bytes = 0;
+  for (const auto& [key, f] : cache_) {
+    bytes += sizeof(Factor) + 32 + f->vertices.capacity() * sizeof(Index) + f->dense.capacity() * sizeof(double);
+    // CHOLMOD's factor: about its non-zeros, plus its workspace and settings.
+    if (f->sparse) bytes += sizeof(*f->sparse) + 16 * f->vertices.size() * sizeof(double);
+  }
+  return bytes;
 }
 
 }  // namespace filigree

@@ -6,6 +6,8 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
+#include <type_traits>
 #include <unordered_map>
 #include <vector>
 
@@ -21,57 +23,92 @@ struct Regions {
   std::vector<Index> offsets{0};       // region r is vertices[offsets[r] .. offsets[r+1])
   std::vector<Index> vertices;         // ascending within a region
   std::vector<Index> constraints;      // per region: cut vertices adjacent to it (c_i)
-  std::vector<Index> region_of;        // per vertex: its region, kNone in the cut
-  std::vector<Index> local_index;      // per region vertex: its position in its region
+  // Per vertex: its region, kNone in the cut. May be empty while every
+  // vertex is in the cut (a T = 0 cut allocates nothing per vertex).
+  std::vector<Index> region_of;
 
   std::size_t count() const { return offsets.size() - 1; }
   std::size_t size(std::size_t r) const { return offsets[r + 1] - offsets[r]; }
-  // The thesis' performance estimate T = Σ (n_i² + c_i²) (eq. 3.12).
+  // The thesis' performance estimate T = Σ (n_i² + c_i²) (eq. 3.12). Exact:
+  // the terms are integers, far below 2⁵³.
   double performance_estimate() const;
+  std::size_t memory_bytes() const;
 };
 
 // `in_cut[v]` marks vertices in the cut mesh. Regions are numbered by their
 // smallest vertex, so the result depends only on the cut.
 Regions find_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut);
 
-// Solves regions, keeping each region's sparse Cholesky factorisation
-// (CHOLMOD) for as long as a region with exactly the same vertices exists.
+// Brings `regions` — find_regions' result for an earlier `in_cut`, or an
+// empty Regions if every vertex was in the cut — up to date after the
+// vertices `changed` entered or left the cut (repeats, and vertices that
+// changed back, are fine). Only the regions that contain or border a changed
+// vertex are searched again; the rest are renumbered, O(their vertices). The
+// result equals find_regions(laplacian, in_cut).
+void update_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut,
+                    std::span<const Index> changed, Regions& regions);
+
+// Solves regions, keeping each region's Cholesky factorisation for as long as
+// a region with exactly the same vertices exists: dense for small regions (a
+// sparse solver's fixed cost per call would dominate), CHOLMOD's sparse one
+// above. Most regions of a finite T hold a vertex or two (percolation, DESIGN
+// §2.2.4); those are factorised afresh every solve, from the rows their
+// right-hand side reads anyway, which costs less than finding a cached factor.
 class RegionSolver {
  public:
   RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta);
   ~RegionSolver();
 
   // Writes the solution of every region into `x` (cut vertices of `x` are the
-  // fixed values). `rotation(v)` gives the rotation applied to δ_v.
-  // Regions are solved on `threads` threads; results do not depend on it.
-  // Returns the number of factorisations this call performed.
+  // fixed values). `rotation(v)` gives the rotation applied to δ_v; it is
+  // called once per region vertex just before that vertex's region is solved,
+  // from up to `threads` threads at once, and may read x at v and at v's mesh
+  // neighbours (those still hold this call's input: a region's neighbours are
+  // its own vertices or cut vertices). Regions are factorised and solved on
+  // `threads` threads; results do not depend on it.
+  // Returns the number of factorisations this call made for its cache
+  // (regions of more than kDirectMax vertices that are new).
+  // If `rotation` also has a `prefetch(Index v)` member, it is called a few
+  // regions ahead of rotation(v), so that what rotation(v) reads arrives in
+  // time (tiny regions lie scattered, and their solves wait on memory).
   template <class RotationOf>
-  std::size_t solve(const Regions& regions, std::vector<Vec3>& x, int threads, RotationOf&& rotation);
+  std::size_t solve(const Regions& regions, std::vector<Vec3>& x, int threads, RotationOf&& rotation) {
+    using F = std::remove_reference_t<RotationOf>;
+    Calls calls{[](const void* f, Index v) -> Eigen::Matrix3d { return (*static_cast<const F*>(f))(v); }, nullptr,
+                &rotation};
+    if constexpr (requires(const F& f, Index v) { f.prefetch(v); })
+      calls.prefetch = [](const void* f, Index v) { static_cast<const F*>(f)->prefetch(v); };
+    return solve_all(regions, x, threads, calls);
+  }
 
   std::size_t cached_factorizations() const { return cache_.size(); }
+  // Heap bytes of the cached factorisations (estimated for CHOLMOD's).
+  std::size_t memory_bytes() const;
+
+  // Regions of at most this many vertices are solved without the cache.
+  static constexpr std::size_t kDirectMax = 8;
+  // Regions of at most this many vertices get a dense factorisation.
+  static constexpr std::size_t kDenseMax = 32;
 
  private:
   struct Factor;
-  // Factorises (or finds) region r; not thread-safe, called before the solves.
-  Factor& factor_for(const Regions& regions, std::size_t r, std::size_t& new_factorizations);
-  void solve_region(const Regions& regions, std::size_t r, Factor& f, std::vector<Vec3>& x,
-                    const std::vector<Eigen::Matrix3d>& rotations) const;
-  void solve_all(const Regions& regions, std::vector<Vec3>& x, int threads, const std::vector<Eigen::Matrix3d>& rotations,
-                 std::size_t& new_factorizations);
+  // The caller's rotation, type-erased.
+  struct Calls {
+    Eigen::Matrix3d (*rotation)(const void*, Index);
+    void (*prefetch)(const void*, Index);  // may be null
+    const void* context;
+  };
+  std::size_t solve_all(const Regions& regions, std::vector<Vec3>& x, int threads, const Calls& calls);
+  void factorize(const Regions& regions, std::size_t r, Factor& f) const;
+  // Step 0, 1, 2 of fetching the rows a tiny region r's solve reads.
+  void prefetch(const Regions& regions, std::size_t r, int step, const std::vector<Vec3>& x, const Calls& calls) const;
+  // `f` is null for a region of at most kDirectMax vertices.
+  void solve_region(const Regions& regions, std::size_t r, const Factor* f, std::vector<Vec3>& x,
+                    const Calls& calls) const;
 
   const CotangentLaplacian& laplacian_;
   const std::vector<Vec3>& delta_;
   std::unordered_map<std::uint64_t, std::unique_ptr<Factor>> cache_;
-  std::vector<Eigen::Matrix3d> rotations_;  // per vertex scratch, filled for region vertices
 };
-
-template <class RotationOf>
-std::size_t RegionSolver::solve(const Regions& regions, std::vector<Vec3>& x, int threads, RotationOf&& rotation) {
-  rotations_.resize(x.size());
-  for (Index v : regions.vertices) rotations_[v] = rotation(v);
-  std::size_t made = 0;
-  solve_all(regions, x, threads, rotations_, made);
-  return made;
-}
 
 }  // namespace filigree

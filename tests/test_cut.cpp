@@ -1,0 +1,385 @@
+// The adaptive cut's parts at scale (issue 10 item 5): the full cut made in
+// O(n) and its lazily counted blockers, the indexed node queues, regions kept
+// up to date incrementally (equal to a search from scratch), the region solver
+// (dense and sparse factorisations against a plain solve), and the cut update
+// (its regions, determinism across thread counts, bounded memory).
+
+#include <algorithm>
+#include <atomic>
+#include <random>
+#include <set>
+
+#include <Eigen/SparseCholesky>
+#include <gtest/gtest.h>
+
+#include "geometry/cotangent_laplacian.h"
+#include "hierarchy/cut_state.h"
+#include "hierarchy/hierarchy.h"
+#include "preprocess/preprocess.h"
+#include "runtime/cut.h"
+#include "runtime/deformer.h"
+#include "runtime/node_heap.h"
+#include "runtime/procedural_motion.h"
+#include "runtime/regions.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+// The plain reference, kept here as the whole-mesh test keeps its own solve:
+// a depth-first search from each free vertex in ascending order, counting
+// each adjacent cut vertex once per region, vertices sorted per region.
+Regions plain_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut) {
+  const std::size_t n = laplacian.vertex_count();
+  Regions out;
+  out.region_of.assign(n, kNone);
+  std::vector<Index> stack, seen_cut(n, kNone);
+  for (Index seed = 0; seed < n; ++seed) {
+    if (in_cut[seed] || out.region_of[seed] != kNone) continue;
+    const Index r = static_cast<Index>(out.count());
+    const std::size_t begin = out.vertices.size();
+    Index constraints = 0;
+    stack.assign(1, seed);
+    out.region_of[seed] = r;
+    while (!stack.empty()) {
+      const Index v = stack.back();
+      stack.pop_back();
+      out.vertices.push_back(v);
+      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+        const Index j = laplacian.neighbors[k];
+        if (in_cut[j]) {
+          if (seen_cut[j] != r) seen_cut[j] = r, ++constraints;
+        } else if (out.region_of[j] == kNone) {
+          out.region_of[j] = r;
+          stack.push_back(j);
+        }
+      }
+    }
+    std::sort(out.vertices.begin() + static_cast<std::ptrdiff_t>(begin), out.vertices.end());
+    out.offsets.push_back(static_cast<Index>(out.vertices.size()));
+    out.constraints.push_back(constraints);
+  }
+  return out;
+}
+
+struct Case {
+  const char* name;
+  TriMesh (*make)();
+  std::size_t base_vertices;
+};
+
+class CutTest : public ::testing::TestWithParam<Case> {
+ protected:
+  void SetUp() override {
+    mesh_ = GetParam().make();
+    PreprocessOptions options;
+    options.base_vertices = GetParam().base_vertices;
+    h_ = preprocess(mesh_, options);
+    laplacian_ = cotangent_laplacian(mesh_);
+  }
+  // Regions compared field by field (region_of only where both have it).
+  static void expect_equal(const Regions& got, const Regions& want, const std::string& when) {
+    ASSERT_EQ(got.offsets, want.offsets) << when;
+    ASSERT_EQ(got.vertices, want.vertices) << when;
+    ASSERT_EQ(got.constraints, want.constraints) << when;
+    if (got.count() > 0 || !got.region_of.empty()) {
+      ASSERT_EQ(got.region_of, want.region_of) << when;
+    }
+    ASSERT_EQ(got.performance_estimate(), want.performance_estimate()) << when;
+  }
+  std::vector<Vec3> bent_result(double phase) {
+    Deformer d(h_);
+    return d.deform(procedural_pose(h_.base_mesh().positions, Motion::kBend, phase)).positions;
+  }
+  TriMesh mesh_;
+  Hierarchy h_;
+  CotangentLaplacian laplacian_;
+};
+
+TEST_P(CutTest, TheFullCutIsEveryNodeRecovered) {
+  CutState by_nodes(h_);
+  for (NodeId k : recovery_order(h_)) by_nodes.recover(k);
+  CutState full = CutState::full(h_);
+  EXPECT_EQ(full.recovered_count(), by_nodes.recovered_count());
+  EXPECT_EQ(full.alive_face_count(), by_nodes.alive_face_count());
+  for (FaceId f = 0; f < h_.faces.size(); ++f) ASSERT_EQ(full.face_alive(f), by_nodes.face_alive(f)) << "face " << f;
+  EXPECT_EQ(full.mesh().faces, by_nodes.mesh().faces);
+  // A cut that never changed holds no per-node counts.
+  EXPECT_LE(full.memory_bytes(), (h_.node_count() + h_.faces.size()) / 8 + 64);
+
+  // The same random walk down and up from both: the same answers throughout.
+  std::mt19937 rng(7);
+  std::vector<NodeId> candidates;
+  for (int move = 0; move < 3000; ++move) {
+    const bool down = rng() % 3 != 0;
+    candidates.clear();
+    for (NodeId k = 0; k < h_.node_count(); ++k) {
+      ASSERT_EQ(full.can_recover(k), by_nodes.can_recover(k)) << "move " << move << " node " << k;
+      ASSERT_EQ(full.can_remove(k), by_nodes.can_remove(k)) << "move " << move << " node " << k;
+      if (down ? full.can_remove(k) : full.can_recover(k)) candidates.push_back(k);
+    }
+    if (candidates.empty()) continue;
+    const NodeId k = candidates[rng() % candidates.size()];
+    if (down) {
+      full.remove(k), by_nodes.remove(k);
+    } else {
+      full.recover(k), by_nodes.recover(k);
+    }
+    if (move % 10 == 0) {
+      // Before the first change `full` answered without counts; now it has them.
+      EXPECT_TRUE(full.memory_bytes() >= h_.node_count() * sizeof(Index));
+    }
+  }
+  EXPECT_EQ(full.mesh().faces, by_nodes.mesh().faces);
+}
+
+TEST_P(CutTest, IncrementalRegionsEqualASearchFromScratch) {
+  const std::size_t n = mesh_.vertex_count();
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 3; ++trial) {
+    // Start from everything in the cut (an empty Regions), as the cut does.
+    std::vector<bool> in_cut(n, true);
+    Regions regions;
+    std::vector<Index> changed;
+    for (int step = 0; step < 60; ++step) {
+      // Batches of flips, biased to free vertices early and to walls later,
+      // so that regions grow, merge and split; some vertices flip twice.
+      changed.clear();
+      const std::size_t batch = 1 + rng() % (step % 7 == 0 ? n / 4 : 12);
+      const double free_bias = step < 30 ? 0.7 : 0.4;
+      for (std::size_t i = 0; i < batch; ++i) {
+        const Index v = rng() % n;
+        const bool want_free = std::uniform_real_distribution<>(0, 1)(rng) < free_bias;
+        if (in_cut[v] != !want_free) {
+          in_cut[v] = !want_free;
+          changed.push_back(v);
+        }
+        if (i % 5 == 0 && !changed.empty()) {  // a vertex that changes back
+          const Index u = changed[rng() % changed.size()];
+          in_cut[u] = !in_cut[u];
+          changed.push_back(u);
+        }
+      }
+      update_regions(laplacian_, in_cut, changed, regions);
+      const std::string when = "trial " + std::to_string(trial) + " step " + std::to_string(step);
+      const Regions reference = plain_regions(laplacian_, in_cut);
+      expect_equal(regions, reference, when);
+      expect_equal(find_regions(laplacian_, in_cut), reference, when + " (from scratch)");
+    }
+  }
+}
+
+TEST_P(CutTest, RegionSolverMatchesAPlainSolvePerRegion) {
+  const std::size_t n = mesh_.vertex_count();
+  // Cuts with regions of one vertex up to well above the dense limit.
+  std::mt19937 rng(3);
+  const std::vector<Vec3> delta = laplacian_.apply(mesh_.positions);
+  // One solver per thread count, so that factorisations run in parallel too.
+  RegionSolver solver_1(laplacian_, delta), solver_2(laplacian_, delta);
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  std::size_t kinds[3] = {0, 0, 0};
+  for (double free_share : {0.1, 0.45, 0.6, 0.9}) {
+    std::vector<bool> in_cut(n);
+    for (Index v = 0; v < n; ++v) in_cut[v] = std::uniform_real_distribution<>(0, 1)(rng) >= free_share;
+    const Regions regions = find_regions(laplacian_, in_cut);
+    std::size_t direct = 0, dense = 0, sparse = 0;
+    for (std::size_t r = 0; r < regions.count(); ++r) {
+      const std::size_t m = regions.size(r);
+      (m <= RegionSolver::kDirectMax ? direct : m <= RegionSolver::kDenseMax ? dense : sparse)++;
+    }
+    std::vector<Vec3> x = mesh_.positions;
+    for (Vec3& p : x) p = rot * p + Vec3(0.1, 0.2, -0.3);
+    std::vector<Vec3> want = x;
+    // The plain reference: L_RR x_R = R δ_R + Σ w x_B per region, SimplicialLDLT.
+    for (std::size_t r = 0; r < regions.count(); ++r) {
+      const std::size_t m = regions.size(r);
+      const Index* vs = regions.vertices.data() + regions.offsets[r];
+      std::vector<Eigen::Triplet<double>> entries;
+      Eigen::MatrixX3d b(static_cast<Eigen::Index>(m), 3);
+      for (std::size_t i = 0; i < m; ++i) {
+        const Index v = vs[i];
+        Vec3 rhs = rot * delta[v];
+        double diagonal = 0.0;
+        for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
+          const Index j = laplacian_.neighbors[k];
+          diagonal += laplacian_.weights[k];
+          if (in_cut[j]) {
+            rhs += laplacian_.weights[k] * x[j];
+          } else {
+            const auto local = std::lower_bound(vs, vs + m, j) - vs;
+            entries.emplace_back(static_cast<int>(i), static_cast<int>(local), -laplacian_.weights[k]);
+          }
+        }
+        entries.emplace_back(static_cast<int>(i), static_cast<int>(i), diagonal);
+        b.row(static_cast<Eigen::Index>(i)) = rhs.transpose();
+      }
+      Eigen::SparseMatrix<double> a(static_cast<int>(m), static_cast<int>(m));
+      a.setFromTriplets(entries.begin(), entries.end());
+      Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt(a);
+      ASSERT_EQ(ldlt.info(), Eigen::Success);
+      const Eigen::MatrixX3d sol = ldlt.solve(b);
+      for (std::size_t i = 0; i < m; ++i) want[vs[i]] = sol.row(static_cast<Eigen::Index>(i)).transpose();
+    }
+    const double diag = bounding_box_diagonal(mesh_.positions);
+    for (int threads : {1, 2}) {
+      RegionSolver& solver = threads == 1 ? solver_1 : solver_2;
+      for (int round = 0; round < 2; ++round) {
+        std::vector<Vec3> got = x;
+        const std::size_t made = solver.solve(regions, got, threads, [&](Index) { return rot; });
+        // Regions the previous cut also had keep their factorisation; a
+        // second solve reuses every one.
+        if (round == 0) {
+          EXPECT_LE(made, dense + sparse);
+        } else {
+          EXPECT_EQ(made, 0u);
+        }
+        double worst = 0.0;
+        for (Index v = 0; v < n; ++v) worst = std::max(worst, (got[v] - want[v]).norm());
+        EXPECT_LE(worst, 1e-9 * diag) << "free share " << free_share << ", " << direct << " direct, " << dense
+                                      << " dense and " << sparse << " sparse regions, " << threads << " threads";
+      }
+      EXPECT_EQ(solver.cached_factorizations(), dense + sparse);
+    }
+    kinds[0] += direct, kinds[1] += dense, kinds[2] += sparse;
+  }
+  EXPECT_GT(kinds[0], 0u);
+  EXPECT_GT(kinds[1], 0u);
+  EXPECT_GT(kinds[2], 0u);
+}
+
+// A rotation with a prefetch member is told the vertices ahead; results are
+// the same as without.
+struct CountingRotation {
+  Eigen::Matrix3d r;
+  std::atomic<std::size_t>* hints;
+  Eigen::Matrix3d operator()(Index) const { return r; }
+  void prefetch(Index) const { ++*hints; }
+};
+
+TEST_P(CutTest, RotationPrefetchHintsChangeNothing) {
+  const std::size_t n = mesh_.vertex_count();
+  std::vector<bool> in_cut(n);
+  std::mt19937 rng(9);
+  for (Index v = 0; v < n; ++v) in_cut[v] = rng() % 4 != 0;  // mostly tiny regions
+  const Regions regions = find_regions(laplacian_, in_cut);
+  const std::vector<Vec3> delta = laplacian_.apply(mesh_.positions);
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(-0.3, Vec3(0, 1, 1).normalized()).toRotationMatrix();
+  RegionSolver plain(laplacian_, delta), hinted(laplacian_, delta);
+  std::vector<Vec3> a = mesh_.positions, b = mesh_.positions;
+  plain.solve(regions, a, 2, [&](Index) { return rot; });
+  std::atomic<std::size_t> hints{0};
+  hinted.solve(regions, b, 2, CountingRotation{rot, &hints});
+  EXPECT_EQ(a, b);
+  EXPECT_GT(hints.load(), 0u);
+}
+
+TEST_P(CutTest, UpdatedCutKeepsItsRegionsExactAndItsStateBounded) {
+  const std::vector<Vec3> bent = bent_result(1.0);
+  for (double t : {500.0, 2e4, 3e5}) {
+    AdaptiveCut cut(h_, laplacian_, t);
+    EXPECT_EQ(cut.regions().count(), 0u);
+    for (int frame = 0; frame < 25; ++frame) {
+      cut.update(bent, 64 + h_.node_count() / 8, 16 + h_.node_count() / 64);
+      const std::string when = "T = " + std::to_string(t) + " frame " + std::to_string(frame);
+      const CutState& s = cut.state();
+      for (Index v = 0; v < mesh_.vertex_count(); ++v) ASSERT_EQ(cut.in_cut()[v], s.vertex_present(v)) << when;
+      expect_equal(cut.regions(), plain_regions(laplacian_, cut.in_cut()), when);
+      EXPECT_LE(cut.regions().performance_estimate(), t) << when;
+    }
+    // Queues hold each node at most once, whatever the frame count.
+    EXPECT_LE(cut.memory_bytes(), 40 * mesh_.vertex_count() + 4096) << "T = " << t;
+  }
+  // T = 0 holds about two bits per node and vertex, one per face.
+  AdaptiveCut direct(h_, laplacian_, 0.0);
+  EXPECT_LE(direct.memory_bytes(), mesh_.vertex_count() / 2 + h_.faces.size() / 8 + 256);
+  EXPECT_EQ(direct.state().recovered_count(), h_.node_count());
+}
+
+TEST_P(CutTest, ThresholdChangesResetOrKeepTheCut) {
+  const std::vector<Vec3> bent = bent_result(1.0);
+  const std::size_t eval = 64 + h_.node_count() / 8, moves = 16 + h_.node_count() / 64;
+  AdaptiveCut cut(h_, laplacian_, 2e4);
+  for (int frame = 0; frame < 5; ++frame) cut.update(bent, eval, moves);
+  ASSERT_GT(cut.regions().count(), 0u);
+  // Finite to finite keeps the cut.
+  const std::vector<bool> before = cut.in_cut();
+  cut.set_threshold(3e4);
+  EXPECT_EQ(cut.in_cut(), before);
+  // T = 0: the full cut, no regions, nothing per node kept.
+  cut.set_threshold(0.0);
+  EXPECT_EQ(cut.state().recovered_count(), h_.node_count());
+  EXPECT_EQ(cut.regions().count(), 0u);
+  EXPECT_EQ(cut.update(bent, eval, moves), 0u);
+  EXPECT_LE(cut.memory_bytes(), mesh_.vertex_count() / 2 + h_.faces.size() / 8 + 256);
+  // T = ∞: the empty cut, one region per component of the removed vertices.
+  cut.set_threshold(AdaptiveCut::kInfinity);
+  EXPECT_EQ(cut.state().recovered_count(), 0u);
+  expect_equal(cut.regions(), plain_regions(laplacian_, cut.in_cut()), "T = inf");
+  // Back to a finite T: the cut starts full again and adapts.
+  cut.set_threshold(2e4);
+  EXPECT_EQ(cut.state().recovered_count(), h_.node_count());
+  for (int frame = 0; frame < 5; ++frame) cut.update(bent, eval, moves);
+  EXPECT_GT(cut.regions().count(), 0u);
+  expect_equal(cut.regions(), plain_regions(laplacian_, cut.in_cut()), "T = 2e4 again");
+}
+
+TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
+  const std::vector<Vec3> bent = bent_result(0.8);
+  AdaptiveCut one(h_, laplacian_, 2e4), two(h_, laplacian_, 2e4);
+  for (int frame = 0; frame < 10; ++frame) {
+    const std::size_t eval = 64 + h_.node_count() / 16, moves = 16 + h_.node_count() / 100;
+    ASSERT_EQ(one.update(bent, eval, moves, 1), two.update(bent, eval, moves, 2)) << "frame " << frame;
+    ASSERT_EQ(one.in_cut(), two.in_cut()) << "frame " << frame;
+    for (NodeId k = 0; k < h_.node_count(); ++k) ASSERT_EQ(one.score(k), two.score(k));
+  }
+}
+
+TriMesh bunny() { return test::shipped_mesh("bunny_small.obj"); }
+TriMesh grid() { return test::wavy_grid(30); }
+TriMesh spheres() { return test::two_spheres(3); }
+
+INSTANTIATE_TEST_SUITE_P(Meshes, CutTest,
+                         ::testing::Values(Case{"bunny", bunny, 150}, Case{"open_grid", grid, 60},
+                                           Case{"two_spheres", spheres, 80}),
+                         [](const auto& info) { return std::string(info.param.name); });
+
+// The indexed heap against an ordered set, under pushes, re-keys and erases.
+TEST(NodeHeapTest, MatchesAnOrderedSet) {
+  std::mt19937 rng(5);
+  const std::size_t n = 400;
+  std::vector<float> key(n, 0.0f);
+  std::vector<Index> place(n, kNone);
+  struct Before {
+    bool operator()(const HeapEntry& a, const HeapEntry& b) const {
+      return a.key != b.key ? a.key < b.key : a.node < b.node;
+    }
+  };
+  NodeHeap<Before> heap(place);
+  auto cmp = [&](NodeId a, NodeId b) { return key[a] != key[b] ? key[a] < key[b] : a < b; };
+  std::set<NodeId, decltype(cmp)> want(cmp);
+  for (int op = 0; op < 20000; ++op) {
+    const NodeId k = rng() % n;
+    const int what = rng() % 3;
+    if (what == 0 && !heap.contains(k)) {
+      key[k] = static_cast<float>(rng() % 50);
+      heap.push(k, key[k]);
+      want.insert(k);
+    } else if (what == 1 && heap.contains(k)) {
+      want.erase(k);
+      key[k] = static_cast<float>(rng() % 50);  // ties are common
+      heap.update(k, key[k]);
+      want.insert(k);
+    } else if (what == 2 && heap.contains(k)) {
+      heap.erase(k);
+      want.erase(k);
+    }
+    ASSERT_EQ(heap.size(), want.size());
+    if (!want.empty()) {
+      ASSERT_EQ(heap.top().node, *want.begin()) << "op " << op;
+      ASSERT_EQ(heap.top().key, key[*want.begin()]);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace filigree
