@@ -42,7 +42,9 @@ std::string HierarchyCache::key_of(std::uint64_t mesh_hash, const PreprocessOpti
   } else {
     std::snprintf(spec, sizeof spec, "default");
   }
-  return hash_to_hex(mesh_hash) + "-" + spec;
+  // The format version is part of the key: a server never reads a cached
+  // hierarchy of another format; it builds (and shares) its own.
+  return hash_to_hex(mesh_hash) + "-" + spec + "-v" + std::to_string(kHierarchyFormatVersion);
 }
 
 std::filesystem::path HierarchyCache::file_of(const std::string& key) const { return dir_ / (key + ".fgh"); }
@@ -122,7 +124,17 @@ std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mes
     }
   }
   if (wait_for.valid()) return wait_for.get();  // someone else builds it: share the result (or its error)
-  if (!we_build) return load(key);
+  if (!we_build) {
+    try {
+      return load(key);
+    } catch (const HierarchyFileError& e) {
+      // A damaged cache file: the mesh is at hand, so build it again.
+      spdlog::warn("event=cached_hierarchy_unreadable key={} error=\"{}\"", key, e.what());
+      std::error_code ignored;
+      std::filesystem::remove(file_of(key), ignored);
+      return get_or_build(mesh, options, key_out, built);
+    }
+  }
 
   std::shared_ptr<const Hierarchy> h;
   bool fetched = false, claimed = false;

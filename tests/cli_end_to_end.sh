@@ -13,6 +13,7 @@ grep -q "base       150 vertices" "$OUT/pre.txt" || fail "preprocess summary: $(
 grep -q "peak" "$OUT/pre.txt" || fail "no peak memory in summary"
 "$FILIGREE" inspect "$OUT/bunny.fgh" > "$OUT/inspect.txt"
 grep -q "original      1839 vertices, 3674 faces" "$OUT/inspect.txt" || fail "inspect: $(cat "$OUT/inspect.txt")"
+grep -q "bytes/vertex in memory (.*), .* bytes/vertex on disk" "$OUT/inspect.txt" || fail "inspect size: $(cat "$OUT/inspect.txt")"
 "$FILIGREE" export-base "$OUT/bunny.fgh" -o "$OUT/base.obj" --ids "$OUT/ids.txt" > /dev/null
 [ "$(wc -l < "$OUT/ids.txt")" -eq 150 ] || fail "ids file does not have 150 lines"
 [ "$(grep -c '^v ' "$OUT/base.obj")" -eq 150 ] || fail "base.obj does not have 150 vertices"
@@ -55,6 +56,9 @@ printf 'v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n' > "$OUT/index.obj"
 expect_error "out of range" "$FILIGREE" preprocess "$OUT/index.obj" -o "$OUT/x.fgh"
 head -c 1000 "$OUT/bunny.fgh" > "$OUT/truncated.fgh"
 expect_error "truncated" "$FILIGREE" inspect "$OUT/truncated.fgh"
+cp "$OUT/bunny.fgh" "$OUT/v1.fgh"  # the same file claiming format version 1
+printf '\001\000\000\000' | dd of="$OUT/v1.fgh" bs=1 seek=8 conv=notrunc status=none
+expect_error "format version 1.*rebuild it" "$FILIGREE" inspect "$OUT/v1.fgh"
 expect_error "node count or 'all'" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover lots -o "$OUT/x.obj"
 expect_error "only" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover 999999 -o "$OUT/x.obj"
 head -c 100 /dev/zero > "$OUT/short.pose"

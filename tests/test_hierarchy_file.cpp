@@ -1,9 +1,11 @@
 // The hierarchy file: bit-identical round trips, and every kind of damage
 // turned into an error that says what is wrong.
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include <gtest/gtest.h>
 
@@ -11,6 +13,7 @@
 #include "hierarchy/hierarchy_file.h"
 #include "preprocess/preprocess.h"
 #include "support/test_meshes.h"
+#include "util/content_hash.h"
 
 namespace filigree {
 namespace {
@@ -42,15 +45,102 @@ class HierarchyFileTest : public ::testing::Test {
   static inline std::string* bytes_ = nullptr;
 };
 
+// Same bytes, element by element (float fields compared as bits, not values).
+template <class T>
+void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+  ASSERT_EQ(a.size(), b.size()) << what;
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(T)), 0) << what;
+}
+
+void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
+  expect_same_bytes(a.rest_positions, b.rest_positions, "rest_positions");
+  expect_same_bytes(a.faces, b.faces, "faces");
+  EXPECT_EQ(a.original_face_count, b.original_face_count);
+  expect_same_bytes(a.node_vertex, b.node_vertex, "node_vertex");
+  expect_same_bytes(a.node_closed, b.node_closed, "node_closed");
+  expect_same_bytes(a.ring_offsets, b.ring_offsets, "ring_offsets");
+  expect_same_bytes(a.ring_vertices, b.ring_vertices, "ring_vertices");
+  expect_same_bytes(a.ring_weights, b.ring_weights, "ring_weights");
+  expect_same_bytes(a.node_offset, b.node_offset, "node_offset");
+  expect_same_bytes(a.removed_faces, b.removed_faces, "removed_faces");
+  expect_same_bytes(a.created_faces, b.created_faces, "created_faces");
+  expect_same_bytes(a.parent_offsets, b.parent_offsets, "parent_offsets");
+  expect_same_bytes(a.parents, b.parents, "parents");
+  expect_same_bytes(a.child_offsets, b.child_offsets, "child_offsets");
+  expect_same_bytes(a.children, b.children, "children");
+  expect_same_bytes(a.base_vertices, b.base_vertices, "base_vertices");
+  expect_same_bytes(a.base_faces, b.base_faces, "base_faces");
+  expect_same_bytes(a.maps_face, b.maps_face, "maps_face");
+  expect_same_bytes(a.maps_bary, b.maps_bary, "maps_bary");
+  expect_same_bytes(a.vertex_node, b.vertex_node, "vertex_node");
+  EXPECT_EQ(a.mesh_hash, b.mesh_hash);
+  EXPECT_EQ(a.build.build_seconds, b.build.build_seconds);
+  EXPECT_EQ(a.build.requested_base_vertices, b.build.requested_base_vertices);
+  EXPECT_EQ(a.build.threads, b.build.threads);
+}
+
+// A payload edited in place, with the header's checksum made right again: a
+// file from a buggy or malicious producer.
+std::string rehashed(std::string bytes) {
+  const std::uint64_t hash = hash_bytes(bytes.data() + 64, bytes.size() - 64);
+  std::memcpy(bytes.data() + 32, &hash, sizeof hash);
+  return bytes;
+}
+
+// Byte offset of section `tag`'s first element.
+std::size_t section_data(const std::string& bytes, std::uint32_t tag) {
+  std::size_t pos = 64;
+  while (pos + 16 <= bytes.size()) {
+    std::uint32_t head[2];
+    std::uint64_t count;
+    std::memcpy(head, bytes.data() + pos, 8);
+    std::memcpy(&count, bytes.data() + pos + 8, 8);
+    if (head[0] == tag) return pos + 16;
+    const std::size_t size = head[1] * count;
+    pos += 16 + size + (8 - size % 8) % 8;
+  }
+  ADD_FAILURE() << "no section " << tag;
+  return 0;
+}
+
 TEST_F(HierarchyFileTest, MemoryRoundTripIsBitIdentical) {
   const Hierarchy back = deserialize_hierarchy(*bytes_);
   EXPECT_EQ(serialize_hierarchy(back), *bytes_);
-  EXPECT_EQ(back.rest_positions, hierarchy_->rest_positions);
-  EXPECT_EQ(back.faces, hierarchy_->faces);
-  EXPECT_EQ(back.parents, hierarchy_->parents);
-  EXPECT_EQ(back.maps_bary, hierarchy_->maps_bary);
-  EXPECT_EQ(back.mesh_hash, hierarchy_->mesh_hash);
-  EXPECT_EQ(back.build.build_seconds, hierarchy_->build.build_seconds);
+  expect_same_hierarchy(back, *hierarchy_);
+  // The preprocessed hierarchy filled its derived arrays itself; the loaded
+  // one derived them: they agree, and both pass the full check.
+  EXPECT_NO_THROW(validate_hierarchy(back));
+}
+
+TEST_F(HierarchyFileTest, FloatFieldsRoundTripBitExact) {
+  // float32 fields: stored as they are in memory, no conversion on the way.
+  Hierarchy h = *hierarchy_;
+  h.ring_weights[0] = std::nextafter(h.ring_weights[0], 2.0f);
+  h.node_offset[1].x() = std::nextafter(h.node_offset[1].x(), 0.0f);
+  h.node_offset[2].z() = 0x1p-140f;  // subnormal
+  h.maps_bary[3] = Vec3f(0.25f, std::nextafter(0.5f, 1.0f), 0.25f);
+  const Hierarchy back = deserialize_hierarchy(serialize_hierarchy(h));
+  expect_same_hierarchy(back, h);
+}
+
+TEST_F(HierarchyFileTest, MemoryBytesIsTheSumOfTheArrays) {
+  // A loaded hierarchy allocates exactly; count by hand what each array holds.
+  const Hierarchy h = deserialize_hierarchy(*bytes_);
+  const std::size_t n = h.vertex_count(), nodes = h.node_count(), faces = h.faces.size();
+  const std::size_t slots = h.ring_vertices.size(), created = faces - h.original_face_count, edges = h.children.size();
+  const std::size_t expected = n * (24 + 4 + 12 + 4)               // rest_positions, maps_face, maps_bary, vertex_node
+                               + faces * 12 + created * 4          // faces, created_faces
+                               + nodes * (4 + 1 + 12)              // node_vertex, node_closed, node_offset
+                               + (nodes + 1) * 4 * 3               // ring, parent and child offsets
+                               + slots * (4 + 4 + 4)               // ring_vertices, ring_weights, removed_faces
+                               + edges * 4 * 2                     // children, parents
+                               + (h.base_vertices.size() + h.base_faces.size()) * 4;
+  EXPECT_EQ(h.memory_bytes(), expected);
+  EXPECT_EQ(created, slots - 2 * nodes);  // each ring of r vertices made r − 2 faces
+  // A copy may hold more (capacity), never less.
+  Hierarchy grown = h;
+  grown.rest_positions.reserve(2 * n);
+  EXPECT_EQ(grown.memory_bytes(), expected + n * 24);
 }
 
 TEST_F(HierarchyFileTest, FileRoundTripIsBitIdentical) {
@@ -88,9 +178,76 @@ TEST_F(HierarchyFileTest, WrongMagicVersionAndTrailingBytes) {
   b = *bytes_;
   const std::uint32_t future = kHierarchyFormatVersion + 1;
   std::memcpy(b.data() + 8, &future, 4);
-  EXPECT_NE(error_of(b).find("unsupported format version 2"), std::string::npos) << error_of(b);
+  EXPECT_NE(error_of(b).find("unsupported format version " + std::to_string(future)), std::string::npos) << error_of(b);
 
   EXPECT_NE(error_of(*bytes_ + "junk").find("unexpected bytes"), std::string::npos);
+}
+
+TEST_F(HierarchyFileTest, VersionOneFilesAreRefusedWithWhatToDo) {
+  // A format-1 file (before the compact layout): the header says so, and the
+  // message says how to get a current file.
+  std::string b = *bytes_;
+  const std::uint32_t v1 = 1;
+  std::memcpy(b.data() + 8, &v1, 4);
+  const std::string msg = error_of(b);
+  EXPECT_NE(msg.find("test.fgh: unsupported format version 1"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("rebuild it"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("filigree preprocess"), std::string::npos) << msg;
+
+  const auto path = temp_file("v1.fgh");
+  std::ofstream(path, std::ios::binary).write(b.data(), static_cast<std::streamsize>(b.size()));
+  for (const auto& attempt : {std::function<void()>([&] { load_hierarchy(path); }), std::function<void()>([&] { read_hierarchy_file_info(path); })}) {
+    try {
+      attempt();
+      ADD_FAILURE() << "a version 1 file was accepted";
+    } catch (const HierarchyFileError& e) {
+      EXPECT_NE(std::string(e.what()).find("format version 1"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove(path);
+}
+
+TEST_F(HierarchyFileTest, TruncatedOrCorruptFilesOnDiskAreErrorsNotCrashes) {
+  // load_hierarchy maps the file: every size is checked against the mapping
+  // before anything is read through it.
+  const auto path = temp_file("damaged.fgh");
+  for (std::size_t size : {std::size_t{0}, std::size_t{63}, std::size_t{64}, std::size_t{4096}, bytes_->size() / 3,
+                           bytes_->size() - 8, bytes_->size() - 1}) {
+    std::ofstream(path, std::ios::binary | std::ios::trunc).write(bytes_->data(), static_cast<std::streamsize>(size));
+    try {
+      load_hierarchy(path);
+      ADD_FAILURE() << "size " << size << " accepted";
+    } catch (const HierarchyFileError& e) {
+      EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << "size " << size << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+  }
+  // The whole file, then cut short in place (as a crashed copy would leave it).
+  save_hierarchy(*hierarchy_, path);
+  std::filesystem::resize_file(path, bytes_->size() - 100);
+  EXPECT_THROW(load_hierarchy(path), HierarchyFileError);
+  for (std::size_t at : {std::size_t{100}, bytes_->size() / 2, bytes_->size() - 3}) {
+    std::string b = *bytes_;
+    b[at] = static_cast<char>(b[at] ^ 0x01);
+    std::ofstream(path, std::ios::binary | std::ios::trunc).write(b.data(), static_cast<std::streamsize>(b.size()));
+    try {
+      load_hierarchy(path);
+      ADD_FAILURE() << "flipped byte " << at << " accepted";
+    } catch (const HierarchyFileError& e) {
+      EXPECT_NE(std::string(e.what()).find("corrupt"), std::string::npos) << e.what();
+    }
+  }
+  // A directory is not a hierarchy file.
+  EXPECT_THROW(load_hierarchy(path.parent_path()), HierarchyFileError);
+  std::filesystem::remove(path);
+}
+
+TEST_F(HierarchyFileTest, UnalignedBuffersLoadToo) {
+  // Sections are read in place; a buffer that is not 8-byte aligned is copied first.
+  std::string shifted = " " + *bytes_;
+  const Hierarchy back = deserialize_hierarchy(std::span<const char>(shifted).subspan(1));
+  expect_same_hierarchy(back, *hierarchy_);
 }
 
 TEST_F(HierarchyFileTest, EveryFlippedPayloadByteIsCaught) {
@@ -108,7 +265,7 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   // A structurally wrong hierarchy written by a buggy or malicious producer:
   // the checksum is right, the content is not.
   Hierarchy forged = *hierarchy_;
-  forged.parents[0] = static_cast<NodeId>(forged.node_count() + 5);
+  forged.children[0] = static_cast<NodeId>(forged.node_count() + 5);
   std::string msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("corrupt: invalid hierarchy"), std::string::npos) << msg;
 
@@ -118,13 +275,64 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   EXPECT_NE(msg.find("face 3"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.maps_bary[7] = Vec3(0.5, 0.5, 0.5);
+  forged.maps_bary[7] = Vec3f(0.5f, 0.5f, 0.5f);
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("barycentric"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.ring_weights[2] = std::nan("");
+  forged.ring_weights[2] = std::nanf("");
   EXPECT_NE(error_of(serialize_hierarchy(forged)).find("ring weight"), std::string::npos);
+
+  // Stored forms the writer never makes, edited into the bytes.
+  std::string b = *bytes_;
+  b[section_data(b, 3) + 4] = 40;  // a created face's corner past its ring
+  msg = error_of(rehashed(b));
+  EXPECT_NE(msg.find("corners outside its ring"), std::string::npos) << msg;
+
+  b = *bytes_;
+  // A removed face that is also removed by the next node.
+  std::memcpy(b.data() + section_data(b, 10) + 4 * hierarchy_->ring_offsets[1], b.data() + section_data(b, 10), 4);
+  msg = error_of(rehashed(b));
+  EXPECT_NE(msg.find("removes an invalid face"), std::string::npos) << msg;
+
+  b = *bytes_;
+  // Node 0 removes a face the last node creates: a face that does not exist yet.
+  const NodeId last = static_cast<NodeId>(hierarchy_->node_count() - 1);
+  const FaceId own = hierarchy_->created_faces_of(last)[0];
+  std::memcpy(b.data() + section_data(b, 10) + 4 * hierarchy_->ring_offsets[0], &own, 4);
+  msg = error_of(rehashed(b));
+  EXPECT_NE(msg.find("node 0 removes face " + std::to_string(own) + " before it exists"), std::string::npos) << msg;
+}
+
+TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
+  // Arrays a file never stores must still agree with what they derive from
+  // in a hierarchy built in memory.
+  EXPECT_NO_THROW(validate_hierarchy(*hierarchy_));
+  const auto message = [](const Hierarchy& h) -> std::string {
+    try {
+      validate_hierarchy(h);
+    } catch (const HierarchyError& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  Hierarchy h = *hierarchy_;
+  ++h.parents[0];
+  EXPECT_NE(message(h).find("parent and child lists disagree"), std::string::npos) << message(h);
+  h = *hierarchy_;
+  h.created_faces.back() = 0;
+  EXPECT_NE(message(h).find("created face list"), std::string::npos) << message(h);
+  h = *hierarchy_;
+  h.vertex_node[h.base_vertices[0]] = 0;
+  EXPECT_NE(message(h).find("names a node that did not remove it"), std::string::npos) << message(h);
+  h = *hierarchy_;
+  h.base_faces.pop_back();
+  EXPECT_NE(message(h).find("base face count"), std::string::npos) << message(h);
+  h = *hierarchy_;
+  const NodeId k = 3;
+  h.faces[h.created_faces_of(k)[0]][0] = h.node_vertex[k];  // the removed vertex is not in its own ring
+  EXPECT_NE(message(h).find("not a triangle of its ring"), std::string::npos) << message(h);
+  EXPECT_THROW(serialize_hierarchy(h), HierarchyError);
 }
 
 TEST_F(HierarchyFileTest, MissingFileIsAnError) {

@@ -1,5 +1,6 @@
 // `filigree inspect H.fgh`: what a hierarchy file holds.
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 
@@ -34,6 +35,11 @@ void add_inspect_command(CLI::App& app) {
     std::printf("nodes         %zu (%zu on the boundary), depth %zu, largest ring %zu\n", h.node_count(), boundary_nodes,
                 h.depth(), max_ring);
     std::printf("faces stored  %zu (original + created by removals)\n", h.faces.size());
+    // What one more vertex costs a server (the loaded arrays) and a cache directory.
+    const double n = static_cast<double>(std::max<std::size_t>(h.vertex_count(), 1));
+    std::printf("size          %.1f bytes/vertex in memory (%.1f MiB), %.1f bytes/vertex on disk\n",
+                static_cast<double>(h.memory_bytes()) / n, static_cast<double>(h.memory_bytes()) / (1024.0 * 1024.0),
+                static_cast<double>(info.file_size) / n);
     std::printf("built         in %.2f s with %u threads, requested base %llu\n", h.build.build_seconds, h.build.threads,
                 static_cast<unsigned long long>(h.build.requested_base_vertices));
   });

@@ -10,12 +10,20 @@ Vec3 RingFrame::to_local(const Vec3& p) const { return axes.transpose() * (p - c
 
 Vec3 RingFrame::from_local(const Vec3& local) const { return center + scale * (axes * local); }
 
-RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
-                     const std::vector<Vec3>& positions, bool closed) {
+namespace {
+
+template <class W>
+RingFrame frame_of(std::span<const Index> ring, std::span<const W> weights, const std::vector<Vec3>& positions, bool closed) {
   const std::size_t k = ring.size();
   RingFrame frame;
   frame.center = Vec3::Zero();
-  for (std::size_t i = 0; i < k; ++i) frame.center += weights[i] * positions[ring[i]];
+  double sum = 0.0;
+  for (std::size_t i = 0; i < k; ++i) {
+    frame.center += static_cast<double>(weights[i]) * positions[ring[i]];
+    sum += static_cast<double>(weights[i]);
+  }
+  // Weights are positive (ring_weights.h); a zero sum only from a bad caller.
+  if (sum > 0.0) frame.center /= sum;
 
   Vec3 normal = Vec3::Zero();
   double radius = 0.0;
@@ -41,6 +49,18 @@ RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weight
   frame.axes.col(1) = normal.cross(tangent);
   frame.axes.col(2) = normal;
   return frame;
+}
+
+}  // namespace
+
+RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
+                     const std::vector<Vec3>& positions, bool closed) {
+  return frame_of(ring, weights, positions, closed);
+}
+
+RingFrame ring_frame(std::span<const Index> ring, std::span<const float> weights,
+                     const std::vector<Vec3>& positions, bool closed) {
+  return frame_of(ring, weights, positions, closed);
 }
 
 }  // namespace filigree

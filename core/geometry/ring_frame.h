@@ -21,11 +21,17 @@ struct RingFrame {
   Vec3 from_local(const Vec3& local) const;
 };
 
-// Frame of the ring: the normal is the ring polygon's vector area about the
-// centre (open rings are not closed), the tangent the direction to ring[0]
-// projected into the tangent plane. Degenerate rings get an arbitrary but
-// deterministic orthonormal basis and scale 1, never NaN.
+// Frame of the ring: the centre is the weighted average Σ w_k x_k / Σ w_k,
+// the normal the ring polygon's vector area about the centre (open rings are
+// not closed), the tangent the direction to ring[0] projected into the
+// tangent plane. Degenerate rings get an arbitrary but deterministic
+// orthonormal basis and scale 1, never NaN.
+// Dividing by Σ w matters for the hierarchy's float32 weights, whose sum is 1
+// only to ~1e-7: without it the centre would drift by (Σ w − 1)·x, growing
+// with the distance from the coordinate origin.
 RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
+                     const std::vector<Vec3>& positions, bool closed);
+RingFrame ring_frame(std::span<const Index> ring, std::span<const float> weights,
                      const std::vector<Vec3>& positions, bool closed);
 
 }  // namespace filigree

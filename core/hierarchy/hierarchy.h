@@ -3,8 +3,17 @@
 // pose of the base mesh to the detailed mesh (DESIGN §2.1, thesis §3.1–3.2).
 // Plain arrays (structure of arrays) so that it (de)serialises by memcpy and
 // many of them fit in one server.
+//
+// Compact (format v2, issue 10): 32-bit indices, float32 wherever the value
+// is relative to a local frame (see each field for why that is precise
+// enough), and nothing stored that the rest determines. A few arrays are
+// *derived* (vertex_node, parents, created_faces, base_vertices, base_faces):
+// kept in memory because callers index them, never stored in the file, and
+// rebuilt by hierarchy_from() when a file is loaded.
 
+#include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <span>
 #include <stdexcept>
@@ -17,7 +26,15 @@ namespace filigree {
 
 using NodeId = Index;
 using FaceId = Index;
+using Vec3f = Eigen::Vector3f;
 inline constexpr Index kNone = std::numeric_limits<Index>::max();
+
+// A face created by a removal, as the positions of its corners in the
+// removed vertex's ring (the hole's triangulation only joins ring vertices):
+// how the file stores created faces, in 3 bytes instead of 12.
+using RingCorners = std::array<std::uint8_t, 3>;
+// So a ring has at most this many vertices (preprocessing stops at 32).
+inline constexpr std::size_t kMaxRingSize = 255;
 
 // How the hierarchy was built (stored in the file, shown by `inspect`).
 struct BuildInfo {
@@ -27,7 +44,8 @@ struct BuildInfo {
 };
 
 struct Hierarchy {
-  // ---- The original mesh (rest pose), in input order.
+  // ---- The original mesh (rest pose), in input order. Double: the identity
+  // pose must give back the rest mesh within 1e-9 of the bbox diagonal.
   std::vector<Vec3> rest_positions;  // n
   // Every face that ever existed: [0, original_face_count) is the original
   // mesh, in input order; later faces were created by removals, in order.
@@ -42,36 +60,48 @@ struct Hierarchy {
   // Removal-time 1-ring, ordered so that (v, ring[k], ring[k+1]) were faces.
   std::vector<Index> ring_offsets;        // N+1
   std::vector<Index> ring_vertices;
-  std::vector<double> ring_weights;       // normalised, > 0 (geometry/ring_weights.h)
+  // Normalised (Σ = 1 up to float rounding), > 0 (geometry/ring_weights.h).
+  // Float32 is enough because preprocessing rounds the weights *before* it
+  // computes node_offset: the offset is exact for the stored weights, and
+  // ring_frame() divides by their sum, so the rounding only changes which
+  // (equally valid) centre the offset is relative to.
+  std::vector<float> ring_weights;
   // v's position in the RingFrame of its ring (geometry/ring_frame.h): direct
   // recovery puts v back at frame.from_local(node_offset) (thesis eq. 3.10).
-  std::vector<Vec3> node_offset;
-  // Faces deleted by the removal (v's fan; they return on recovery) and the
-  // faces it created (the hole's triangulation; they go on recovery).
-  std::vector<Index> removed_face_offsets;  // N+1
+  // Float32: the offset is rotation- and scale-free, O(1), so rounding moves
+  // v by ~1e-7 of its ring's radius; the rest pose stays exact because direct
+  // recovery adds back its float error of the rest pose.
+  std::vector<Vec3f> node_offset;
+  // Faces deleted by the removal, one per ring slot: slot i holds the fan
+  // face (v, ring[i], ring[i+1]); an open ring has one face fewer and its
+  // last slot holds kNone. They return on recovery.
   std::vector<FaceId> removed_faces;
-  std::vector<Index> created_face_offsets;  // N+1
+  // Faces created by the removal (the hole's triangulation; they go on
+  // recovery): a ring of r vertices leaves a hole of r corners, so node k
+  // created exactly r − 2 faces, ids original_face_count + ring_offsets[k] − 2k
+  // onwards. Derived: this is just that list of ids, kept so that
+  // created_faces_of() is a span.
   std::vector<FaceId> created_faces;
-  // Dependency edges (thesis Fig. 3.9): parents[k] deleted a face that k created.
+  // Dependency edges (thesis Fig. 3.9): parents[k] deleted a face that k
+  // created. Children are stored; parents are derived (their inverse).
   std::vector<Index> parent_offsets;  // N+1
   std::vector<NodeId> parents;
   std::vector<Index> child_offsets;  // N+1
   std::vector<NodeId> children;
 
-  // ---- Base mesh: the vertices never removed and the faces alive at the end.
+  // ---- Base mesh: the vertices never removed and the faces alive at the end
+  // (derived).
   std::vector<Index> base_vertices;  // original ids, ascending; base order = this order
   std::vector<FaceId> base_faces;    // ids into `faces`, ascending
 
   // ---- MAPS parameterisation (thesis §3.1.2): vertex i lies at
   // Σ_c maps_bary[i][c] · x(faces[base_faces[maps_face[i]]][c]) on the base mesh.
+  // Float32: barycentrics in [0, 1]; rounding moves the point by ~1e-7 of
+  // its base triangle, far below the parameterisation's own distortion.
   std::vector<Index> maps_face;
-  std::vector<Vec3> maps_bary;
+  std::vector<Vec3f> maps_bary;
 
-  // ---- Differential coordinates: δ_i = (L x)_i with the clamped cotangent
-  // Laplacian L of the original mesh (geometry/cotangent_laplacian.h).
-  std::vector<Vec3> laplacian;
-
-  // ---- Per vertex: the node that removed it, kNone for base vertices.
+  // ---- Per vertex: the node that removed it, kNone for base vertices (derived).
   std::vector<NodeId> vertex_node;
 
   std::uint64_t mesh_hash = 0;  // hash_mesh() of the mesh it was built from
@@ -79,12 +109,15 @@ struct Hierarchy {
 
   std::size_t vertex_count() const { return rest_positions.size(); }
   std::size_t node_count() const { return node_vertex.size(); }
-  std::span<const Index> ring(NodeId k) const { return span_of(ring_vertices, ring_offsets, k); }
-  std::span<const double> weights(NodeId k) const {
-    return {ring_weights.data() + ring_offsets[k], ring_offsets[k + 1] - ring_offsets[k]};
+  std::size_t ring_size(NodeId k) const { return ring_offsets[k + 1] - ring_offsets[k]; }
+  std::span<const Index> ring(NodeId k) const { return {ring_vertices.data() + ring_offsets[k], ring_size(k)}; }
+  std::span<const float> weights(NodeId k) const { return {ring_weights.data() + ring_offsets[k], ring_size(k)}; }
+  std::span<const FaceId> removed_faces_of(NodeId k) const {
+    return {removed_faces.data() + ring_offsets[k], ring_size(k) - (node_closed[k] ? 0 : 1)};
   }
-  std::span<const FaceId> removed_faces_of(NodeId k) const { return span_of(removed_faces, removed_face_offsets, k); }
-  std::span<const FaceId> created_faces_of(NodeId k) const { return span_of(created_faces, created_face_offsets, k); }
+  std::span<const FaceId> created_faces_of(NodeId k) const {
+    return {created_faces.data() + ring_offsets[k] - 2 * std::size_t{k}, ring_size(k) - 2};
+  }
   std::span<const NodeId> parents_of(NodeId k) const { return span_of(parents, parent_offsets, k); }
   std::span<const NodeId> children_of(NodeId k) const { return span_of(children, child_offsets, k); }
 
@@ -97,11 +130,33 @@ struct Hierarchy {
   Vec3 maps_position(Index i, const std::vector<Vec3>& positions) const;
   // Longest chain of dependent nodes (0 for no nodes).
   std::size_t depth() const;
+  // Heap bytes held: the capacities of every array.
+  std::size_t memory_bytes() const;
 
  private:
   static std::span<const Index> span_of(const std::vector<Index>& data, const std::vector<Index>& offsets, NodeId k) {
     return {data.data() + offsets[k], offsets[k + 1] - offsets[k]};
   }
+};
+
+// The arrays a hierarchy is made of, as read-only views: exactly what the
+// file stores (hierarchy_file.h), laid out as in a Hierarchy except that
+// created faces are RingCorners. Everything else is derived from these.
+struct StoredHierarchy {
+  std::span<const Vec3> rest_positions;
+  std::span<const Triangle> original_faces;
+  std::span<const RingCorners> created_corners;  // per created face, in face order
+  std::span<const Index> node_vertex;
+  std::span<const std::uint8_t> node_closed;
+  std::span<const Index> ring_offsets;
+  std::span<const Index> ring_vertices;
+  std::span<const float> ring_weights;
+  std::span<const Vec3f> node_offset;
+  std::span<const FaceId> removed_faces;
+  std::span<const Index> child_offsets;
+  std::span<const NodeId> children;
+  std::span<const Index> maps_face;
+  std::span<const Vec3f> maps_bary;
 };
 
 // A structurally inconsistent hierarchy (bad file, or a bug); what() says what.
@@ -110,9 +165,28 @@ struct HierarchyError : std::runtime_error {
 };
 
 // Checks every invariant a consumer relies on (sizes, index ranges, finite
-// values, dependency order, each face created and removed at most once, base
-// consistent with the removals); throws HierarchyError naming the first
-// violation. Linear time.
+// values, dependency order, each face created by one node and removed at most
+// once and only after it was created, children = the creators of the faces a
+// node removed); throws HierarchyError naming the first violation. Linear
+// time, in sequential passes (random reads only into per-vertex/per-face bit
+// sets and the ring offsets of each node's children).
+void validate_hierarchy(const StoredHierarchy& s);
+
+// Validates `s` and builds the hierarchy from it: its arrays copied, the
+// derived ones (faces from corners, created_faces, parents, base, vertex_node)
+// computed. mesh_hash, build and nothing else are left to the caller.
+// `concurrently` (if any) is called once, alongside the checks: on a helper
+// thread for a large hierarchy on a machine with a second core (the file
+// loader computes the payload's checksum there). Throws HierarchyError.
+Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& concurrently = {});
+
+// The stored view of `h`; its created faces are encoded into `corners`.
+// Throws HierarchyError if `h` cannot be stored (a created face that is not a
+// triangle of its node's ring, array sizes that do not fit together).
+StoredHierarchy stored_view(const Hierarchy& h, std::vector<RingCorners>& corners);
+
+// validate_hierarchy(stored_view(h)), then checks that every derived array
+// equals its derivation.
 void validate_hierarchy(const Hierarchy& h);
 
 }  // namespace filigree

@@ -1,9 +1,16 @@
 #include "hierarchy/hierarchy_file.h"
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <bit>
+#include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <vector>
 
 #include "hierarchy/hierarchy.h"
@@ -37,35 +44,27 @@ struct BuildRecord {
 };
 static_assert(sizeof(BuildRecord) == 24);
 
-// The sections in file order. `fn(tag, vector&)` is called for each array of
-// the hierarchy, const or not, so writer and reader cannot disagree.
-template <class H, class Fn>
-void for_each_section(H& h, Fn&& fn) {
-  fn(1, h.rest_positions);
-  fn(2, h.faces);
-  fn(3, h.node_vertex);
-  fn(4, h.node_closed);
-  fn(5, h.ring_offsets);
-  fn(6, h.ring_vertices);
-  fn(7, h.ring_weights);
-  fn(8, h.node_offset);
-  fn(9, h.removed_face_offsets);
-  fn(10, h.removed_faces);
-  fn(11, h.created_face_offsets);
-  fn(12, h.created_faces);
-  fn(13, h.parent_offsets);
-  fn(14, h.parents);
-  fn(15, h.child_offsets);
-  fn(16, h.children);
-  fn(17, h.base_vertices);
-  fn(18, h.base_faces);
-  fn(19, h.maps_face);
-  fn(20, h.maps_bary);
-  fn(21, h.laplacian);
-  fn(22, h.vertex_node);
+// The sections in file order. `fn(tag, span&)` is called for each array of
+// the stored hierarchy, const or not, so writer and reader cannot disagree.
+template <class S, class Fn>
+void for_each_section(S& s, Fn&& fn) {
+  fn(1, s.rest_positions);
+  fn(2, s.original_faces);
+  fn(3, s.created_corners);
+  fn(4, s.node_vertex);
+  fn(5, s.node_closed);
+  fn(6, s.ring_offsets);
+  fn(7, s.ring_vertices);
+  fn(8, s.ring_weights);
+  fn(9, s.node_offset);
+  fn(10, s.removed_faces);
+  fn(11, s.child_offsets);
+  fn(12, s.children);
+  fn(13, s.maps_face);
+  fn(14, s.maps_bary);
 }
-constexpr std::uint32_t kBuildTag = 23;
-constexpr std::uint32_t kSectionCount = 23;
+constexpr std::uint32_t kBuildTag = 15;
+constexpr std::uint32_t kSectionCount = 15;
 
 using Sink = std::function<void(const void*, std::size_t)>;
 
@@ -79,8 +78,8 @@ void write_section(const Sink& sink, std::uint32_t tag, std::uint32_t elem, std:
   sink(zeros, pad);
 }
 
-void write_payload(const Hierarchy& h, const Sink& sink) {
-  for_each_section(h, [&](std::uint32_t tag, const auto& v) {
+void write_payload(const Hierarchy& h, const StoredHierarchy& s, const Sink& sink) {
+  for_each_section(s, [&](std::uint32_t tag, const auto& v) {
     using T = typename std::decay_t<decltype(v)>::value_type;
     write_section(sink, tag, sizeof(T), v.size(), v.data());
   });
@@ -88,7 +87,7 @@ void write_payload(const Hierarchy& h, const Sink& sink) {
   write_section(sink, kBuildTag, sizeof b, 1, &b);
 }
 
-Header make_header(const Hierarchy& h) {
+Header make_header(const Hierarchy& h, const StoredHierarchy& s) {
   Header hd{};
   std::memcpy(hd.magic, kMagic, sizeof kMagic);
   hd.version = kHierarchyFormatVersion;
@@ -96,7 +95,7 @@ Header make_header(const Hierarchy& h) {
   hd.mesh_hash = h.mesh_hash;
   ContentHasher hasher;
   std::uint64_t size = 0;
-  write_payload(h, [&](const void* p, std::size_t n) {
+  write_payload(h, s, [&](const void* p, std::size_t n) {
     hasher.update(p, n);
     size += n;
   });
@@ -120,6 +119,10 @@ Header parse_header(std::span<const char> bytes, const std::string& name) {
   Header hd;
   std::memcpy(&hd, bytes.data(), sizeof hd);
   if (std::memcmp(hd.magic, kMagic, sizeof kMagic) != 0) fail(name, "not a Filigree hierarchy file (bad magic)");
+  if (hd.version < kHierarchyFormatVersion)
+    fail(name, "unsupported format version " + std::to_string(hd.version) + ", older than this build's version " +
+                   std::to_string(kHierarchyFormatVersion) +
+                   ": rebuild it from its mesh with `filigree preprocess` (the server rebuilds its cached hierarchies automatically)");
   if (hd.version != kHierarchyFormatVersion)
     fail(name, "unsupported format version " + std::to_string(hd.version) + " (this build reads version " + std::to_string(kHierarchyFormatVersion) + ")");
   if (hd.header_size != sizeof(Header)) fail(name, "corrupt header (header size " + std::to_string(hd.header_size) + ")");
@@ -131,13 +134,14 @@ class SectionReader {
  public:
   SectionReader(std::span<const char> payload, const std::string& name) : p_(payload), name_(name) {}
 
+  // Points `out` at the section's elements, in place: the payload starts
+  // 8-byte aligned and every section is padded to 8 bytes.
   template <class T>
-  void read(std::uint32_t tag, std::vector<T>& out) {
+  void read(std::uint32_t tag, std::span<const T>& out) {
+    static_assert(alignof(T) <= 8);
     std::uint64_t count = 0;
     const char* data = next(tag, sizeof(T), count);
-    out.resize(count);
-    // Cast through void*: Eigen vectors are plain doubles but not trivially copyable by type.
-    if (count) std::memcpy(static_cast<void*>(out.data()), data, count * sizeof(T));
+    out = {reinterpret_cast<const T*>(data), static_cast<std::size_t>(count)};
   }
   const char* next(std::uint32_t tag, std::uint32_t elem, std::uint64_t& count) {
     if (p_.size() - pos_ < 16) fail(name_, "corrupt: section " + std::to_string(tag) + " is missing");
@@ -166,65 +170,126 @@ class SectionReader {
 }  // namespace
 
 std::string serialize_hierarchy(const Hierarchy& h) {
-  const Header hd = make_header(h);
+  std::vector<RingCorners> corners;
+  const StoredHierarchy s = stored_view(h, corners);
+  const Header hd = make_header(h, s);
   std::string out;
   out.reserve(sizeof hd + hd.payload_size);
   out.append(reinterpret_cast<const char*>(&hd), sizeof hd);
-  write_payload(h, [&](const void* p, std::size_t n) { out.append(static_cast<const char*>(p), n); });
+  write_payload(h, s, [&](const void* p, std::size_t n) { out.append(static_cast<const char*>(p), n); });
   return out;
 }
 
 void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path) {
-  const Header hd = make_header(h);
+  std::vector<RingCorners> corners;
+  const StoredHierarchy s = stored_view(h, corners);
+  const Header hd = make_header(h, s);
   // Write to a temporary name, then rename: a crash never leaves half a file
-  // under the real name.
+  // under the real name, and a loader never maps a file being written.
   const std::filesystem::path tmp = path.string() + ".partial";
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) throw HierarchyFileError(path.string() + ": cannot open for writing");
     out.write(reinterpret_cast<const char*>(&hd), sizeof hd);
-    write_payload(h, [&](const void* p, std::size_t n) { out.write(static_cast<const char*>(p), static_cast<std::streamsize>(n)); });
+    write_payload(h, s, [&](const void* p, std::size_t n) { out.write(static_cast<const char*>(p), static_cast<std::streamsize>(n)); });
     if (!out.flush()) throw HierarchyFileError(path.string() + ": write failed");
   }
   std::filesystem::rename(tmp, path);
 }
 
 Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name) {
+  if (reinterpret_cast<std::uintptr_t>(bytes.data()) % 8 != 0) {
+    // Sections are read in place, which needs the 8-byte alignment every
+    // allocation and mapping has; a caller's odd slice gets an aligned copy.
+    std::vector<std::uint64_t> aligned((bytes.size() + 7) / 8);
+    std::memcpy(aligned.data(), bytes.data(), bytes.size());
+    return deserialize_hierarchy({reinterpret_cast<const char*>(aligned.data()), bytes.size()}, name);
+  }
   const Header hd = parse_header(bytes, name);
   const std::span<const char> payload = bytes.subspan(sizeof(Header));
   if (payload.size() < hd.payload_size)
     fail(name, "truncated: " + std::to_string(bytes.size()) + " bytes, header promises " + std::to_string(sizeof(Header) + hd.payload_size));
   if (payload.size() > hd.payload_size) fail(name, "corrupt: " + std::to_string(payload.size() - hd.payload_size) + " unexpected bytes after the payload");
-  if (hash_bytes(payload.data(), payload.size()) != hd.payload_hash) fail(name, "corrupt: payload checksum mismatch");
-  if (hd.section_count != kSectionCount) fail(name, "corrupt: " + std::to_string(hd.section_count) + " sections, expected " + std::to_string(kSectionCount));
 
+  // The checksum is computed alongside the checks (they are safe on any
+  // bytes: a forged file with a right checksum must be caught by them too),
+  // and wins: a damaged file is reported as a checksum mismatch, whatever
+  // the checks found first.
+  std::optional<std::uint64_t> hash;
+  const auto compute_hash = [&] { hash = hash_bytes(payload.data(), payload.size()); };
+  const auto verify_hash = [&] {
+    if (!hash) compute_hash();
+    if (*hash != hd.payload_hash) fail(name, "corrupt: payload checksum mismatch");
+  };
   Hierarchy h;
-  SectionReader reader(payload, name);
-  for_each_section(h, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
-  std::vector<BuildRecord> build;
-  reader.read(kBuildTag, build);
-  if (build.size() != 1 || !reader.at_end()) fail(name, "corrupt: unexpected section layout");
-  h.build = {build[0].requested_base_vertices, build[0].build_seconds, build[0].threads};
-  h.mesh_hash = hd.mesh_hash;
-  h.original_face_count = hd.original_face_count;
-  if (h.rest_positions.size() != hd.vertex_count || h.faces.size() != hd.face_count || h.node_vertex.size() != hd.node_count)
-    fail(name, "corrupt: section sizes disagree with the header");
   try {
-    validate_hierarchy(h);
+    if (hd.section_count != kSectionCount) fail(name, "corrupt: " + std::to_string(hd.section_count) + " sections, expected " + std::to_string(kSectionCount));
+    StoredHierarchy s;
+    SectionReader reader(payload, name);
+    for_each_section(s, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
+    std::span<const BuildRecord> build;
+    reader.read(kBuildTag, build);
+    if (build.size() != 1 || !reader.at_end()) fail(name, "corrupt: unexpected section layout");
+    if (s.rest_positions.size() != hd.vertex_count || s.original_faces.size() != hd.original_face_count ||
+        s.original_faces.size() + s.created_corners.size() != hd.face_count || s.node_vertex.size() != hd.node_count)
+      fail(name, "corrupt: section sizes disagree with the header");
+    h = hierarchy_from(s, compute_hash);
+    h.build = {build[0].requested_base_vertices, build[0].build_seconds, build[0].threads};
   } catch (const HierarchyError& e) {
+    verify_hash();
     fail(name, std::string("corrupt: ") + e.what());
+  } catch (const HierarchyFileError&) {
+    verify_hash();
+    throw;
   }
+  verify_hash();
+  h.mesh_hash = hd.mesh_hash;
   return h;
 }
 
+namespace {
+
+// A file mapped read-only for the duration of a load. The kernel pages it in
+// from the page cache as the checks stream through it: no read buffer.
+class MappedFile {
+ public:
+  explicit MappedFile(const std::filesystem::path& path) {
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw HierarchyFileError(path.string() + ": cannot open (" + std::strerror(errno) + ")");
+    struct stat st {};
+    if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+      ::close(fd);
+      throw HierarchyFileError(path.string() + ": not a regular file");
+    }
+    size_ = static_cast<std::size_t>(st.st_size);
+    if (size_ > 0) {
+      void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
+      const int err = errno;
+      ::close(fd);
+      if (p == MAP_FAILED) throw HierarchyFileError(path.string() + ": cannot map (" + std::strerror(err) + ")");
+      data_ = static_cast<const char*>(p);
+      ::madvise(const_cast<char*>(data_), size_, MADV_SEQUENTIAL);
+    } else {
+      ::close(fd);
+    }
+  }
+  ~MappedFile() {
+    if (data_) ::munmap(const_cast<char*>(data_), size_);
+  }
+  MappedFile(const MappedFile&) = delete;
+  MappedFile& operator=(const MappedFile&) = delete;
+  std::span<const char> bytes() const { return {data_, size_}; }
+
+ private:
+  const char* data_ = nullptr;
+  std::size_t size_ = 0;
+};
+
+}  // namespace
+
 Hierarchy load_hierarchy(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw HierarchyFileError(path.string() + ": cannot open");
-  const std::streamsize size = in.tellg();
-  in.seekg(0);
-  std::vector<char> bytes(static_cast<std::size_t>(size));
-  if (!in.read(bytes.data(), size)) throw HierarchyFileError(path.string() + ": read failed");
-  return deserialize_hierarchy(bytes, path.string());
+  const MappedFile file(path);
+  return deserialize_hierarchy(file.bytes(), path.string());
 }
 
 HierarchyFileInfo read_hierarchy_file_info(const std::filesystem::path& path) {

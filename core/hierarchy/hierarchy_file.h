@@ -7,9 +7,20 @@
 // the payload, u32 vertex count, u32 face count, u32 original face count,
 // u32 node count, u32 section count, u32 reserved — then sections, each
 // u32 tag, u32 element size, u64 element count, the elements, zero padding to
-// 8 bytes. Loading checks the header, every size against the bytes present,
-// the payload hash, then validate_hierarchy(): a truncated, corrupt or forged
-// file is an error, never a crash or an out-of-bounds read.
+// 8 bytes. The sections are the arrays of a StoredHierarchy (hierarchy.h) in
+// its order, then the build record; every element sits at a multiple of its
+// alignment, so a loaded file is read in place.
+//
+// Version 2 (issue 10) stores only what cannot be derived, in float32 where
+// the hierarchy allows it: ~170 bytes per vertex against ~310 in version 1.
+// Version 1 files are refused with a message to rebuild them.
+//
+// Loading maps the file read-only, checks the header, every size against the
+// bytes present, the payload hash, then validates the mapped arrays
+// (validate_hierarchy) before it copies them: a truncated, corrupt or forged
+// file is an error, never a crash or an out-of-bounds read. (A file truncated
+// *while* it is mapped would still fault: writers replace files by renaming
+// a finished one, as save_hierarchy does, never in place.)
 
 #include <cstdint>
 #include <filesystem>
@@ -21,7 +32,7 @@ namespace filigree {
 
 struct Hierarchy;
 
-inline constexpr std::uint32_t kHierarchyFormatVersion = 1;
+inline constexpr std::uint32_t kHierarchyFormatVersion = 2;
 
 // what() starts with the file name (or "<memory>") and says what is wrong.
 struct HierarchyFileError : std::runtime_error {

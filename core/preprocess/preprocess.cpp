@@ -49,8 +49,9 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   h.original_face_count = static_cast<Index>(mesh.faces.size());
   h.mesh_hash = hash_mesh(mesh);
 
+  // The differential coordinates are not stored: the runtime derives them
+  // from the rest mesh when it first optimises (DeformerModel).
   const CotangentLaplacian laplacian = cotangent_laplacian(mesh);
-  h.laplacian = laplacian.apply(mesh.positions);
 
   // Boundary vertices: an edge used by one face.
   std::vector<bool> boundary(mesh.vertex_count(), false);

@@ -89,8 +89,6 @@ class Simplifier {
     const std::size_t n = mesh_.positions().size();
     const std::size_t target = std::max<std::size_t>(opt_.target_vertices, 1);
     out_.ring_offsets = {0};
-    out_.removed_face_offsets = {0};
-    out_.created_face_offsets = {0};
     out_.child_offsets = {0};
 
     // Initial costs in parallel; each thread plans with its own scratch.
@@ -255,14 +253,19 @@ class Simplifier {
     const std::vector<Index>& r = p.ring.ring;
     const NodeId node = static_cast<NodeId>(out_.node_vertex.size());
 
-    // Ring coordinates for direct recovery (thesis eq. 3.10).
+    // Ring coordinates for direct recovery (thesis eq. 3.10). The hierarchy
+    // keeps the weights in float32: round them first and compute the offset
+    // in the frame of the rounded weights, so that the stored pair puts v
+    // back where it was (only the offset's own float rounding remains).
     const std::vector<double> w = ring_weights(x[v], r, x, p.ring.closed);
+    const std::size_t first = out_.ring_weights.size();
+    for (double wi : w) out_.ring_weights.push_back(static_cast<float>(wi));
+    const std::span<const float> stored(out_.ring_weights.data() + first, w.size());
     out_.node_vertex.push_back(v);
     out_.node_closed.push_back(p.ring.closed ? 1 : 0);
     out_.ring_vertices.insert(out_.ring_vertices.end(), r.begin(), r.end());
-    out_.ring_weights.insert(out_.ring_weights.end(), w.begin(), w.end());
     out_.ring_offsets.push_back(static_cast<Index>(out_.ring_vertices.size()));
-    out_.node_offset.push_back(ring_frame(r, w, x, p.ring.closed).to_local(x[v]));
+    out_.node_offset.push_back(ring_frame(r, stored, x, p.ring.closed).to_local(x[v]).cast<float>());
 
     // Faces: the fan dies, the hole's triangulation is born. The new node is
     // the parent of every node that created a fan face (thesis Fig. 3.9: the
@@ -280,10 +283,12 @@ class Simplifier {
     kids.erase(std::unique(kids.begin(), kids.end()), kids.end());
     out_.children.insert(out_.children.end(), kids.begin(), kids.end());
     out_.child_offsets.push_back(static_cast<Index>(out_.children.size()));
+    // One removed face per ring slot (fan[i] follows ring[i]); an open ring's
+    // last slot has none. Created faces need no list of their own: they are
+    // the next r − 2 ids (add_face numbers faces in order).
     out_.removed_faces.insert(out_.removed_faces.end(), p.ring.fan.begin(), p.ring.fan.end());
-    out_.removed_face_offsets.push_back(static_cast<Index>(out_.removed_faces.size()));
+    if (!p.ring.closed) out_.removed_faces.push_back(kNone);
     out_.created_faces.insert(out_.created_faces.end(), created.begin(), created.end());
-    out_.created_face_offsets.push_back(static_cast<Index>(out_.created_faces.size()));
 
     // MAPS: v and every point in its fan move into the new triangles through
     // the same planar map (thesis §3.1.2).
@@ -319,17 +324,17 @@ class Simplifier {
       out_.base_faces.push_back(f);
     }
     out_.maps_face.assign(n, kNone);
-    out_.maps_bary.assign(n, Vec3::Zero());
+    out_.maps_bary.assign(n, Vec3f::Zero());
     for (Index v = 0; v < n; ++v) {
       if (removed_[v]) {
         out_.maps_face[v] = base_index[point_face_[v]];
-        out_.maps_bary[v] = point_bary_[v];
+        out_.maps_bary[v] = point_bary_[v].cast<float>();  // float32: see Hierarchy::maps_bary
       } else {
         // A base vertex is the corner of its first live face.
         const FaceId f = mesh_.vertex_faces(v).front();
         const Triangle& t = mesh_.face(f);
         out_.maps_face[v] = base_index[f];
-        for (int c = 0; c < 3; ++c) out_.maps_bary[v][c] = t[c] == v ? 1.0 : 0.0;
+        for (int c = 0; c < 3; ++c) out_.maps_bary[v][c] = t[c] == v ? 1.0f : 0.0f;
       }
     }
     // Parents: invert the child lists (counting sort keeps them ascending).

@@ -33,8 +33,8 @@ struct SimplifyOptions {
 };
 
 // Simplifies `mesh` and fills `out`'s faces, nodes, dependency edges, base
-// mesh, MAPS parameterisation and vertex_node (everything but laplacian,
-// mesh_hash and build). `curvature` and `saliency` are per vertex.
+// mesh, MAPS parameterisation and vertex_node (everything but mesh_hash and
+// build). `curvature` and `saliency` are per vertex.
 // Precondition: mesh is edge- and vertex-manifold, consistently oriented,
 // without degenerate/duplicate faces or unreferenced vertices
 // (validate_mesh reports nothing fatal or repairable).

@@ -38,8 +38,8 @@ struct Deformer::Optimised {
   std::vector<Eigen::Quaterniond> base_q;
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
-      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.laplacian()),
-        solver(m.laplacian(), m.hierarchy().laplacian), positions(m.hierarchy().rest_positions) {
+      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.laplacian(), o.threshold),
+        solver(m.laplacian(), m.differential_coordinates()), positions(m.hierarchy().rest_positions) {
     cut.reset(o.threshold);
   }
 };
@@ -81,8 +81,7 @@ const std::vector<Index>& Deformer::region_of_vertex() const {
 const CutState& Deformer::cut_state() const {
   if (s_->optimised) return s_->optimised->cut.state();
   if (!s_->full_cut) {
-    s_->full_cut = std::make_unique<CutState>(model_->hierarchy());
-    for (NodeId k : recovery_order(model_->hierarchy())) s_->full_cut->recover(k);
+    s_->full_cut = std::make_unique<CutState>(CutState::full(model_->hierarchy()));
   }
   return *s_->full_cut;
 }
@@ -99,7 +98,8 @@ void Deformer::set_threshold(double threshold) {
 
 std::size_t Deformer::memory_bytes() const {
   std::size_t bytes = s_->workspace.xyzw.capacity() * sizeof(float);
-  if (s_->optimised) bytes += s_->optimised->positions.capacity() * sizeof(Vec3);
+  if (const Optimised* o = s_->optimised.get())
+    bytes += o->positions.capacity() * sizeof(Vec3) + o->cut.memory_bytes() + o->solver.memory_bytes();
   return bytes;
 }
 
@@ -139,7 +139,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
     const std::size_t nodes = h.node_count();
     const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(2048, nodes / 32);
     const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(128, nodes / 256);
-    stats.cut_moves = s.cut.update(s.positions, eval, moves);
+    stats.cut_moves = s.cut.update(s.positions, eval, moves, options_.threads);
   }
   stats.cut_update_ms = ms_since(t);
 
@@ -167,7 +167,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   const auto& corners = model_->maps_corners();
   auto interpolated = [&](Index v) {
     const auto& c = corners[v];
-    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_bary[v]).toRotationMatrix();
+    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_bary[v].cast<double>()).toRotationMatrix();
   };
   stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
   const CotangentLaplacian& laplacian = model_->laplacian();

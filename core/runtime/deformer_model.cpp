@@ -8,6 +8,7 @@ namespace filigree {
 
 struct DeformerModel::Optimisation {
   CotangentLaplacian laplacian;
+  std::vector<Vec3> delta;
   std::vector<std::array<Index, 3>> maps_corners;
 };
 
@@ -24,7 +25,8 @@ DeformerModel::~DeformerModel() = default;
 const DeformerModel::Optimisation& DeformerModel::optimisation() const {
   std::call_once(optimisation_once_, [this] {
     const Hierarchy& h = *h_;
-    auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.original_mesh()), {}});
+    auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.original_mesh()), {}, {}});
+    o->delta = o->laplacian.apply(h.rest_positions);
     std::vector<Index> base_local(h.vertex_count(), kNone);
     for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
     o->maps_corners.resize(h.vertex_count());
@@ -40,6 +42,8 @@ const DeformerModel::Optimisation& DeformerModel::optimisation() const {
 
 const CotangentLaplacian& DeformerModel::laplacian() const { return optimisation().laplacian; }
 
+const std::vector<Vec3>& DeformerModel::differential_coordinates() const { return optimisation().delta; }
+
 const std::vector<std::array<Index, 3>>& DeformerModel::maps_corners() const { return optimisation().maps_corners; }
 
 std::size_t DeformerModel::memory_bytes() const {
@@ -47,7 +51,8 @@ std::size_t DeformerModel::memory_bytes() const {
   if (optimisation_built_.load(std::memory_order_acquire)) {
     const Optimisation& o = *optimisation_;
     bytes += o.laplacian.offsets.capacity() * sizeof(Index) + o.laplacian.neighbors.capacity() * sizeof(Index) +
-             o.laplacian.weights.capacity() * sizeof(double) + o.maps_corners.capacity() * sizeof(o.maps_corners[0]);
+             o.laplacian.weights.capacity() * sizeof(double) + o.delta.capacity() * sizeof(Vec3) +
+             o.maps_corners.capacity() * sizeof(o.maps_corners[0]);
   }
   return bytes;
 }

@@ -1,7 +1,8 @@
 #pragma once
 // What the runtime derives once from a hierarchy (DESIGN §3.1): the traversal
 // layout of direct recovery and, when a deformer first optimises regions
-// (T > 0), the cotangent Laplacian and the MAPS corners. Immutable once
+// (T > 0), the cotangent Laplacian, the differential coordinates and the
+// MAPS corners. Immutable once
 // built (the lazy parts are built once, thread-safely) and shared read-only by
 // every Deformer and every thread of that mesh; a Deformer owns only its
 // session's state.
@@ -35,6 +36,9 @@ class DeformerModel {
   const DirectRecovery& recovery() const { return *recovery_; }
   // Region optimisation's data: built by the first caller, then shared.
   const CotangentLaplacian& laplacian() const;
+  // δ = L x_rest per vertex, the differential coordinates of the rest mesh
+  // (DESIGN §2.1.5): derived here rather than stored in the hierarchy.
+  const std::vector<Vec3>& differential_coordinates() const;
   // Per vertex: the base-order corners of its MAPS face (thesis §3.1.2).
   const std::vector<std::array<Index, 3>>& maps_corners() const;
   // Heap bytes held now, excluding the hierarchy (lazy parts once built).
