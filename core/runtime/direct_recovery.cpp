@@ -28,7 +28,7 @@ struct Block {
   const float* offset;        // [xyz][lane]
   const std::uint8_t* meta;   // [lane]: ring size | kOpenRing
   const float* error;         // [xyz][lane]: rest error (see the header)
-  const Index* vertex;        // [lane]: original id, kPadding for padding lanes
+  const Index* vertex;        // [lane]: original id, kNone for padding lanes
   std::size_t out;            // traversal slot of lane 0
 };
 
@@ -37,7 +37,7 @@ struct Output {
   double* xyz;                // 3 doubles per original vertex
   double ox, oy, oz;          // the workspace's origin
 };
-constexpr Index kPaddingLane = 0xffffffffu;
+constexpr Index kPaddingLane = kNone;  // vertex_of_slot_ of a padding lane
 
 // Eight float lanes (GCC vector extensions): one lane per node of a block.
 // Compiled for AVX2 each is one register; for the baseline, two SSE ones.
@@ -277,7 +277,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
     throw std::invalid_argument("hierarchy too large for the runtime's 32-bit ring indices (" + std::to_string(h.vertex_count()) + " vertices)");
   slot_of_vertex_.assign(h.vertex_count(), 0);
   for (Index i = 0; i < base_count_; ++i) slot_of_vertex_[h.base_vertices[i]] = i;
-  vertex_of_slot_.assign(order.size(), kPadding);
+  vertex_of_slot_.assign(order.size(), kNone);
   for (std::size_t i = 0; i < order.size(); ++i) {
     if (order[i] == kNone) continue;
     vertex_of_slot_[i] = h.node_vertex[order[i]];

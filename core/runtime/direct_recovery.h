@@ -93,8 +93,7 @@ class DirectRecovery {
   std::size_t base_count_ = 0, node_count_ = 0;
   std::vector<Index> base_vertices_;       // base order → original id
   std::vector<Index> slot_of_vertex_;      // original id → traversal slot
-  static constexpr Index kPadding = 0xffffffffu;
-  std::vector<Index> vertex_of_slot_;      // traversal slot − base_count_ → original id, kPadding for padding lanes
+  std::vector<Index> vertex_of_slot_;      // traversal slot − base_count_ → original id, kNone for padding lanes
   std::size_t partitions_ = 1, phases_ = 1;
   // Segment phase·partitions_ + partition is blocks [segment_blocks_[s], segment_blocks_[s+1]).
   std::vector<std::uint32_t> segment_blocks_;

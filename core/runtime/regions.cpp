@@ -245,32 +245,26 @@ void RegionSolver::factorize(const Regions& regions, std::size_t r, Factor& f) c
   // L_RR: the rows of the region, columns restricted to it; the diagonal keeps
   // every weight, so the constraints make it strictly diagonally dominant (SPD).
   auto local = [&](Index j) { return static_cast<std::size_t>(std::lower_bound(first, first + n, j) - first); };
-  if (n <= kDenseMax) {
-    f.dense.assign(n * (n + 1) / 2, 0.0);
+  // Visits the lower triangle of L_RR (row, column, value), diagonal last per row.
+  auto for_each_entry = [&](auto&& put) {
     for (std::size_t i = 0; i < n; ++i) {
       const Index v = first[i];
       double diagonal = 0.0;
       for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
         const Index j = laplacian_.neighbors[k];
         diagonal += laplacian_.weights[k];
-        if (j < v && regions.region_of[j] == self) f.dense[packed(i, local(j))] = -laplacian_.weights[k];
+        if (j < v && regions.region_of[j] == self) put(i, local(j), -laplacian_.weights[k]);
       }
-      f.dense[packed(i, i)] = diagonal;
+      put(i, i, diagonal);
     }
+  };
+  if (n <= kDenseMax) {
+    f.dense.assign(n * (n + 1) / 2, 0.0);
+    for_each_entry([&](std::size_t i, std::size_t j, double w) { f.dense[packed(i, j)] = w; });
     if (!dense_cholesky(f.dense.data(), n)) not_factorisable(n);
   } else {
     std::vector<Eigen::Triplet<double>> entries;
-    for (std::size_t i = 0; i < n; ++i) {
-      const Index v = first[i];
-      double diagonal = 0.0;
-      for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
-        const Index j = laplacian_.neighbors[k];
-        diagonal += laplacian_.weights[k];
-        if (j < v && regions.region_of[j] == self)
-          entries.emplace_back(static_cast<int>(i), static_cast<int>(local(j)), -laplacian_.weights[k]);
-      }
-      entries.emplace_back(static_cast<int>(i), static_cast<int>(i), diagonal);
-    }
+    for_each_entry([&](std::size_t i, std::size_t j, double w) { entries.emplace_back(static_cast<int>(i), static_cast<int>(j), w); });
     Eigen::SparseMatrix<double> a(static_cast<int>(n), static_cast<int>(n));
     a.setFromTriplets(entries.begin(), entries.end());
     f.sparse = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>>();
