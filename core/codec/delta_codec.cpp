@@ -53,13 +53,6 @@ constexpr std::uint32_t kMaxBits = 24;
 // max, range and min + range all stay finite in float32.
 constexpr double kMaxMagnitude = 1e30;
 
-// Smallest quantization range handed to Draco. Its quantizer multiplies by
-// (2^bits − 1) / range in float: a range below ~1e-31 makes that infinite and
-// 0 · inf a NaN, which Draco then casts to int (undefined behaviour). A range
-// of 0 (every delta equal) or a denormal one is therefore raised to this; every
-// value then quantizes to 0 and decodes to exactly `min`.
-constexpr float kMinRange = 1e-20f;
-
 // The fixed part of a Draco header (draco/compression/point_cloud/
 // point_cloud_decoder.cc, DecodeHeader): "DRACO", major, minor, encoder type,
 // encoder method, uint16 flags. A sequential point cloud then starts with its
@@ -72,7 +65,7 @@ constexpr std::size_t kNumPointsOffset = kHeaderSize;
 
 // Reads what decode would read, without Draco, and rejects anything that
 // encode_deltas cannot have written.
-void check_header(const std::string& bytes, std::uint32_t count) {
+void check_header(std::string_view bytes, std::uint32_t count) {
   if (bytes.size() < kNumPointsOffset + 4) {
     throw DeltaCodecError("delta buffer truncated: " + std::to_string(bytes.size()) +
                           " bytes is shorter than a Draco point cloud header");
@@ -102,8 +95,8 @@ void check_header(const std::string& bytes, std::uint32_t count) {
   }
 }
 
-// Decodes a non-empty buffer of `count` points; every check is fatal.
-std::vector<Vec3> decode_draco(const std::string& bytes, std::uint32_t count) {
+// Decodes a non-empty buffer of `count` points into out (3·count); every check is fatal.
+void decode_draco(std::string_view bytes, std::uint32_t count, std::span<float> out) {
   check_header(bytes, count);
 
   draco::DecoderBuffer buffer;
@@ -145,20 +138,19 @@ std::vector<Vec3> decode_draco(const std::string& bytes, std::uint32_t count) {
     throw DeltaCodecError("delta attribute maps fewer points than the buffer holds");
   }
 
-  std::vector<Vec3> out(count);
-  double value[3];
+  const bool identity = att->is_mapping_identity();
+  const auto* data = att->buffer()->data();
   for (std::uint32_t i = 0; i < count; ++i) {
-    const draco::AttributeValueIndex avi = att->mapped_index(draco::PointIndex(i));
-    if (avi.value() >= entries || !att->ConvertValue<double>(avi, 3, value)) {
-      throw DeltaCodecError("delta attribute has no value for point " + std::to_string(i));
-    }
+    const std::size_t avi = identity ? i : att->mapped_index(draco::PointIndex(i)).value();
+    if (avi >= entries) throw DeltaCodecError("delta attribute has no value for point " + std::to_string(i));
+    float value[3];
+    std::memcpy(value, data + offset + stride * static_cast<std::int64_t>(avi), sizeof value);
     // encode_deltas never writes a non-finite value: this buffer is corrupt.
     if (!std::isfinite(value[0]) || !std::isfinite(value[1]) || !std::isfinite(value[2])) {
       throw DeltaCodecError("delta buffer decodes to a non-finite value at point " + std::to_string(i));
     }
-    out[i] = Vec3(value[0], value[1], value[2]);
+    std::memcpy(&out[3 * static_cast<std::size_t>(i)], value, sizeof value);
   }
-  return out;
 }
 
 // The smallest float ≥ x (x finite, within float range).
@@ -169,6 +161,29 @@ float float_at_least(double x) {
 }
 
 }  // namespace
+
+std::string encode_draco(std::span<const float> values, const DeltaQuantization& q, int speed) {
+  if (values.empty()) return {};
+  const auto n = static_cast<std::uint32_t>(values.size() / 3);
+  draco::PointCloudBuilder builder;
+  builder.Start(n);
+  const int att_id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 3, draco::DT_FLOAT32);
+  // Point i gets values[3i … 3i+2]: the same as SetAttributeValueForPoint for
+  // each i in order, in one pass.
+  builder.SetAttributeValuesForAllPoints(att_id, values.data(), 3 * sizeof(float));
+  const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(/*deduplicate_points=*/false);
+  if (!cloud || cloud->num_points() != n) throw DeltaCodecError("Draco could not build the delta point cloud");
+
+  draco::ExpertEncoder encoder(*cloud);
+  encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
+  encoder.SetSpeedOptions(speed, speed);
+  const float origin[3] = {q.min, q.min, q.min};
+  encoder.SetAttributeExplicitQuantization(att_id, static_cast<int>(q.bits), 3, origin, q.range);
+  draco::EncoderBuffer out;
+  const draco::Status status = encoder.EncodeToBuffer(&out);
+  if (!status.ok()) throw DeltaCodecError("Draco could not encode the deltas: " + status.error_msg_string());
+  return std::string(out.data(), out.size());
+}
 
 EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits) {
   if (bits < kMinBits || bits > kMaxBits) {
@@ -204,51 +219,41 @@ EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits)
   result.bits = bits;
   if (all_zero) return result;  // empty bytes, min = range = max_error = 0
 
-  const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
-  const float min = *lo;
-  // Rounded up so that min + range covers the largest value: a value above
-  // the range would quantize past 2^bits − 1.
-  const float range = std::max(float_at_least(static_cast<double>(*hi) - static_cast<double>(min)), kMinRange);
+  const DeltaQuantization q = quantization_over(values, bits);
+  result.bytes = encode_draco(values, q);
+  result.min = q.min;
+  result.range = q.range;
 
-  draco::PointCloudBuilder builder;
-  builder.Start(n);
-  const int att_id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 3, draco::DT_FLOAT32);
-  // Point i gets values[3i … 3i+2]: the same as SetAttributeValueForPoint for
-  // each i in order, in one pass.
-  builder.SetAttributeValuesForAllPoints(att_id, values.data(), 3 * sizeof(float));
-  const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(/*deduplicate_points=*/false);
-  if (!cloud || cloud->num_points() != n) {
-    throw DeltaCodecError("Draco could not build the delta point cloud");
-  }
-
-  draco::ExpertEncoder encoder(*cloud);
-  encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
-  const float origin[3] = {min, min, min};
-  encoder.SetAttributeExplicitQuantization(att_id, static_cast<int>(bits), 3, origin, range);
-  draco::EncoderBuffer out;
-  const draco::Status status = encoder.EncodeToBuffer(&out);
-  if (!status.ok()) {
-    throw DeltaCodecError("Draco could not encode the deltas: " + status.error_msg_string());
-  }
-
-  result.bytes.assign(out.data(), out.size());
-  result.min = min;
-  result.range = range;
-
-  // Measure, do not assume: decode what we send and compare with the input
-  // (the doubles, so the float32 conversion counts as error too).
-  const std::vector<Vec3> decoded = decode_draco(result.bytes, n);
+  // What a decoder will read, against the input (the doubles, so the float32
+  // conversion counts as error too).
+  q.decode(values, values);
   double max_error = 0.0;
-  for (std::uint32_t i = 0; i < n; ++i) {
-    max_error = std::max(max_error, (decoded[i] - deltas[i]).cwiseAbs().maxCoeff());
-  }
+  for (std::uint32_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c)
+      max_error = std::max(max_error, std::abs(double{values[3 * static_cast<std::size_t>(i) + c]} - deltas[i][c]));
   result.max_error = float_at_least(max_error);  // reported ≥ actual
   return result;
 }
 
+void decode_deltas_into(std::string_view bytes, std::uint32_t count, std::span<float> out) {
+  if (out.size() != 3 * static_cast<std::size_t>(count))
+    throw DeltaCodecError("delta output holds " + std::to_string(out.size()) + " floats for " + std::to_string(count) +
+                          " points");
+  if (bytes.empty()) {
+    std::fill(out.begin(), out.end(), 0.0f);
+    return;
+  }
+  decode_draco(bytes, count, out);
+}
+
 std::vector<Vec3> decode_deltas(const EncodedDeltas& encoded) {
-  if (encoded.bytes.empty()) return std::vector<Vec3>(encoded.count, Vec3::Zero());
-  return decode_draco(encoded.bytes, encoded.count);
+  // The count is checked against the buffer before anything is allocated for it.
+  if (!encoded.bytes.empty()) check_header(encoded.bytes, encoded.count);
+  std::vector<float> values(3 * static_cast<std::size_t>(encoded.count));
+  decode_deltas_into(encoded.bytes, encoded.count, values);
+  std::vector<Vec3> out(encoded.count);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(values[3 * i], values[3 * i + 1], values[3 * i + 2]);
+  return out;
 }
 
 }  // namespace filigree

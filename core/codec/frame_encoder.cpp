@@ -1,0 +1,180 @@
+#include "codec/frame_encoder.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "codec/delta_codec.h"
+
+namespace filigree {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Largest |delta| carried: far beyond any mesh, small enough for float32.
+constexpr double kMaxMagnitude = 1e30;
+
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+}  // namespace
+
+FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions options) : rest_(rest), options_(options) {
+  if (options_.chunk_vertices == 0) throw std::invalid_argument("frame chunks must hold at least one vertex");
+  if (options_.bits != 0 && (options_.bits < 8 || options_.bits > 24))
+    throw std::invalid_argument("quantization bits must be 0 (automatic) or 8…24, got " + std::to_string(options_.bits));
+  if (options_.bits == 0 && !(options_.max_error > 0.0 && std::isfinite(options_.max_error)))
+    throw std::invalid_argument("automatic quantization needs a positive finite max_error");
+  const std::size_t n = rest_.size();
+  chunks_.resize((n + options_.chunk_vertices - 1) / options_.chunk_vertices);
+  for (std::size_t c = 0; c < chunks_.size(); ++c) {
+    chunks_[c].out.first = static_cast<std::uint32_t>(c * options_.chunk_vertices);
+    chunks_[c].out.count = static_cast<std::uint32_t>(std::min<std::size_t>(options_.chunk_vertices, n - c * options_.chunk_vertices));
+  }
+  keyframe_.assign(3 * n, 0.0f);
+  decoded_.assign(3 * n, 0.0f);
+}
+
+void FrameEncoder::begin(bool force_keyframe) { force_ = force_keyframe || !have_keyframe_; }
+
+void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions) {
+  const auto start = Clock::now();
+  Slot& slot = chunks_.at(c);
+  EncodedChunk& out = slot.out;
+  if (positions.size() != rest_.size())
+    throw std::invalid_argument("frame has " + std::to_string(positions.size()) + " positions for " +
+                                std::to_string(rest_.size()) + " vertices");
+  const std::size_t a = out.first, count = out.count;
+  // Unchanged means within what the keyframe already promised: the target
+  // error (automatic bits), or the keyframe's own error (fixed bits).
+  const double tolerance = options_.bits == 0 ? options_.max_error : keyframe_error_;
+
+  // Pass 1: validate, and which vertices moved away from the keyframe.
+  slot.changed.assign(count, 1);
+  std::size_t changed = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const Vec3 d = positions[a + i] - rest_[a + i];
+    for (int k = 0; k < 3; ++k) {
+      if (!std::isfinite(d[k])) throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is not finite");
+      if (std::abs(d[k]) > kMaxMagnitude)
+        throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is implausibly large");
+    }
+    if (!force_) {
+      const float* key = &keyframe_[3 * (a + i)];
+      const double moved = std::max({std::abs(d.x() - key[0]), std::abs(d.y() - key[1]), std::abs(d.z() - key[2])});
+      slot.changed[i] = moved > tolerance ? 1 : 0;
+    }
+    changed += slot.changed[i];
+  }
+  const bool dense = force_ || static_cast<double>(changed) > options_.dense_fraction * static_cast<double>(count);
+  if (dense) std::fill(slot.changed.begin(), slot.changed.end(), std::uint8_t{1});
+  out.kind = dense ? EncodedChunk::Kind::kDense : changed ? EncodedChunk::Kind::kSparse : EncodedChunk::Kind::kAbsent;
+  out.present = static_cast<std::uint32_t>(dense ? count : changed);
+  out.runs.clear();
+  out.bytes.clear();
+  out.max_error = 0.0;
+
+  // Runs of (skip, take) for a sparse chunk.
+  if (out.kind == EncodedChunk::Kind::kSparse) {
+    std::size_t i = 0;
+    while (i < count) {
+      std::size_t skip = 0, take = 0;
+      while (i < count && !slot.changed[i]) ++skip, ++i;
+      while (i < count && slot.changed[i]) ++take, ++i;
+      if (take == 0) break;  // trailing unchanged vertices need no run
+      out.runs.push_back(static_cast<std::uint32_t>(skip));
+      out.runs.push_back(static_cast<std::uint32_t>(take));
+    }
+  }
+
+  // The present deltas in float32, as Draco will store them.
+  slot.values.resize(3 * static_cast<std::size_t>(out.present));
+  bool all_zero = true;
+  for (std::size_t i = 0, j = 0; i < count; ++i) {
+    if (!slot.changed[i]) continue;
+    const Vec3 d = positions[a + i] - rest_[a + i];
+    for (int k = 0; k < 3; ++k) {
+      slot.values[3 * j + k] = static_cast<float>(d[k]);
+      all_zero &= d[k] == 0.0;
+    }
+    ++j;
+  }
+
+  // Quantization: fixed bits, or the fewest whose exact error meets the target.
+  DeltaQuantization q = quantization_over(slot.values, options_.bits ? options_.bits : 8);
+  if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
+  // Pass 2: the decoded values and the exact error, present vertices from the
+  // quantization (or exactly 0), absent ones from the keyframe.
+  while (true) {
+    if (!all_zero) {
+      slot.decoded.resize(slot.values.size());
+      q.decode(slot.values, slot.decoded);
+    }
+    double error = 0.0;
+    for (std::size_t i = 0, j = 0; i < count; ++i) {
+      const Vec3 d = positions[a + i] - rest_[a + i];
+      float* dec = &decoded_[3 * (a + i)];
+      if (slot.changed[i]) {
+        if (all_zero) {
+          dec[0] = dec[1] = dec[2] = 0.0f;
+        } else {
+          std::copy_n(&slot.decoded[3 * j], 3, dec);
+        }
+        ++j;
+      } else {
+        std::copy_n(&keyframe_[3 * (a + i)], 3, dec);
+      }
+      for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(double{dec[k]} - d[k]));
+    }
+    out.max_error = error;
+    if (options_.bits != 0 || all_zero || out.present == 0 || error <= options_.max_error || q.bits >= 24) break;
+    ++q.bits;  // float rounding pushed past the target: one more bit
+  }
+  out.quantization = all_zero ? DeltaQuantization{q.bits, 0.0f, 0.0f} : q;
+  if (all_zero) slot.values.clear();  // nothing for Draco: an empty buffer means zeros
+  out.encode_ms = ms_since(start);
+}
+
+void FrameEncoder::encode_chunk(std::size_t c) {
+  const auto start = Clock::now();
+  Slot& slot = chunks_.at(c);
+  slot.out.bytes = encode_draco(slot.values, slot.out.quantization, options_.speed);
+  slot.out.encode_ms += ms_since(start);
+}
+
+EncodedFrameSummary FrameEncoder::finish() {
+  EncodedFrameSummary s;
+  s.keyframe = true;
+  for (const Slot& slot : chunks_) {
+    s.keyframe &= slot.out.kind == EncodedChunk::Kind::kDense;
+    s.max_error = std::max(s.max_error, slot.out.max_error);
+    s.present_vertices += slot.out.present;
+    s.bytes += slot.out.bytes.size() + 4 * slot.out.runs.size();
+  }
+  if (s.keyframe) {
+    keyframe_.swap(decoded_);
+    have_keyframe_ = true;
+    keyframe_error_ = s.max_error;
+  }
+  force_ = false;
+  return s;
+}
+
+EncodedFrameSummary FrameEncoder::encode(std::span<const Vec3> positions, bool force_keyframe) {
+  begin(force_keyframe);
+  for (std::size_t c = 0; c < chunks_.size(); ++c) {
+    quantize_chunk(c, positions);
+    encode_chunk(c);
+  }
+  return finish();
+}
+
+std::size_t FrameEncoder::memory_bytes() const {
+  std::size_t bytes = (keyframe_.capacity() + decoded_.capacity()) * sizeof(float);
+  for (const Slot& s : chunks_)
+    bytes += (s.values.capacity() + s.decoded.capacity()) * sizeof(float) + s.changed.capacity() + s.out.runs.capacity() * 4 + s.out.bytes.capacity();
+  return bytes;
+}
+
+}  // namespace filigree

@@ -1,0 +1,262 @@
+// Chunked, sparse frames (proto Frame.chunks): the encoder's exact error, the
+// client's keyed state, and what a subscriber that skips frames decodes.
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "codec/delta_codec.h"
+#include "codec/frame_encoder.h"
+#include "codec/keyed_deltas.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+// What a subscriber receives: the chunks of the frame just encoded.
+struct SentFrame {
+  std::uint64_t version = 0, keyframe_version = 0;
+  std::vector<EncodedChunk> chunks;
+  double max_error = 0.0;
+  std::size_t present = 0;
+  std::vector<DeltaChunkView> views() const {
+    std::vector<DeltaChunkView> v;
+    for (const EncodedChunk& c : chunks) v.push_back({c.first, c.count, c.runs, c.bytes});
+    return v;
+  }
+};
+
+// A session's side: versions and keyframes as the server assigns them.
+struct Sender {
+  FrameEncoder encoder;
+  std::uint64_t version = 0, keyframe = 0;
+  SentFrame send(const std::vector<Vec3>& positions, bool force = false) {
+    const EncodedFrameSummary s = encoder.encode(positions, force);
+    SentFrame f;
+    f.version = ++version;
+    if (s.keyframe) keyframe = f.version;
+    f.keyframe_version = keyframe;
+    for (std::size_t c = 0; c < encoder.chunk_count(); ++c)
+      if (encoder.chunk(c).kind != EncodedChunk::Kind::kAbsent) f.chunks.push_back(encoder.chunk(c));
+    f.max_error = s.max_error;
+    f.present = s.present_vertices;
+    return f;
+  }
+};
+
+double max_abs_error(std::span<const float> deltas, const std::vector<Vec3>& positions, const std::vector<Vec3>& rest) {
+  double e = 0.0;
+  for (std::size_t i = 0; i < rest.size(); ++i)
+    for (int k = 0; k < 3; ++k) e = std::max(e, std::abs(double{deltas[3 * i + k]} - (positions[i][k] - rest[i][k])));
+  return e;
+}
+
+// rest + a smooth whole-body motion of amplitude `a`·diag.
+std::vector<Vec3> body_motion(const std::vector<Vec3>& rest, double a, double phase) {
+  const double diag = bounding_box_diagonal(rest);
+  const double k = 2.0 * std::numbers::pi / diag;
+  std::vector<Vec3> p = rest;
+  for (Vec3& v : p) v += a * diag * Vec3(std::sin(k * v.y() + phase), std::cos(k * v.z() + phase), std::sin(k * v.x()));
+  return p;
+}
+
+// `base` with a bump of height h·diag around `centre` (radius r·diag): a local edit.
+std::vector<Vec3> bump(const std::vector<Vec3>& base, const std::vector<Vec3>& rest, const Vec3& centre, double r, double h) {
+  const double diag = bounding_box_diagonal(rest);
+  std::vector<Vec3> p = base;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double d = (rest[i] - centre).norm() / (r * diag);
+    if (d < 1.0) p[i] += h * diag * (1.0 - d * d) * Vec3(0.3, 1.0, -0.2);
+  }
+  return p;
+}
+
+TEST(FrameEncoder, ChunkedKeyframeMatchesSingleBufferWithinStatedError) {
+  const TriMesh bunny = test::shipped_mesh("bunny_small.obj");
+  const std::vector<Vec3>& rest = bunny.positions;
+  const double target = 5e-5 * bounding_box_diagonal(rest);
+  const std::vector<Vec3> posed = body_motion(rest, 0.05, 0.3);
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 500, .bits = 0, .max_error = target})};
+  const SentFrame f = s.send(posed);
+  ASSERT_EQ(f.keyframe_version, f.version) << "the first frame is a keyframe";
+  ASSERT_EQ(f.chunks.size(), 4u);  // 1839 vertices: 3 × 500 + 339
+  EXPECT_EQ(f.chunks.back().count, 339u);
+  KeyedDeltas client(rest.size());
+  client.apply(f.version, f.keyframe_version, f.views(), 2);
+  const double actual = max_abs_error(client.deltas(), posed, rest);
+  EXPECT_LE(actual, f.max_error);
+  EXPECT_EQ(actual, f.max_error) << "the stated error is exact";
+  EXPECT_LE(f.max_error, target);
+
+  std::vector<Vec3> deltas(rest.size());
+  for (std::size_t i = 0; i < rest.size(); ++i) deltas[i] = posed[i] - rest[i];
+  const EncodedDeltas single = encode_deltas(deltas, 14);
+  const std::vector<Vec3> one = decode_deltas(single);
+  for (std::size_t i = 0; i < rest.size(); ++i)
+    for (int k = 0; k < 3; ++k)
+      ASSERT_LE(std::abs(double{client.deltas()[3 * i + k]} - one[i][k]), f.max_error + single.max_error) << i;
+}
+
+// Randomised deltas at many scales, chunk sizes and bit depths, including
+// degenerate ones (all zero, constant, one vertex per chunk): the stated
+// error is never below the real decoded error.
+TEST(FrameEncoder, StatedErrorNeverBelowDecodedError) {
+  std::mt19937 rng(5);
+  const std::size_t n = 777;
+  std::vector<Vec3> rest(n);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (Vec3& v : rest) v = Vec3(unit(rng), unit(rng), unit(rng));
+  struct Case {
+    double scale;
+    std::uint32_t bits;
+    std::uint32_t chunk;
+  };
+  for (const Case c : {Case{0.0, 14, 100}, Case{1e-7, 0, 64}, Case{1e-3, 8, 1}, Case{1.0, 24, 777}, Case{50.0, 0, 300},
+                       Case{2.0, 11, 7}, Case{-1.0, 0, 256}}) {
+    SCOPED_TRACE("scale " + std::to_string(c.scale) + " bits " + std::to_string(c.bits) + " chunk " + std::to_string(c.chunk));
+    std::vector<Vec3> posed = rest;
+    std::uniform_real_distribution<double> d(-std::abs(c.scale), std::abs(c.scale));
+    // scale < 0: one constant delta for every vertex.
+    for (Vec3& v : posed) v += c.scale < 0 ? Vec3(0.25, -0.5, 0.125) : Vec3(d(rng), d(rng), d(rng));
+    const double target = 1e-4;
+    Sender s{FrameEncoder(rest, {.chunk_vertices = c.chunk, .bits = c.bits, .max_error = target})};
+    KeyedDeltas client(n);
+    for (int frame = 0; frame < 3; ++frame) {
+      const SentFrame f = s.send(posed);
+      client.apply(f.version, f.keyframe_version, f.views());
+      const double actual = max_abs_error(client.deltas(), posed, rest);
+      ASSERT_LE(actual, f.max_error) << "frame " << frame;
+      if (c.bits == 0) {
+        ASSERT_LE(f.max_error, target);
+      }
+      // Next frame: half the vertices move a little, half stay.
+      for (std::size_t i = 0; i < n; i += 2) posed[i] += Vec3(1e-3, 0.0, -2e-3);
+    }
+  }
+}
+
+TEST(FrameEncoder, SparseFrameAppliedToItsKeyframeEqualsFullFrame) {
+  const TriMesh sphere = test::icosphere(4);
+  const std::vector<Vec3>& rest = sphere.positions;
+  const double target = 5e-5 * bounding_box_diagonal(rest);
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 256, .bits = 0, .max_error = target})};
+  const std::vector<Vec3> posed = body_motion(rest, 0.03, 0.0);
+  const SentFrame key = s.send(posed);
+  KeyedDeltas client(rest.size());
+  client.apply(key.version, key.keyframe_version, key.views());
+
+  const std::vector<Vec3> edited = bump(posed, rest, rest[0], 0.15, 0.02);
+  const SentFrame sparse = s.send(edited);
+  EXPECT_EQ(sparse.keyframe_version, key.version);
+  EXPECT_LT(sparse.present, rest.size() / 4) << "a local edit carries few vertices";
+  std::size_t bytes = 0;
+  for (const EncodedChunk& c : sparse.chunks) bytes += c.bytes.size() + 4 * c.runs.size();
+  std::printf("[ sparse   ] %zu of %zu vertices present, %zu bytes (%.3f B/vertex)\n", sparse.present, rest.size(), bytes,
+              double(bytes) / rest.size());
+  client.apply(sparse.version, sparse.keyframe_version, sparse.views());
+
+  // The same positions as a full frame, from a fresh encoder.
+  Sender full{FrameEncoder(rest, {.chunk_vertices = 256, .bits = 0, .max_error = target})};
+  const SentFrame whole = full.send(edited);
+  KeyedDeltas other(rest.size());
+  other.apply(whole.version, whole.keyframe_version, whole.views());
+  EXPECT_LE(max_abs_error(client.deltas(), edited, rest), sparse.max_error);
+  for (std::size_t i = 0; i < 3 * rest.size(); ++i)
+    ASSERT_LE(std::abs(client.deltas()[i] - other.deltas()[i]), sparse.max_error + whole.max_error) << i / 3;
+}
+
+// A subscriber with a mailbox of one skips frames: whatever sparse frame it
+// gets is relative to the keyframe it holds, and a later sparse frame
+// restores the vertices an earlier one changed.
+TEST(FrameEncoder, SkippedFramesAndMovingEditsDecodeCorrectly) {
+  const TriMesh sphere = test::icosphere(4);
+  const std::vector<Vec3>& rest = sphere.positions;
+  const double target = 5e-5 * bounding_box_diagonal(rest);
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 128, .bits = 0, .max_error = target})};
+  KeyedDeltas all(rest.size()), skipping(rest.size());
+  const SentFrame key = s.send(rest);
+  all.apply(key.version, key.keyframe_version, key.views());
+  skipping.apply(key.version, key.keyframe_version, key.views());
+  std::vector<Vec3> posed;
+  for (int frame = 0; frame < 6; ++frame) {
+    // The bump walks around the sphere: frame k's edit is gone in frame k+1.
+    posed = bump(rest, rest, rest[static_cast<std::size_t>(frame * 97) % rest.size()], 0.2, 0.03);
+    const SentFrame f = s.send(posed);
+    ASSERT_EQ(f.keyframe_version, key.version);
+    all.apply(f.version, f.keyframe_version, f.views());
+    ASSERT_LE(max_abs_error(all.deltas(), posed, rest), f.max_error) << "frame " << f.version;
+    if (frame % 3 == 2) {  // the skipping client reads every third frame
+      skipping.apply(f.version, f.keyframe_version, f.views());
+      ASSERT_LE(max_abs_error(skipping.deltas(), posed, rest), f.max_error) << "frame " << f.version;
+    }
+  }
+}
+
+TEST(FrameEncoder, WholeBodyMotionMakesKeyframesAndRequestsForce) {
+  const TriMesh sphere = test::icosphere(3);
+  const std::vector<Vec3>& rest = sphere.positions;
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 100, .bits = 14})};
+  for (int frame = 0; frame < 3; ++frame) {
+    const SentFrame f = s.send(body_motion(rest, 0.05, 0.4 * frame));
+    EXPECT_EQ(f.keyframe_version, f.version) << "every vertex moved: a keyframe";
+    EXPECT_EQ(f.present, rest.size());
+  }
+  const SentFrame same = s.send(body_motion(rest, 0.05, 0.8));
+  EXPECT_NE(same.keyframe_version, same.version) << "nothing moved: a sparse frame";
+  EXPECT_EQ(same.present, 0u);
+  const SentFrame forced = s.send(body_motion(rest, 0.05, 0.8), /*force=*/true);
+  EXPECT_EQ(forced.keyframe_version, forced.version);
+}
+
+TEST(KeyedDeltas, RejectsWhatCannotBeDecodedAndKeepsItsKeyframe) {
+  const TriMesh sphere = test::icosphere(3);
+  const std::vector<Vec3>& rest = sphere.positions;
+  const std::uint32_t n = static_cast<std::uint32_t>(rest.size());
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 200, .bits = 12})};
+  const std::vector<Vec3> posed = body_motion(rest, 0.05, 0.1);
+  const SentFrame key = s.send(posed);
+  KeyedDeltas client(n);
+  client.apply(key.version, key.keyframe_version, key.views());
+  const std::vector<float> held(client.deltas().begin(), client.deltas().end());
+  const SentFrame sparse = s.send(bump(posed, rest, rest[3], 0.2, 0.05));
+  ASSERT_NE(sparse.keyframe_version, sparse.version);
+
+  auto expect_error = [&](std::uint64_t version, std::uint64_t keyframe, std::vector<DeltaChunkView> chunks, const char* what) {
+    EXPECT_THROW(client.apply(version, keyframe, chunks), DeltaCodecError) << what;
+    EXPECT_TRUE(std::equal(held.begin(), held.end(), client.deltas().begin())) << what << ": the keyframe changed";
+  };
+  expect_error(sparse.version, sparse.keyframe_version + 1, sparse.views(), "relative to another keyframe");
+  std::vector<DeltaChunkView> v = key.views();
+  v.pop_back();
+  expect_error(9, 9, v, "a keyframe missing a chunk");
+  v = key.views();
+  std::swap(v[0], v[1]);
+  expect_error(9, 9, v, "chunks out of order");
+  v = key.views();
+  v.back().count += 1;
+  expect_error(9, 9, v, "a chunk past the mesh");
+  v = key.views();
+  std::string broken(v[1].bytes);
+  broken.resize(broken.size() / 2);
+  v[1].bytes = broken;
+  expect_error(9, 9, v, "a truncated chunk");
+  v = sparse.views();
+  const std::vector<std::uint32_t> long_runs = {0, 100000};
+  v[0].runs = long_runs;
+  expect_error(sparse.version, sparse.keyframe_version, v, "runs past their range");
+  const std::vector<std::uint32_t> odd_runs = {1};
+  v = sparse.views();
+  v[0].runs = odd_runs;
+  expect_error(sparse.version, sparse.keyframe_version, v, "an odd number of runs");
+  // And the good sparse frame still applies after all that.
+  EXPECT_NO_THROW(client.apply(sparse.version, sparse.keyframe_version, sparse.views()));
+}
+
+}  // namespace
+}  // namespace filigree
