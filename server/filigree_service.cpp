@@ -240,23 +240,36 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 // ------------------------------------------------------------ Drive, Watch
 
 // A stream of frames with a mailbox of one: offer() replaces what is waiting,
-// so a slow client skips frames, and never blocks the session.
+// so a slow client skips frames, and never blocks the session. In the chunked
+// format, a frame whose keyframe this stream has not written goes after it:
+// the keyframe is queued to be sent first (Frame.keyframe_version).
 template <class Reactor>
 class FrameStream : public FrameSink {
  public:
-  FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {}
+  FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
+    writer_.on_start_write([this](const v1::Frame& f) {
+      if (!f.chunks().empty() && f.keyframe_version() == f.version()) written_keyframe_ = f.version();
+    });
+  }
+
+  // Set once, before the stream subscribes.
+  void set_format(v1::FrameFormat format) { format_ = format; }
+  v1::FrameFormat format() const override { return format_; }
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
-    if (!driver_) {
-      // Watchers all write the one encoded frame (aliasing its PublishedFrame).
-      writer_.send(std::shared_ptr<const v1::Frame>(frame, &frame->frame), /*droppable=*/true);
+    if (format_ == v1::FRAME_FORMAT_SINGLE) {
+      if (frame->single) writer_.send(for_this_stream(frame, frame->single.get()), /*droppable=*/true);
       return;
     }
-    // A driver's copy names the newest of its poses in the frame.
-    auto out = std::make_shared<v1::Frame>(frame->frame);
-    const auto it = frame->pose_of_driver.find(driver_);
-    out->set_pose_id(it == frame->pose_of_driver.end() ? 0 : it->second);
-    writer_.send(std::move(out), /*droppable=*/true);
+    const PublishedFrame* key = frame->keyframe.get();
+    if (key != nullptr) {
+      const std::uint64_t version = key->frame.version();
+      if (written_keyframe_ != version && queued_keyframe_ != version) {
+        queued_keyframe_ = version;
+        writer_.send(for_this_stream(frame->keyframe, &key->frame), /*droppable=*/false);
+      }
+    }
+    writer_.send(for_this_stream(frame, &frame->frame), /*droppable=*/true);
   }
   void close(bool session_closed, const std::string& why) override {
     writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
@@ -264,8 +277,22 @@ class FrameStream : public FrameSink {
   StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
 
  private:
+  // Watchers all write the one encoded frame (aliasing its PublishedFrame); a
+  // driver's copy names the newest of its poses in the frame.
+  std::shared_ptr<const v1::Frame> for_this_stream(const std::shared_ptr<const PublishedFrame>& published,
+                                                   const v1::Frame* frame) const {
+    if (!driver_) return std::shared_ptr<const v1::Frame>(published, frame);
+    auto out = std::make_shared<v1::Frame>(*frame);
+    const auto it = published->pose_of_driver.find(driver_);
+    out->set_pose_id(it == published->pose_of_driver.end() ? 0 : it->second);
+    return out;
+  }
+
   StreamWriter<Reactor, v1::Frame> writer_;
   const std::uint64_t driver_;
+  v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
+  std::atomic<std::uint64_t> written_keyframe_{0};
+  std::uint64_t queued_keyframe_ = 0;  // offer() runs on one session's threads, one at a time
 };
 
 class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {
@@ -284,7 +311,13 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
         session_.reset();
         return stream_->writer().finish(status);
       }
+      stream_->set_format(request_.frame_format());
       session_->subscribe(stream_, session_->version());
+    }
+    if (request_.request_keyframe()) session_->request_keyframe();
+    if (request_.request_keyframe() && request_.positions().empty() && request_.indices().empty()) {
+      StartRead(&request_);  // only the keyframe request: no pose to merge
+      return;
     }
     try {
       session_->submit(driver_, request_.client_name(), request_.pose_id(),
@@ -327,6 +360,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
       stream_->writer().finish(status);
       return;
     }
+    stream_->set_format(request.frame_format());
     // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
     session_->subscribe(stream_, request.after_version() == 0 ? std::nullopt
                                                               : std::optional<std::uint64_t>(request.after_version()));
@@ -417,8 +451,14 @@ grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerConte
 grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context,
                                                     const v1::GetStateRequest* request, v1::SessionState* response) {
   std::shared_ptr<Session> s;
-  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
-  if (status.ok()) *response = s->state();
+  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
+  if (status.ok()) {
+    try {
+      *response = s->state(request->frame_format());
+    } catch (const std::exception& e) {
+      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+    }
+  }
   return finish_unary(context, status);
 }
 

@@ -7,6 +7,8 @@
 #include <spdlog/spdlog.h>
 
 #include "codec/delta_codec.h"
+#include "codec/delta_quantization.h"
+#include "codec/keyed_deltas.h"
 #include "hierarchy/cut_state.h"
 #include "runtime/deformer.h"
 #include "runtime/handle_solver.h"
@@ -42,32 +44,51 @@ void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::Fr
   out.set_encoded_bytes(static_cast<std::uint32_t>(bytes));
 }
 
-// The fewest bits (8…24) whose half quantization step over the deltas' range
-// stays within kAutomaticError of the diagonal (Frame.quantization_bits).
+// Automatic quantization (SessionOptions.quantization_bits = 0) keeps every
+// error within this fraction of the rest mesh's diagonal.
 constexpr double kAutomaticError = 5e-5;
-std::uint32_t automatic_bits(const std::vector<Vec3>& deltas, double diagonal) {
-  double lo = 0.0, hi = 0.0;
-  for (const Vec3& d : deltas) lo = std::min(lo, d.minCoeff()), hi = std::max(hi, d.maxCoeff());
-  const double steps = (hi - lo) / (2.0 * kAutomaticError * std::max(diagonal, 1e-300));
-  std::uint32_t bits = 8;
-  while (bits < 24 && static_cast<double>((1u << bits) - 1) < steps) ++bits;
-  return bits;
+
+FrameEncoderOptions encoder_options(const v1::SessionOptions& o, double diagonal) {
+  FrameEncoderOptions e;
+  e.bits = o.quantization_bits();
+  e.max_error = kAutomaticError * std::max(diagonal, 1e-30);
+  return e;
+}
+
+// The smallest float ≥ x.
+float float_at_least(double x) {
+  float f = static_cast<float>(x);
+  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
 }
 
 }  // namespace
 
-Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, Journal journal)
-    : assets_(std::move(assets)), record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
+Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
+                 Journal journal)
+    : assets_(std::move(assets)), scheduler_(scheduler), lane_(scheduler.lane()),
+      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, assets_->rest_diagonal)),
+      record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = assets_->hierarchy();
   const v1::BaseMesh& base = assets_->base;
   if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base.positions().begin(), base.positions().end());
+  assigned_version_ = record_.version;
 
   deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
   handle_solver_ = std::make_unique<HandleSolver>(h.base_mesh());
   // The current frame exists from the start: the rest mesh, or after a
-  // restart the latest pose, under the version it had.
-  compute_once(true);
-  worker_ = std::thread([this] { run(); });
+  // restart the latest pose, under the version it had. Computed and encoded
+  // here, on the caller's thread.
+  auto f = std::make_unique<InFlight>();
+  f->single = true;
+  if (!compute_frame(*f, /*keep_version=*/true)) return;
+  f->force_keyframe = true;
+  encoder_.begin(true);
+  for (std::size_t c = 0; c <= encoder_.chunk_count(); ++c) {
+    quantize_part_of(*f, c);
+    encode_part_of(*f, c);
+  }
+  publish(*f);
 }
 
 Session::~Session() {
@@ -75,8 +96,7 @@ Session::~Session() {
     std::lock_guard lock(mutex_);
     stopping_ = true;
   }
-  wake_.notify_all();
-  if (worker_.joinable()) worker_.join();
+  scheduler_.drain(*lane_);
 }
 
 Role Session::authorize(const std::string& token) const {
@@ -116,12 +136,12 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
     change.set_client_name(client_name);
     change.set_pose_id(pose_id);
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
-    pending_ = true;
     seq = ++journal_seq_;
     if (journal_) progress = progress_with_change_locked();
+    pending_ = true;
+    maybe_compute_locked();
     touch();
   }
-  wake_.notify_one();
   journal(progress, seq);
 }
 
@@ -137,7 +157,69 @@ void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<st
     if (current_ && (!after_version || current_->frame.version() > *after_version)) now = current_;
     touch();
   }
+  // A single-buffer subscriber of a frame made without that buffer: the
+  // frame transcoded (no new frame, no new version).
+  if (now && sink->format() == v1::FRAME_FORMAT_SINGLE && !now->single) {
+    try {
+      now = with_single(now);
+    } catch (const std::exception& e) {  // the next frame carries the buffer
+      spdlog::error("session={} event=transcode_failed error=\"{}\"", record_.id, e.what());
+      now.reset();
+    }
+  }
   if (now) sink->offer(now);
+}
+
+void Session::request_keyframe() {
+  std::lock_guard lock(mutex_);
+  keyframe_requested_ = true;
+  pending_ = true;
+  maybe_compute_locked();
+}
+
+std::shared_ptr<const PublishedFrame> Session::with_single(const std::shared_ptr<const PublishedFrame>& frame) {
+  // Decode what clients of the chunked frame see, then encode it as one buffer.
+  const std::size_t n = encoder_.vertex_count();
+  KeyedDeltas decoded(n);
+  const auto views_of = [](const v1::Frame& f) {
+    std::vector<DeltaChunkView> views;
+    for (const v1::DeltaChunk& c : f.chunks())
+      views.push_back({c.first_vertex(), c.vertex_count(), {c.runs().data(), static_cast<std::size_t>(c.runs_size())}, c.deltas()});
+    return views;
+  };
+  if (frame->keyframe) decoded.apply(frame->keyframe->frame.version(), frame->keyframe->frame.version(), views_of(frame->keyframe->frame));
+  decoded.apply(frame->frame.version(), frame->frame.keyframe_version(), views_of(frame->frame));
+  std::vector<float> values(decoded.deltas().begin(), decoded.deltas().end());
+  auto single = std::make_shared<v1::Frame>(frame->frame);
+  single->clear_chunks();
+  single->clear_keyframe_version();
+  if (std::any_of(values.begin(), values.end(), [](float v) { return v != 0.0f; })) {
+    const std::uint32_t fixed = record_.options.quantization_bits();
+    DeltaQuantization q = quantization_over(values, fixed ? fixed : 8);
+    const double target = kAutomaticError * std::max(assets_->rest_diagonal, 1e-30);
+    // What is left of the target after the chunked frame's own error.
+    if (!fixed) q.bits = bits_for_error(q.range, std::max(target - frame->frame.max_error(), target / 4));
+    single->set_deltas(encode_draco(values, q));
+    std::vector<float> requantized(values.size());
+    q.decode(values, requantized);
+    double error = 0.0;
+    for (std::size_t i = 0; i < values.size(); ++i) error = std::max(error, std::abs(double{requantized[i]} - values[i]));
+    // Bounded, not exact: the chunked frame's error plus the requantization's.
+    single->set_max_error(float_at_least(double{frame->frame.max_error()} + error));
+    single->set_quantization_bits(q.bits);
+    single->set_delta_min(q.min);
+    single->set_delta_range(q.range);
+  } else {
+    single->clear_deltas();
+    single->set_quantization_bits(0);
+  }
+  single->mutable_stats()->set_encoded_bytes(static_cast<std::uint32_t>(single->deltas().size()));
+  single->mutable_stats()->set_present_vertices(static_cast<std::uint32_t>(n));
+  auto out = std::make_shared<PublishedFrame>(*frame);
+  out->single = std::move(single);
+  std::lock_guard lock(mutex_);
+  if (current_ == frame) current_ = out;  // later subscribers reuse it
+  return out;
 }
 
 void Session::unsubscribe(const FrameSink* sink) {
@@ -176,9 +258,9 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(handles.size()));
     handles_dirty_ = true;
     pending_ = true;
+    maybe_compute_locked();
     touch();
   }
-  wake_.notify_one();
   return count;
 }
 
@@ -190,12 +272,12 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
-    pending_ = true;
     seq = ++journal_seq_;
     if (journal_) progress = progress_with_change_locked();
+    pending_ = true;
+    maybe_compute_locked();
     touch();
   }
-  wake_.notify_one();
   journal(progress, seq);
 }
 
@@ -209,7 +291,6 @@ void Session::close() {
       if (auto s = w.lock()) sinks.push_back(s);
     sinks_.clear();
   }
-  wake_.notify_all();
   for (const auto& s : sinks) s->close(true, {});
 }
 
@@ -231,7 +312,7 @@ std::string Session::failure() const {
 
 SessionProgress Session::progress_with_change_locked() const {
   // The frame that will show a change made now: the next, or the one after the one computing.
-  return {record_.options, record_.pose, record_.version + 1 + (computing_ ? 1 : 0)};
+  return {record_.options, record_.pose, record_.version + in_flight_locked() + 1};
 }
 
 void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
@@ -242,34 +323,143 @@ void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
   journaled_seq_ = seq;
 }
 
-void Session::run() {
-  while (true) {
-    {
-      std::unique_lock lock(mutex_);
-      wake_.wait(lock, [&] { return pending_ || stopping_; });
-      if (stopping_) return;
-    }
-    compute_once(false);
-  }
+bool Session::want_single_locked() const {
+  for (const auto& w : sinks_)
+    if (const auto sink = w.lock(); sink && sink->format() == v1::FRAME_FORMAT_SINGLE) return true;
+  return false;
 }
 
-void Session::compute_once(bool keep_version) {
+void Session::maybe_compute_locked() {
+  // frame_ is free once the encoding frame's parts have read it, and no
+  // computed frame waits for the encoder.
+  if (stopping_ || !pending_ || computing_ || computed_ || positions_busy_ > 0) return;
+  computing_ = true;
+  scheduler_.post(*lane_, [this] { compute_task(); });
+}
+
+void Session::compute_task() {
+  auto f = std::make_unique<InFlight>();
+  {
+    std::lock_guard lock(mutex_);
+    if (stopping_) {
+      computing_ = false;
+      return;
+    }
+    f->single = want_single_locked();
+  }
+  // Alone on the machine a session's compute uses every core; sharing it,
+  // one (the other sessions keep the rest busy).
+  deformer_->set_threads(scheduler_.busy_lanes() <= 1 ? static_cast<int>(scheduler_.threads()) : 1);
+  const bool ok = compute_frame(*f, /*keep_version=*/false);
+  std::lock_guard lock(mutex_);
+  computing_ = false;
+  if (ok && !stopping_) {
+    computed_ = std::move(f);
+    if (!encoding_) start_encode_locked();
+  }
+  maybe_compute_locked();
+}
+
+void Session::start_encode_locked() {
+  encoding_ = std::move(computed_);
+  InFlight* f = encoding_.get();
+  f->force_keyframe = keyframe_requested_ || !keyframe_;
+  keyframe_requested_ = false;
+  encoder_.begin(f->force_keyframe);
+  f->encode_start = Clock::now();
+  const std::size_t parts = encoder_.chunk_count() + (f->single ? 1 : 0);
+  positions_busy_ = parts_left_ = parts;
+  for (std::size_t c = 0; c < parts; ++c) scheduler_.post(*lane_, [this, f, c] { part_task(f, c); });
+}
+
+void Session::quantize_part_of(InFlight& f, std::size_t c) {
+  if (c < encoder_.chunk_count()) return encoder_.quantize_chunk(c, frame_);
+  // The single buffer: every delta over one range (FRAME_FORMAT_SINGLE).
+  const std::vector<Vec3>& rest = assets_->hierarchy().rest_positions;
+  f.single_values.resize(3 * rest.size());
+  bool all_zero = true;
+  for (std::size_t i = 0; i < rest.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double d = frame_[i][k] - rest[i][k];
+      if (!std::isfinite(d) || std::abs(d) > 1e30) throw DeltaCodecError("delta of vertex " + std::to_string(i) + " is not finite");
+      f.single_values[3 * i + k] = static_cast<float>(d);
+      all_zero &= d == 0.0;
+    }
+  if (all_zero) {
+    f.single_values.clear();
+    f.single_quantization = {};
+    f.single_error = 0.0;
+    return;
+  }
+  const std::uint32_t fixed = record_.options.quantization_bits();
+  DeltaQuantization q = quantization_over(f.single_values, fixed ? fixed : 8);
+  const double target = kAutomaticError * std::max(assets_->rest_diagonal, 1e-30);
+  if (!fixed) q.bits = bits_for_error(q.range, target);
+  std::vector<float> decoded(f.single_values.size());
+  while (true) {
+    q.decode(f.single_values, decoded);
+    double error = 0.0;
+    for (std::size_t i = 0; i < rest.size(); ++i)
+      for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(double{decoded[3 * i + k]} - (frame_[i][k] - rest[i][k])));
+    f.single_error = error;
+    if (fixed || error <= target || q.bits >= 24) break;
+    ++q.bits;
+  }
+  f.single_quantization = q;
+}
+
+void Session::encode_part_of(InFlight& f, std::size_t c) {
+  if (c < encoder_.chunk_count()) return encoder_.encode_chunk(c);
+  f.single_bytes = encode_draco(f.single_values, f.single_quantization);
+}
+
+void Session::part_task(InFlight* f, std::size_t c) {
+  try {
+    quantize_part_of(*f, c);
+  } catch (const std::exception& e) {
+    if (!f->failed.exchange(true)) spdlog::error("session={} event=encode_failed error=\"{}\"", record_.id, e.what());
+  }
+  {
+    std::lock_guard lock(mutex_);
+    if (--positions_busy_ == 0) maybe_compute_locked();  // the next frame may compute now
+  }
+  try {
+    if (!f->failed) encode_part_of(*f, c);
+  } catch (const std::exception& e) {
+    if (!f->failed.exchange(true)) spdlog::error("session={} event=encode_failed error=\"{}\"", record_.id, e.what());
+  }
+  {
+    std::lock_guard lock(mutex_);
+    if (--parts_left_ > 0) return;
+  }
+  // The last part: publish, then start the frame that waited.
+  if (!f->failed) {
+    publish(*f);
+  } else {
+    encoder_.finish();
+    std::lock_guard lock(mutex_);
+    keyframe_requested_ = true;  // clients' state must not depend on a frame never sent
+  }
+  std::lock_guard lock(mutex_);
+  encoding_.reset();
+  if (computed_ && !stopping_) start_encode_locked();
+  maybe_compute_locked();
+}
+
+bool Session::compute_frame(InFlight& f, bool keep_version) {
   const Hierarchy& h = assets_->hierarchy();
   const std::size_t m = h.base_vertices.size();
-  // Buffers reused frame to frame; only this session's worker computes.
+  // Buffers reused frame to frame; one compute at a time.
   Pose& pose = scratch_pose_;
   pose.positions.resize(m);
-  std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
-  std::map<std::string, v1::Change> changes;
   std::optional<double> threshold;
-  std::uint32_t bits;
   std::vector<HandleTarget> handle_targets;
   std::uint64_t seq;
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     pending_ = false;
-    computing_ = true;
+    f.version = keep_version ? record_.version : ++assigned_version_;
     if (handles_dirty_) {
       handles_dirty_ = false;
       for (const auto& [v, entries] : handles_) {
@@ -283,12 +473,17 @@ void Session::compute_once(bool keep_version) {
     }
     for (std::size_t i = 0; i < m; ++i)
       pose.positions[i] = Vec3(record_.pose[3 * i], record_.pose[3 * i + 1], record_.pose[3 * i + 2]);
-    pose_of_driver = latest_pose_of_driver_;
-    changes.swap(changes_);
+    f.pose_of_driver = latest_pose_of_driver_;
+    f.changes.swap(changes_);
     threshold.swap(pending_threshold_);
-    bits = record_.options.quantization_bits();
     seq = journal_seq_;
   }
+  // A version given out but never published is taken back (computes are
+  // serial, so no later one exists yet).
+  const auto give_back = [&] {
+    std::lock_guard lock(mutex_);
+    if (!keep_version) --assigned_version_;
+  };
   try {
     if (!handle_targets.empty()) {
       // Handles move the whole base pose (as-rigid-as-possible from the current one).
@@ -305,7 +500,7 @@ void Session::compute_once(bool keep_version) {
         for (int k = 0; k < 3; ++k) progress.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
       std::lock_guard lock(mutex_);
       progress.options = record_.options;
-      progress.version = keep_version ? record_.version : record_.version + 1;
+      progress.version = f.version;
     }
     try {
       journal(progress, seq);
@@ -317,97 +512,141 @@ void Session::compute_once(bool keep_version) {
         std::lock_guard lock(mutex_);
         failure_ = e.what();
         stopping_ = true;
-        computing_ = false;
         for (const auto& w : sinks_)
           if (auto sink = w.lock()) sinks.push_back(sink);
         sinks_.clear();
       }
+      give_back();
       spdlog::warn("session={} event=journal_failed error=\"{}\"", record_.id, e.what());
       for (const auto& sink : sinks) sink->close(false, std::string("the session stopped on this replica: ") + e.what());
-      return;
+      return false;
     }
     if (threshold) deformer_->set_threshold(*threshold);
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
-    bool at_rest = true;
-    for (std::size_t i = 0; i < m && at_rest; ++i)
-      for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
+    f.at_rest = true;
+    for (std::size_t i = 0; i < m && f.at_rest; ++i)
+      for (int k = 0; k < 3; ++k) f.at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
     // Deform anyway so the cut, regions and stats (overlays) follow this
-    // frame; the deformer writes straight into the frame buffer, which then
-    // becomes the deltas in place.
-    std::vector<Vec3>& deltas = frame_;
-    deltas.resize(h.vertex_count());
-    const FrameStats stats = deformer_->deform(pose, deltas);
-    const auto t = Clock::now();
-    if (at_rest) {
-      std::fill(deltas.begin(), deltas.end(), Vec3::Zero());
-    } else {
-      for (std::size_t i = 0; i < deltas.size(); ++i) deltas[i] -= h.rest_positions[i];
-    }
-    const EncodedDeltas enc = encode_deltas(deltas, bits ? bits : automatic_bits(deltas, assets_->rest_diagonal));
-    const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - t).count();
-
-    auto published = std::make_shared<PublishedFrame>();
-    v1::Frame& f = published->frame;
-    f.set_deltas(enc.bytes);
-    f.set_vertex_count(enc.count);
-    f.set_quantization_bits(enc.bits);
-    f.set_delta_min(enc.min);
-    f.set_delta_range(enc.range);
-    f.set_max_error(enc.max_error);
-    for (auto& [name, change] : changes) *f.add_changes() = change;
-    fill_stats(stats, encode_ms, enc.bytes.size(), *f.mutable_stats());
-    published->pose_of_driver = std::move(pose_of_driver);
+    // frame; the deformer writes straight into the frame buffer.
+    frame_.resize(h.vertex_count());
+    f.stats = deformer_->deform(pose, frame_);
+    if (f.at_rest) std::copy(h.rest_positions.begin(), h.rest_positions.end(), frame_.begin());
 
     // Overlays only while a viewer asks for them: they are O(n) per frame.
-    std::shared_ptr<v1::Overlays> overlays;
     bool want_overlays;
     {
       std::lock_guard lock(mutex_);
       want_overlays = Clock::now() < overlays_wanted_until_;
     }
     if (want_overlays) {
-      overlays = std::make_shared<v1::Overlays>();
-      overlays->set_ready(true);
+      f.overlays = std::make_shared<v1::Overlays>();
+      v1::Overlays& overlays = *f.overlays;
+      overlays.set_ready(true);
       const std::vector<Index>& region = deformer_->region_of_vertex();
       std::uint32_t regions = 0;
       for (Index r : region) {
-        overlays->add_region_of(r == kNone ? 0 : r + 1);
+        overlays.add_region_of(r == kNone ? 0 : r + 1);
         if (r != kNone) regions = std::max<std::uint32_t>(regions, r + 1);
       }
-      if (region.empty()) overlays->mutable_region_of()->Resize(static_cast<int>(h.vertex_count()), 0);
-      overlays->set_region_count(regions);
+      if (region.empty()) overlays.mutable_region_of()->Resize(static_cast<int>(h.vertex_count()), 0);
+      overlays.set_region_count(regions);
       const CutState& cut = deformer_->cut_state();
-      for (FaceId f = 0; f < h.faces.size(); ++f)
-        if (cut.face_alive(f))
-          for (Index v : h.faces[f]) overlays->add_cut_faces(v);
+      for (FaceId face = 0; face < h.faces.size(); ++face)
+        if (cut.face_alive(face))
+          for (Index v : h.faces[face]) overlays.add_cut_faces(v);
     }
-
-    std::vector<std::shared_ptr<FrameSink>> sinks;
-    {
-      std::lock_guard lock(mutex_);
-      if (!keep_version) ++record_.version;
-      computing_ = false;
-      if (overlays) {
-        overlays->set_version(record_.version);
-        overlays_ = overlays;
-      }
-      f.set_version(record_.version);
-      current_ = published;
-      touch();
-      std::erase_if(sinks_, [](const std::weak_ptr<FrameSink>& w) { return w.expired(); });
-      for (const auto& w : sinks_)
-        if (auto s = w.lock()) sinks.push_back(s);
-    }
-    for (const auto& s : sinks) s->offer(published);
+    return true;
   } catch (const std::exception& e) {
-    {
-      std::lock_guard lock(mutex_);
-      computing_ = false;
-    }
+    give_back();
     // A compute failure must not take the server down; the session keeps
     // its last frame and logs why.
     spdlog::error("session={} event=compute_failed error=\"{}\"", record_.id, e.what());
+    return false;
   }
+}
+
+void Session::publish(InFlight& f) {
+  const EncodedFrameSummary summary = encoder_.finish();
+  const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - f.encode_start).count();
+  auto published = std::make_shared<PublishedFrame>();
+  published->pose_of_driver = std::move(f.pose_of_driver);
+
+  // What both formats share.
+  v1::Frame common;
+  common.set_version(f.version);
+  common.set_vertex_count(static_cast<std::uint32_t>(encoder_.vertex_count()));
+  for (auto& [name, change] : f.changes) *common.add_changes() = change;
+  if (f.single) {
+    auto single = std::make_shared<v1::Frame>(common);
+    single->set_deltas(std::move(f.single_bytes));
+    single->set_quantization_bits(f.single_quantization.bits);
+    single->set_delta_min(f.single_quantization.min);
+    single->set_delta_range(f.single_quantization.range);
+    single->set_max_error(float_at_least(f.single_error));
+    fill_stats(f.stats, encode_ms, single->deltas().size(), *single->mutable_stats());
+    single->mutable_stats()->set_present_vertices(single->vertex_count());
+    published->single = std::move(single);
+  }
+  v1::Frame& out = published->frame;
+  out = std::move(common);
+  std::uint32_t bits = 0;
+  for (std::size_t c = 0; c < encoder_.chunk_count(); ++c) {
+    EncodedChunk& chunk = encoder_.chunk(c);
+    if (chunk.kind == EncodedChunk::Kind::kAbsent) continue;
+    v1::DeltaChunk& d = *out.add_chunks();
+    d.set_first_vertex(chunk.first);
+    d.set_vertex_count(chunk.count);
+    d.mutable_runs()->Add(chunk.runs.begin(), chunk.runs.end());
+    d.set_deltas(std::move(chunk.bytes));
+    d.set_quantization_bits(chunk.quantization.bits);
+    d.set_delta_min(chunk.quantization.min);
+    d.set_delta_range(chunk.quantization.range);
+    bits = std::max(bits, chunk.quantization.bits);
+  }
+  out.set_quantization_bits(bits);
+  out.set_max_error(float_at_least(summary.max_error));
+  fill_stats(f.stats, encode_ms, summary.bytes, *out.mutable_stats());
+  out.mutable_stats()->set_present_vertices(static_cast<std::uint32_t>(summary.present_vertices));
+
+  {
+    std::lock_guard lock(mutex_);
+    if (summary.keyframe || !keyframe_) {
+      out.set_keyframe_version(f.version);
+    } else {
+      out.set_keyframe_version(keyframe_->frame.version());
+      published->keyframe = keyframe_;
+    }
+  }
+  // A single-buffer subscriber came while this frame computed without it.
+  bool single_wanted;
+  {
+    std::lock_guard lock(mutex_);
+    single_wanted = !published->single && want_single_locked();
+  }
+  std::shared_ptr<const PublishedFrame> shared = published;
+  if (single_wanted) {
+    try {
+      shared = with_single(shared);
+    } catch (const std::exception& e) {
+      spdlog::error("session={} event=transcode_failed error=\"{}\"", record_.id, e.what());
+    }
+  }
+  std::vector<std::shared_ptr<FrameSink>> sinks;
+  {
+    std::lock_guard lock(mutex_);
+    record_.version = f.version;
+    if (f.overlays) {
+      f.overlays->set_version(record_.version);
+      overlays_ = f.overlays;
+    }
+    current_ = shared;
+    if (!shared->keyframe) keyframe_ = shared;
+    touch();
+    std::erase_if(sinks_, [](const std::weak_ptr<FrameSink>& w) { return w.expired(); });
+    for (const auto& w : sinks_)
+      if (auto s = w.lock()) sinks.push_back(s);
+  }
+  for (const auto& s : sinks) s->offer(shared);
 }
 
 v1::Overlays Session::overlays() {
@@ -421,10 +660,10 @@ v1::Overlays Session::overlays() {
       out = *overlays_;
     } else {
       pending_ = true;  // recompute the current pose once, with overlays
+      maybe_compute_locked();
     }
     touch();
   }
-  if (!had_recent) wake_.notify_one();
   return out;  // ready == false until a frame with overlays exists
 }
 
@@ -441,12 +680,23 @@ v1::SessionInfo Session::info() const {
   return info;
 }
 
-v1::SessionState Session::state() const {
+v1::SessionState Session::state(v1::FrameFormat format) {
+  // The single buffer may have to be made first (outside the lock).
+  std::shared_ptr<const PublishedFrame> single;
+  if (format == v1::FRAME_FORMAT_SINGLE) {
+    single = current_frame();
+    if (single && !single->single) single = with_single(single);
+  }
   v1::SessionState s;
   std::lock_guard lock(mutex_);
   s.set_version(record_.version);
   for (float c : record_.pose) s.add_pose(c);
-  if (current_) *s.mutable_frame() = current_->frame;
+  if (single) {
+    *s.mutable_frame() = *single->single;
+  } else if (current_) {
+    *s.mutable_frame() = current_->frame;
+    if (current_->keyframe) *s.mutable_keyframe() = current_->keyframe->frame;
+  }
   return s;
 }
 
@@ -479,7 +729,7 @@ std::uint64_t Session::version() const {
 
 std::uint64_t Session::accepted_version() const {
   std::lock_guard lock(mutex_);
-  return record_.version + (computing_ ? 1 : 0);
+  return assigned_version_;
 }
 
 std::size_t Session::drivers() const {

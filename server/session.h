@@ -2,12 +2,16 @@
 // One session: a hierarchy, its deformer, the merged pose of every driver, and
 // the frames fanned out to every subscriber (DESIGN §3).
 //
-// Threading: submit() and subscribe() are called from gRPC threads; one
-// worker thread per session computes, so there is one compute at a time per
-// session, and poses that arrive meanwhile are coalesced (newest write per base
-// vertex wins). Each subscriber has a mailbox of one, so a slow one skips
-// frames without delaying anyone.
+// Threading: submit() and subscribe() are called from gRPC threads; the
+// frame work runs on the server's FrameScheduler, on this session's lane: one
+// compute at a time per session (poses that arrive meanwhile are coalesced,
+// newest write per base vertex wins), then the frame's chunks are quantized
+// and encoded in parallel. A pipeline of two: the next frame computes while
+// the previous one encodes, once the encoder has read its positions. Each
+// subscriber has a mailbox of one, so a slow one skips frames without
+// delaying anyone.
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -18,18 +22,19 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <thread>
 #include <unordered_map>
 #include <vector>
 
+#include "codec/frame_encoder.h"
 #include "filigree/v1/filigree.pb.h"
 #include "hierarchy/hierarchy.h"
+#include "runtime/deformer.h"  // FrameStats
 #include "runtime/pose.h"
+#include "server/frame_scheduler.h"
 #include "server/session_assets.h"
 #include "server/session_record.h"
 
 namespace filigree {
-class Deformer;
 class HandleSolver;
 }
 
@@ -40,7 +45,11 @@ enum class Role { kNone, kViewer, kEditor };
 // A frame as published: encoded once, shared by every subscriber. Drivers
 // learn which of their poses it includes from pose_of_driver.
 struct PublishedFrame {
-  v1::Frame frame;
+  v1::Frame frame;  // FRAME_FORMAT_CHUNKED
+  // The keyframe `frame` is relative to; null when it is one itself.
+  std::shared_ptr<const PublishedFrame> keyframe;
+  // FRAME_FORMAT_SINGLE, encoded only while a subscriber wants it.
+  std::shared_ptr<const v1::Frame> single;
   std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
 };
 
@@ -49,7 +58,10 @@ class FrameSink {
  public:
   virtual ~FrameSink() = default;
   // Called with every new frame, from the session's worker; must not block.
+  // A chunked stream sends frame->keyframe first if it has not sent it.
   virtual void offer(std::shared_ptr<const PublishedFrame> frame) = 0;
+  // Which frames this subscriber reads (fixed for its life).
+  virtual v1::FrameFormat format() const = 0;
   // The session is closing (session_closed) or leaves this process (the
   // server stops, or the session moves to another replica): finish the
   // stream, with `why` as the UNAVAILABLE message in the second case.
@@ -64,8 +76,10 @@ using Journal = std::function<void(const SessionProgress&)>;
 
 class Session {
  public:
-  // Computes the current frame, then starts the worker.
-  Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, Journal journal = {});
+  // Computes the current frame; later frames run on `scheduler`, which must
+  // outlive the session.
+  Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
+          Journal journal = {});
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
@@ -88,6 +102,8 @@ class Session {
   void unsubscribe(const FrameSink* sink);
   // A driver's stream ended: it no longer counts as a driver.
   void driver_left(std::uint64_t driver);
+  // The next frame is a keyframe (a client lost its decoded state).
+  void request_keyframe();
 
   void set_threshold(double threshold, bool whole_mesh);
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
@@ -107,10 +123,13 @@ class Session {
   v1::Overlays overlays();
 
   v1::SessionInfo info() const;
-  v1::SessionState state() const;
+  // The merged pose and the current frame in `format` (with its keyframe
+  // when chunked and sparse).
+  v1::SessionState state(v1::FrameFormat format);
   SessionRecord record() const;
   const SessionAssets& assets() const { return *assets_; }
   std::shared_ptr<const PublishedFrame> current_frame() const;
+
   std::size_t subscriber_count() const;
   // Seconds since the last request or frame.
   double idle_seconds() const;
@@ -121,26 +140,71 @@ class Session {
   std::size_t drivers() const;
 
  private:
-  void run();
-  // Computes and publishes a frame of the current merged pose; the version
-  // grows by one unless `keep_version` (the frame made when (re)loading).
-  void compute_once(bool keep_version);
+  // A frame between compute and publication.
+  struct InFlight {
+    std::uint64_t version = 0;
+    FrameStats stats;
+    std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+    std::map<std::string, v1::Change> changes;
+    std::shared_ptr<v1::Overlays> overlays;
+    bool at_rest = false, force_keyframe = false, single = false;
+    std::chrono::steady_clock::time_point encode_start{};
+    // The single buffer (FRAME_FORMAT_SINGLE), when one is made.
+    std::vector<float> single_values;
+    DeltaQuantization single_quantization;
+    double single_error = 0.0;
+    std::string single_bytes;
+    std::atomic<bool> failed{false};
+  };
+
+  // Computes the merged pose into frame_ (and overlays); false when nothing
+  // may be published (the journal failed, or the compute did).
+  bool compute_frame(InFlight& f, bool keep_version);
+  // Starts encoding computed_ (mutex_ held): posts its chunks.
+  void start_encode_locked();
+  // Posts a compute if a change waits and frame_ is free (mutex_ held).
+  void maybe_compute_locked();
+  void compute_task();
+  // Part c of a frame's encoding: chunk c, or the single buffer (c ==
+  // chunk_count). Quantizing reads frame_; encoding does not.
+  void quantize_part_of(InFlight& f, std::size_t c);
+  void encode_part_of(InFlight& f, std::size_t c);
+  void part_task(InFlight* f, std::size_t c);
+  // Whether frames should carry the single buffer now (mutex_ held).
+  bool want_single_locked() const;
+  // `frame` with a single buffer transcoded from its chunks (decoded as a
+  // client would, encoded as one buffer); becomes the current frame if
+  // `frame` was. Throws DeltaCodecError if the frame cannot be decoded.
+  std::shared_ptr<const PublishedFrame> with_single(const std::shared_ptr<const PublishedFrame>& frame);
+  // Builds and publishes the encoded frame.
+  void publish(InFlight& f);
   void touch();
   // Journals `progress` unless a later progress (by seq) already was.
   void journal(const SessionProgress& progress, std::uint64_t seq);
   // The progress including a change just merged, under the version of the frame that will show it.
   SessionProgress progress_with_change_locked() const;
+  // Frames assigned a version but not published yet.
+  std::uint64_t in_flight_locked() const { return assigned_version_ - record_.version; }
 
   const std::shared_ptr<const SessionAssets> assets_;  // shared by every session of the mesh
   std::unique_ptr<Deformer> deformer_;
   std::unique_ptr<HandleSolver> handle_solver_;
-  Pose scratch_pose_;       // compute_once's buffers (worker thread only)
-  std::vector<Vec3> frame_;  // positions, then deltas in place
+  FrameScheduler& scheduler_;
+  std::shared_ptr<FrameScheduler::Lane> lane_;
+  Pose scratch_pose_;        // compute_frame's buffers (one compute at a time)
+  std::vector<Vec3> frame_;  // positions of the frame computed last
+  FrameEncoder encoder_;
+  std::unique_ptr<InFlight> computed_;  // computed, waiting for the encoder
+  std::unique_ptr<InFlight> encoding_;  // being encoded
 
   mutable std::mutex mutex_;
-  std::condition_variable wake_;
   SessionRecord record_;
   bool pending_ = false, stopping_ = false, closed_ = false, computing_ = false;
+  std::uint64_t assigned_version_ = 0;  // the newest frame's version, published or not
+  std::size_t positions_busy_ = 0;      // parts of the encoding frame still reading frame_
+  std::size_t parts_left_ = 0;          // parts of the encoding frame not encoded yet
+  bool keyframe_requested_ = false;
+  std::shared_ptr<const PublishedFrame> keyframe_;
   std::optional<double> pending_threshold_;
   std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;
   std::map<std::string, v1::Change> changes_;  // since the last frame, by client
@@ -162,7 +226,6 @@ class Session {
   std::uint64_t journal_seq_ = 0;    // changes merged (mutex_)
   std::uint64_t journaled_seq_ = 0;  // changes journaled (journal_mutex_)
   std::string failure_;
-  std::thread worker_;
 };
 
 }  // namespace filigree::server

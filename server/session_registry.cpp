@@ -25,7 +25,7 @@ std::string random_token() {
 }
 
 SessionRegistry::SessionRegistry(HierarchyCache& cache, SessionStore& store, RegistryLimits limits)
-    : cache_(cache), store_(store), limits_(limits) {}
+    : cache_(cache), store_(store), limits_(limits), scheduler_(limits.frame_threads) {}
 
 SessionRegistry::~SessionRegistry() = default;
 
@@ -73,7 +73,7 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.uploaded_ids = std::move(uploaded_ids);
   if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
   Journal journal = journal_for(r.id);
-  auto made = std::make_shared<Session>(std::move(r), assets_.get(h), std::move(journal));
+  auto made = std::make_shared<Session>(std::move(r), assets_.get(h), scheduler_, std::move(journal));
   confirm_lease(made->id());
   auto s = insert(std::move(made));
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
@@ -133,7 +133,7 @@ std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_
       return nullptr;
     }
     auto h = cache_.load(r->hierarchy_key);
-    s = std::make_shared<Session>(std::move(*r), assets_.get(h), journal_for(id));
+    s = std::make_shared<Session>(std::move(*r), assets_.get(h), scheduler_, journal_for(id));
   } catch (const StoreUnavailable&) {
     store_.release(id);
     throw;

@@ -28,6 +28,8 @@ struct RegistryLimits {
   // The lease's length (shared store): a replica that could not renew a
   // lease for this long stops computing the session.
   double lease_seconds = 3.0;
+  // Threads computing and encoding every session's frames; 0: one per core.
+  unsigned frame_threads = 0;
 };
 
 // More sessions than --max-sessions.
@@ -104,6 +106,8 @@ class SessionRegistry {
   SessionAssetsCache assets_;
   SessionStore& store_;
   const RegistryLimits limits_;
+  // Declared before sessions_: sessions end (and drain their lanes) before it stops.
+  FrameScheduler scheduler_;
   mutable std::mutex mutex_;
   std::map<std::string, Entry> sessions_;
   std::map<std::string, std::shared_ptr<std::mutex>> loading_;

@@ -1,10 +1,14 @@
 #pragma once
 // Serialises writes on a gRPC callback stream: one write in flight, a mailbox
-// of one for droppable messages (a newer frame replaces a waiting one), and a
-// Finish that waits for the write in flight — the callback API allows neither
-// two outstanding writes nor Finish during a write. Messages are held by
-// shared pointer, so one frame can be written to every subscriber uncopied.
+// of one for droppable messages (a newer frame replaces a waiting one), a
+// queue for those that must arrive (a keyframe a later frame needs; they go
+// first), and a Finish that waits for the write in flight — the callback API
+// allows neither two outstanding writes nor Finish during a write. Messages
+// are held by shared pointer, so one frame can be written to every
+// subscriber uncopied.
 
+#include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -19,14 +23,24 @@ class StreamWriter {
   explicit StreamWriter(Reactor* reactor) : reactor_(reactor) {}
 
   // Queues a message. A droppable one replaces a waiting droppable one; a
-  // waiting non-droppable message is never replaced.
+  // non-droppable one is queued, written before any droppable one, and
+  // drops the droppable one waiting before it (it is older).
   void send(std::shared_ptr<const Message> message, bool droppable) {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
     if (closing_ || finished_) return;
-    if (waiting_ && !waiting_droppable_ && droppable) return;
-    waiting_ = std::move(message);
-    waiting_droppable_ = droppable;
+    if (droppable) {
+      waiting_ = std::move(message);
+    } else {
+      waiting_.reset();
+      must_send_.push_back(std::move(message));
+    }
     pump();
+  }
+
+  // Called (under the writer's lock) with each message as its write starts.
+  void on_start_write(std::function<void(const Message&)> observer) {
+    std::lock_guard<std::recursive_mutex> lock(mutex_);
+    observer_ = std::move(observer);
   }
 
   // Finishes the stream once the write in flight (and a waiting
@@ -35,7 +49,7 @@ class StreamWriter {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
     if (closing_ || finished_) return;
     closing_ = std::move(status);
-    if (waiting_ && waiting_droppable_) waiting_.reset();
+    waiting_.reset();
     pump();
   }
 
@@ -44,6 +58,7 @@ class StreamWriter {
     writing_ = false;
     if (!ok) {  // the client is gone: nothing more can be written
       waiting_.reset();
+      must_send_.clear();
       if (!closing_) closing_ = grpc::Status(grpc::StatusCode::CANCELLED, "the client went away");
     }
     pump();
@@ -58,9 +73,15 @@ class StreamWriter {
  private:
   void pump() {
     if (finished_ || writing_) return;
-    if (waiting_) {
-      out_ = std::move(waiting_);
+    if (!must_send_.empty() || waiting_) {
+      if (!must_send_.empty()) {
+        out_ = std::move(must_send_.front());
+        must_send_.pop_front();
+      } else {
+        out_ = std::move(waiting_);
+      }
       writing_ = true;
+      if (observer_) observer_(*out_);
       reactor_->StartWrite(out_.get());
     } else if (closing_) {
       finished_ = true;
@@ -72,8 +93,9 @@ class StreamWriter {
   std::recursive_mutex mutex_;
   Reactor* reactor_;
   std::shared_ptr<const Message> out_;  // kept alive until OnWriteDone
-  std::shared_ptr<const Message> waiting_;
-  bool waiting_droppable_ = true;
+  std::shared_ptr<const Message> waiting_;        // droppable: the newest only
+  std::deque<std::shared_ptr<const Message>> must_send_;
+  std::function<void(const Message&)> observer_;
   bool writing_ = false;
   bool finished_ = false;
   std::optional<grpc::Status> closing_;

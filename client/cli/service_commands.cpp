@@ -167,7 +167,7 @@ void drive(const DriveArgs& a) {
   Client client(a.server);
   const SessionMesh session = client.join(a.session, a.token);
   const std::vector<std::vector<float>> poses = make_poses(a, session);
-  const FrameDecoder decoder(session.rest_positions);
+  FrameDecoder decoder(session.rest_positions);
   auto driver = client.drive(a.session, a.token, a.name);
 
   std::vector<Clock::time_point> sent_at(poses.size() + 1);  // by pose_id
@@ -244,7 +244,7 @@ void drive(const DriveArgs& a) {
 void watch(const WatchArgs& a) {
   Client client(a.server);
   const SessionMesh session = client.join(a.session, a.token);
-  const FrameDecoder decoder(session.rest_positions);
+  FrameDecoder decoder(session.rest_positions);
   std::vector<std::vector<Vec3>> frames;
   int count = 0;
   std::uint64_t last_version = a.after;

@@ -145,7 +145,7 @@ void run(const Args& args) {
               mesh.quantization_bits);
 
   // 2. The decoder keeps the rest mesh; frames are deltas from it.
-  const filigree::FrameDecoder decoder(mesh.rest_positions);
+  filigree::FrameDecoder decoder(mesh.rest_positions);
   const Bend bend(mesh.base_positions);
   auto driver = client.drive(session_id, token, "engine_loop");
 

@@ -123,6 +123,7 @@ SessionMesh Client::join(const std::string& session_id, const std::string& token
 v1::SessionState Client::state(const std::string& session_id, const std::string& token) {
   v1::GetStateRequest request;
   request.set_session_id(session_id);
+  request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
   return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_);
 }
 

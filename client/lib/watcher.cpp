@@ -10,6 +10,7 @@ Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const 
   v1::WatchRequest request;
   request.set_session_id(session_id);
   request.set_after_version(after_version);
+  request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
   stream_ = stub.Watch(&context_, request);
 }
 

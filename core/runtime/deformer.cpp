@@ -86,6 +86,11 @@ const CutState& Deformer::cut_state() const {
   return *s_->full_cut;
 }
 
+void Deformer::set_threads(int threads) {
+  if (threads < 1) throw std::invalid_argument("threads must be ≥ 1");
+  options_.threads = threads;
+}
+
 void Deformer::set_threshold(double threshold) {
   check_threshold(threshold);
   options_.threshold = threshold;

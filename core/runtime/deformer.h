@@ -85,6 +85,8 @@ class Deformer {
 
   // Changes T live; the cut adapts over the next frames (0 and ∞ take effect at once).
   void set_threshold(double threshold);
+  // Threads for the next frames (≥ 1; results do not depend on it).
+  void set_threads(int threads);
   const DeformerOptions& options() const { return options_; }
   std::size_t base_vertex_count() const;
   std::size_t vertex_count() const;

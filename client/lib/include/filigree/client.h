@@ -67,7 +67,8 @@ class Client {
 
   // The session's base and rest mesh (editor or viewer token).
   SessionMesh join(const std::string& session_id, const std::string& token);
-  // The merged pose and the current frame.
+  // The merged pose and the current frame, chunked: a FrameDecoder decodes
+  // state.keyframe() first when the frame is sparse (has_keyframe()).
   v1::SessionState state(const std::string& session_id, const std::string& token);
   // Changes the cut threshold (editor token); whole_mesh means T = ∞.
   void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh);
