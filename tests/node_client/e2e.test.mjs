@@ -1,8 +1,15 @@
-// A Filigree client written against proto/filigree/v1/filigree.proto alone,
-// with another gRPC implementation (@grpc/grpc-js + @grpc/proto-loader) and
-// Draco's official WASM decoder (draco3d): uploads a mesh, drives rigid poses,
-// decodes the frames and checks them vertex by vertex, the access rules and
-// the standard health service.
+// A Filigree client written against proto/filigree/v1/filigree.proto, with
+// another gRPC implementation (@grpc/grpc-js + @grpc/proto-loader) and Draco's
+// official WASM decoder (draco3d): uploads a mesh, drives rigid poses, decodes
+// the frames and checks them vertex by vertex, the access rules and the
+// standard health service.
+//
+// Frames come in both formats. FRAME_FORMAT_SINGLE (the default: clients
+// written before chunked frames) is decoded by decodeDeltas below, written
+// from the proto alone. FRAME_FORMAT_CHUNKED is decoded by the web viewer's
+// own code (web_viewer/src/frame.ts: chunk checks, KeyedDeltas), so that the
+// viewer's reading of chunks, runs and keyframes is checked against the real
+// server, and compared with the single format frame by frame.
 //
 // Environment:
 //   FILIGREE_SERVER  path of the filigree-server binary
@@ -22,6 +29,7 @@ import * as grpc from '@grpc/grpc-js';
 import * as protoLoader from '@grpc/proto-loader';
 import draco3d from 'draco3d';
 import healthCheck from 'grpc-health-check';
+import ts from 'typescript';
 
 const SERVER = process.env.FILIGREE_SERVER;
 const ROOT = process.env.FILIGREE_ROOT;
@@ -30,6 +38,7 @@ const CHUNK_BYTES = 16 * 1024;
 const BASE_VERTICES = 150;
 const REST_VERTICES = 1839;
 const LIFT = 0.1;  // the pose moves every base vertex by (0, LIFT, 0)
+const CHUNKED = 'FRAME_FORMAT_CHUNKED';
 
 // One set of loader options for every proto: field names as in the .proto,
 // 64-bit integers as decimal strings (sent as strings too), enums as names,
@@ -173,8 +182,9 @@ function checkQuantization(frame, restPositions) {
   assert.ok(frame.max_error <= allowed * (1 + 1e-6), `max_error ${frame.max_error} ≤ 5e-5 of the diagonal = ${allowed}`);
 }
 
-// Opens a Drive stream, sends one full pose (pose_id 1), returns the first
-// frame that includes it, then half-closes and waits for the OK status.
+// Opens a Drive stream (default format: single frames), sends one full pose
+// (pose_id 1), returns the first frame that includes it, then half-closes and
+// waits for the OK status.
 async function driveFullPose(client, md, sessionId, positions, openCalls) {
   const call = client.Drive(md);
   openCalls.push(call);
@@ -226,6 +236,108 @@ function decodeDeltas(M, frame) {
   }
 }
 
+// ------------------------------------------------------------------ chunked frames
+
+// The web viewer's web_viewer/src/frame.ts as a module. It imports nothing at
+// run time, so its TypeScript transpiled alone is the whole module.
+async function loadFrameModule(root) {
+  const path = join(root, 'web_viewer', 'src', 'frame.ts');
+  const { outputText } = ts.transpileModule(readFileSync(path, 'utf8'), {
+    fileName: path,
+    compilerOptions: { module: ts.ModuleKind.ESNext, target: ts.ScriptTarget.ES2022 },
+  });
+  return import(`data:text/javascript;base64,${Buffer.from(outputText).toString('base64')}`);
+}
+
+// A grpc-js Frame (field names as in the .proto, 64-bit integers as strings)
+// as frame.ts reads it (ChunkedFrameData).
+function chunkedFrame(frame) {
+  return {
+    version: BigInt(frame.version),
+    keyframeVersion: BigInt(frame.keyframe_version),
+    vertexCount: frame.vertex_count,
+    chunks: frame.chunks.map((c) => ({
+      firstVertex: c.first_vertex, vertexCount: c.vertex_count, runs: c.runs, deltas: c.deltas,
+    })),
+  };
+}
+
+const isKeyframe = (frame) => frame.version === frame.keyframe_version;
+const describeFrame = (frame) => (isKeyframe(frame) ? `v${frame.version} keyframe`
+  : `v${frame.version} sparse on v${frame.keyframe_version} (${frame.stats?.present_vertices} present)`);
+
+// Checks what a chunked frame says about itself: chunks with sane bits, the
+// error within 5e-5 of the rest mesh's diagonal (default options), and the
+// present vertices the server reports are the ones the chunks carry.
+function checkChunkedFrame(F, frame, restPositions) {
+  assert.ok(F.isChunked(chunkedFrame(frame)), `frame ${frame.version} is chunked`);
+  assert.equal(frame.deltas.length, 0, 'a chunked frame has no single buffer');
+  for (const chunk of frame.chunks) {
+    if (chunk.deltas.length === 0) continue;
+    assert.ok(chunk.quantization_bits >= 8 && chunk.quantization_bits <= 24, `chunk bits ${chunk.quantization_bits}`);
+  }
+  const allowed = 5e-5 * diagonal(restPositions);
+  assert.ok(frame.max_error <= allowed * (1 + 1e-6), `max_error ${frame.max_error} ≤ 5e-5 of the diagonal = ${allowed}`);
+  if (frame.stats) {
+    const present = F.presentCounts(chunkedFrame(frame).chunks, frame.vertex_count).reduce((a, b) => a + b, 0);
+    assert.equal(frame.stats.present_vertices, present, `frame ${frame.version}: stats.present_vertices`);
+  }
+}
+
+// Follows a stream of frames: applies each one in arrival order (nothing is
+// missed between two waits) and lets a test wait for the next frame, after
+// those already waited for, that satisfies a predicate (next), or for the
+// first such frame of the stream (first). An error of `apply` fails the wait.
+function followFrames(call, apply) {
+  const frames = [];
+  let seen = 0;
+  let failure = null;
+  let waiter = null;
+  const settle = () => {
+    if (!waiter) return;
+    const at = frames.findIndex((f, i) => i >= waiter.from && waiter.accept(f));
+    const w = waiter;
+    if (at >= 0) {
+      waiter = null;
+      if (w.advance) seen = at + 1;
+      w.resolve(frames[at]);
+    } else if (failure) {
+      waiter = null;
+      w.reject(failure);
+    }
+  };
+  const wait = (accept, from, advance) =>
+    new Promise((resolve, reject) => { waiter = { accept, from, advance, resolve, reject }; settle(); });
+  call.on('data', (frame) => {
+    if (failure) return;
+    try {
+      apply(frame);
+      frames.push(frame);
+    } catch (error) {
+      failure = new Error(`frame ${frame.version} (${describeFrame(frame)}) could not be applied: ${error.message}`);
+    }
+    settle();
+  });
+  call.on('error', (error) => { failure ??= error; settle(); });
+  call.on('end', () => { failure ??= new Error('the stream ended before the expected frame'); settle(); });
+  return {
+    frames,
+    next: (accept) => wait(accept, seen, true),
+    first: (accept) => wait(accept, 0, false),
+  };
+}
+
+// The largest |a − b| over two arrays of deltas, and where.
+function worstDifference(a, b) {
+  let worst = 0;
+  let at = -1;
+  for (let i = 0; i < a.length; ++i) {
+    const d = Math.abs(a[i] - b[i]);
+    if (d > worst) [worst, at] = [d, Math.floor(i / 3)];
+  }
+  return { worst, vertex: at };
+}
+
 // ------------------------------------------------------------------ tests
 
 describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS }, () => {
@@ -234,6 +346,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
   let client;       // filigree.v1.Filigree
   let health;       // grpc.health.v1.Health
   let draco;        // the draco3d decoder module
+  let F;            // web_viewer/src/frame.ts
   const openCalls = [];  // streams to cancel in `after` if a test left them open
   // Set by the tests in order; a later test fails at once if an earlier one did.
   let created;      // CreateSessionResponse.Created
@@ -241,6 +354,84 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
 
   const sessionMd = (token) => metadata({ 'x-session-id': created.info.session_id, 'x-filigree-token': token });
   const needSession = () => assert.ok(created, 'needs the session made by the CreateSession test');
+
+  // Checks a chunked frame and applies it to `keyed` with the viewer's code;
+  // returns the deltas after it (a copy: the next frame changes them in place).
+  const applyChunked = (keyed, frame) => {
+    checkChunkedFrame(F, frame, created.info.rest.positions);
+    F.decodeAndApply(draco, keyed, chunkedFrame(frame));
+    return keyed.deltas.slice();
+  };
+
+  // The deltas of a chunked GetState: its keyframe first when its frame is
+  // relative to one, into a KeyedDeltas that held nothing.
+  const chunkedStateDeltas = (state) => {
+    const frames = F.framesOfState(state);
+    assert.ok(isKeyframe(frames[0]), `GetState starts with a keyframe (${frames.map(describeFrame).join(', ')})`);
+    if (!isKeyframe(state.frame)) {
+      assert.equal(state.keyframe?.version, state.frame.keyframe_version, 'the keyframe of the frame');
+    }
+    const keyed = new F.KeyedDeltas(REST_VERTICES);
+    let deltas;
+    for (const frame of frames) deltas = applyChunked(keyed, frame);
+    return deltas;
+  };
+
+  // A Drive stream in the chunked format; every frame is applied in order.
+  // pose(request) sends one and resolves with { frame, deltas } of the frame
+  // that includes it; reached(version) with those of the first frame of at
+  // least that version.
+  const openChunkedDrive = (md) => {
+    const call = client.Drive(md);
+    openCalls.push(call);
+    const keyed = new F.KeyedDeltas(REST_VERTICES);
+    const deltasOf = new Map();
+    const stream = followFrames(call, (frame) => deltasOf.set(frame, applyChunked(keyed, frame)));
+    const status = callStatus(call);
+    status.catch(() => {});  // awaited by close(); a failed test must not leave it unhandled
+    let first = true;
+    return {
+      stream,
+      async pose(request) {
+        const next = stream.next((f) => f.pose_id === request.pose_id);
+        // The first request names the session and the format of the stream.
+        await write(call, first
+          ? { session_id: created.info.session_id, client_name: 'node-e2e', frame_format: CHUNKED, ...request }
+          : request);
+        first = false;
+        const frame = await next;
+        return { frame, deltas: deltasOf.get(frame) };
+      },
+      async reached(version) {
+        const frame = await stream.first((f) => BigInt(f.version) >= BigInt(version));
+        return { frame, deltas: deltasOf.get(frame) };
+      },
+      async close() {
+        call.end();
+        await status;
+      },
+    };
+  };
+
+  // Compares the current frame as a chunked Drive stream decoded it with the
+  // same version in the single format (GetState, default format, decoded by
+  // the proto-only decoder). The server may compute a frame after the one
+  // that included a pose: the versions are matched, not assumed.
+  const compareWithSingle = async (drive) => {
+    for (;;) {
+      const state = await unary(client, 'GetState', { session_id: created.info.session_id },
+        sessionMd(created.viewer_token));
+      assert.equal(state.frame.chunks.length, 0, 'GetState without frame_format answers a single frame');
+      const { frame, deltas } = await drive.reached(state.version);
+      if (frame.version !== state.version) continue;  // a newer frame came meanwhile: ask again
+      const single = decodeDeltas(draco, state.frame);
+      const { worst, vertex } = worstDifference(deltas, single);
+      const tolerance = frame.max_error + state.frame.max_error + 1e-6;
+      assert.ok(worst <= tolerance, `frame ${describeFrame(frame)}: vertex ${vertex} differs from the single format ` +
+        `by ${worst} > ${tolerance}`);
+      return frame;
+    }
+  };
 
   before(async () => {
     assert.ok(SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
@@ -256,6 +447,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     client = new filigree.filigree.v1.Filigree(address, grpc.credentials.createInsecure());
     health = new healthPkg.grpc.health.v1.Health(address, grpc.credentials.createInsecure());
     draco = await draco3d.createDecoderModule({});
+    F = await loadFrameModule(ROOT);
   }, { timeout: HOOK_TIMEOUT_MS });
 
   after(async () => {
@@ -357,29 +549,33 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     assert.deepEqual(info.base.positions, created.info.base.positions);
   });
 
-  it('drives a translated base and decodes a rigidly translated mesh', { timeout: TEST_TIMEOUT_MS }, async () => {
-    needSession();
-    const positions = created.info.base.positions.map((v, i) => (i % 3 === 1 ? v + LIFT : v));
-    drivenFrame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
-      openCalls);
+  // The default format, as clients written before chunked frames read it.
+  it('drives a translated base and decodes a rigidly translated mesh (single frames)', { timeout: TEST_TIMEOUT_MS },
+    async () => {
+      needSession();
+      const positions = created.info.base.positions.map((v, i) => (i % 3 === 1 ? v + LIFT : v));
+      drivenFrame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
+        openCalls);
 
-    assert.equal(drivenFrame.vertex_count, REST_VERTICES);
-    assert.ok(BigInt(drivenFrame.version) >= 1n, `version ${drivenFrame.version} ≥ 1`);
-    assert.ok(drivenFrame.deltas.length > 0, 'a moved mesh has deltas');
-    checkQuantization(drivenFrame, created.info.rest.positions);
-    const change = drivenFrame.changes.find((ch) => ch.client_name === 'node-e2e');
-    assert.ok(change, 'the frame names this client among the changes');
-    assert.equal(change.pose_id, '1');
-    assert.equal(change.vertex_count, BASE_VERTICES, 'a full pose moves every base vertex');
+      assert.equal(drivenFrame.vertex_count, REST_VERTICES);
+      assert.ok(BigInt(drivenFrame.version) >= 1n, `version ${drivenFrame.version} ≥ 1`);
+      assert.ok(drivenFrame.deltas.length > 0, 'a moved mesh has deltas');
+      assert.equal(drivenFrame.chunks.length, 0, 'a stream that did not ask for chunks gets none');
+      assert.equal(drivenFrame.keyframe_version, '0');
+      checkQuantization(drivenFrame, created.info.rest.positions);
+      const change = drivenFrame.changes.find((ch) => ch.client_name === 'node-e2e');
+      assert.ok(change, 'the frame names this client among the changes');
+      assert.equal(change.pose_id, '1');
+      assert.equal(change.vertex_count, BASE_VERTICES, 'a full pose moves every base vertex');
 
-    const deltas = decodeDeltas(draco, drivenFrame);
-    const tolerance = drivenFrame.max_error + 1e-5;
-    const expected = [0, LIFT, 0];
-    let worst = 0;
-    for (let i = 0; i < deltas.length; ++i) worst = Math.max(worst, Math.abs(deltas[i] - expected[i % 3]));
-    assert.ok(worst <= tolerance,
-      `every delta is (0, ${LIFT}, 0): worst coordinate error ${worst} > ${tolerance}`);
-  });
+      const deltas = decodeDeltas(draco, drivenFrame);
+      const tolerance = drivenFrame.max_error + 1e-5;
+      const expected = [0, LIFT, 0];
+      let worst = 0;
+      for (let i = 0; i < deltas.length; ++i) worst = Math.max(worst, Math.abs(deltas[i] - expected[i % 3]));
+      assert.ok(worst <= tolerance,
+        `every delta is (0, ${LIFT}, 0): worst coordinate error ${worst} > ${tolerance}`);
+    });
 
   it('sends a late watcher with the viewer token the current frame at once', { timeout: TEST_TIMEOUT_MS }, async () => {
     needSession();
@@ -399,6 +595,33 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     await cancelled;
   });
 
+  it('sends a late chunked watcher the current frame, its keyframe first', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    needSession();
+    assert.ok(drivenFrame, 'needs the frame of the Drive test');
+    const call = client.Watch({ session_id: created.info.session_id, after_version: '0', frame_format: CHUNKED },
+      sessionMd(created.viewer_token));
+    openCalls.push(call);
+    const keyed = new F.KeyedDeltas(REST_VERTICES);
+    const deltasOf = new Map();
+    const stream = followFrames(call, (frame) => deltasOf.set(frame, applyChunked(keyed, frame)));
+    // Decoding it at all means the keyframe came first: a sparse frame without it is a FrameError.
+    const frame = await stream.next((f) => f.version === drivenFrame.version);
+    assert.ok(isKeyframe(stream.frames[0]), 'a new stream starts with a keyframe');
+    assert.equal(frame.vertex_count, REST_VERTICES);
+    const single = decodeDeltas(draco, drivenFrame);
+    const { worst, vertex } = worstDifference(deltasOf.get(frame), single);
+    const tolerance = frame.max_error + drivenFrame.max_error + 1e-6;
+    assert.ok(worst <= tolerance, `vertex ${vertex} differs from the single frame by ${worst} > ${tolerance}`);
+    t.diagnostic(`chunked watch: ${stream.frames.map(describeFrame).join(', ')}; ${frame.chunks.length} chunks`);
+
+    const cancelled = expectCode(new Promise((resolve, reject) => {
+      call.on('error', reject);
+      call.on('end', resolve);
+    }), grpc.status.CANCELLED);
+    call.cancel();
+    await cancelled;
+  });
+
   it('reports the driven pose in GetState', { timeout: TEST_TIMEOUT_MS }, async () => {
     needSession();
     assert.ok(drivenFrame, 'needs the frame of the Drive test');
@@ -410,13 +633,35 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       const rest = created.info.base.positions[i];
       assert.ok(Math.abs(v - (i % 3 === 1 ? rest + LIFT : rest)) <= 1e-5, `pose[${i}] = ${v}`);
     });
+    // The default format: one buffer, no keyframe.
+    assert.equal(state.frame.version, drivenFrame.version);
+    assert.equal(state.frame.chunks.length, 0);
+    assert.equal(state.keyframe, null);
+    assert.deepEqual(Buffer.from(state.frame.deltas), Buffer.from(drivenFrame.deltas));
   });
+
+  it('answers a chunked GetState with the current frame, its keyframe when it is sparse', { timeout: TEST_TIMEOUT_MS },
+    async () => {
+      needSession();
+      assert.ok(drivenFrame, 'needs the frame of the Drive test');
+      const state = await unary(client, 'GetState', { session_id: created.info.session_id, frame_format: CHUNKED },
+        sessionMd(created.viewer_token));
+      assert.equal(state.version, drivenFrame.version);
+      assert.equal(state.frame.version, drivenFrame.version);
+      assert.equal(state.pose.length, 3 * BASE_VERTICES);
+      const deltas = chunkedStateDeltas(state);
+      const tolerance = state.frame.max_error + 1e-5;
+      const expected = [0, LIFT, 0];
+      let worst = 0;
+      for (let i = 0; i < deltas.length; ++i) worst = Math.max(worst, Math.abs(deltas[i] - expected[i % 3]));
+      assert.ok(worst <= tolerance, `every delta is (0, ${LIFT}, 0): worst coordinate error ${worst} > ${tolerance}`);
+    });
 
   // A rigid motion of the whole base moves the whole mesh rigidly too; unlike
   // the translation, a rotation moves every vertex differently, so this also
-  // checks that decoded point i is original vertex i.
-  it('drives a rotated base and decodes a rigidly rotated mesh, vertex by vertex', { timeout: TEST_TIMEOUT_MS },
-    async () => {
+  // checks that a decoded vertex is the right original vertex, chunk by chunk.
+  it('drives a rotated base and decodes a rigidly rotated mesh from chunked frames, vertex by vertex',
+    { timeout: TEST_TIMEOUT_MS }, async (t) => {
       needSession();
       const base = created.info.base.positions;
       const rest = created.info.rest.positions;
@@ -431,11 +676,11 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       const positions = [];
       for (let i = 0; i < m; ++i) positions.push(...rotate(base, i));
 
-      const frame = await driveFullPose(client, sessionMd(created.editor_token), created.info.session_id, positions,
-        openCalls);
+      const drive = openChunkedDrive(sessionMd(created.editor_token));
+      const { frame, deltas } = await drive.pose({ pose_id: '1', indices: [], positions });
+      await drive.close();
       assert.equal(frame.vertex_count, REST_VERTICES);
-      checkQuantization(frame, rest);
-      const deltas = decodeDeltas(draco, frame);
+      assert.ok(isKeyframe(drive.stream.frames[0]), 'a new stream starts with a keyframe');
       const tolerance = frame.max_error + 1e-5;
       let worst = 0;
       let worstVertex = -1;
@@ -448,6 +693,49 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       }
       assert.ok(worst <= tolerance,
         `rest + delta is the rotated rest position: vertex ${worstVertex} is off by ${worst} > ${tolerance}`);
+      t.diagnostic(`chunked drive: ${drive.stream.frames.map(describeFrame).join(', ')}`);
+    });
+
+  // Moves of part of the mesh: the server may send sparse frames (only the
+  // vertices that moved since the keyframe), one after the other; each must
+  // decode to the mesh the single format gives for the same version.
+  it('drives local moves in chunked frames: each decodes to what the single format gives, a requested keyframe too',
+    { timeout: TEST_TIMEOUT_MS }, async (t) => {
+      needSession();
+      const base = created.info.base.positions;
+      const m = base.length / 3;
+      const byHeight = [...Array(m).keys()].sort((a, b) => base[3 * a + 1] - base[3 * b + 1]);
+      const tenth = Math.ceil(m / 10);
+      const shifted = (vertices, dx) => {
+        const set = new Set(vertices);
+        return base.map((v, i) => (i % 3 === 0 && set.has(Math.floor(i / 3)) ? v + dx : v));
+      };
+      const dx = 0.05 * diagonal(created.info.rest.positions);
+      // Rest; the top tenth of the base moved; then the bottom tenth instead
+      // (the vertices the top's move changed go back to the keyframe's).
+      const poses = [base, shifted(byHeight.slice(-tenth), dx), shifted(byHeight.slice(0, tenth), -dx)];
+
+      const drive = openChunkedDrive(sessionMd(created.editor_token));
+      for (let k = 0; k < poses.length; ++k) {
+        await drive.pose({ pose_id: String(k + 1), indices: [], positions: poses[k] });
+        await compareWithSingle(drive);
+      }
+      // GetState in the chunked format decodes to the same mesh, from nothing.
+      const state = await unary(client, 'GetState', { session_id: created.info.session_id, frame_format: CHUNKED },
+        sessionMd(created.viewer_token));
+      const fromState = chunkedStateDeltas(state);
+      const same = await drive.reached(state.frame.version);
+      assert.equal(same.frame.version, state.frame.version, 'the Drive stream got the frame GetState answers');
+      const { worst, vertex } = worstDifference(fromState, same.deltas);
+      assert.ok(worst <= 2 * same.frame.max_error + 1e-6, `GetState's vertex ${vertex} differs by ${worst}`);
+
+      // request_keyframe: the frame that includes the request is a keyframe.
+      const forced = await drive.pose({ pose_id: String(poses.length + 1), indices: [], positions: poses.at(-1),
+        request_keyframe: true });
+      assert.ok(isKeyframe(forced.frame), `a keyframe was asked for: ${describeFrame(forced.frame)}`);
+      await compareWithSingle(drive);
+      await drive.close();
+      t.diagnostic(`chunked drive: ${drive.stream.frames.map(describeFrame).join(', ')}`);
     });
 
   it('refuses a Drive with the viewer token (PERMISSION_DENIED)', { timeout: TEST_TIMEOUT_MS }, async () => {

@@ -3,7 +3,7 @@ import { Code, ConnectError, createClient, type Client, type Interceptor } from 
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
 import {
-  Filigree, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionInfo, type SessionState,
+  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionInfo, type SessionState,
   type SetHandlesResponse,
 } from './gen/filigree/v1/filigree_pb';
 
@@ -35,12 +35,16 @@ export class SessionClient {
 
   // The session's frames: the current one at once (if newer than
   // afterVersion), then every new one; ends when the session closes.
+  // Chunked (frame.ts): each keyframe comes before the frames relative to it,
+  // so afterVersion 0 is how to get the current keyframe again. A server
+  // without that format sends single frames, which the page reads too.
   watch(afterVersion: bigint, signal: AbortSignal): AsyncIterable<Frame> {
-    return this.client.watch({ sessionId: this.sessionId, afterVersion }, { signal });
+    return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED }, { signal });
   }
 
+  // Chunked too: state.frame may be relative to state.keyframe (framesOfState).
   getState(): Promise<SessionState> {
-    return this.client.getState({ sessionId: this.sessionId });
+    return this.client.getState({ sessionId: this.sessionId, frameFormat: FrameFormat.CHUNKED });
   }
 
   setOptions(threshold: number, wholeMesh: boolean): Promise<SessionInfo> {

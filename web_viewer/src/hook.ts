@@ -16,7 +16,10 @@ export interface TestHook {
   framesSkipped: number;    // superseded by a newer frame before they were decoded
   framesRendered: number;
   roundTripMs: number | null;
-  displacement: number;     // largest |delta| coordinate of the last applied frame (its quantization range)
+  displacement: number;     // largest |delta| coordinate of the last applied frame (single: its quantization range; chunked: decoded)
+  frameKind: 'single' | 'keyframe' | 'sparse' | '';  // of the last applied frame ('' before the first)
+  framesSparse: number;     // applied frames relative to a keyframe (chunked format)
+  resyncs: number;          // Watch streams reopened to get a keyframe again (one failed or never came)
   clientName: string;       // this page's name in SetHandles, SubmitPose and the change list
   handleCount: number;      // this page's handles
   handlesAnswered: number;  // SetHandles calls the server accepted
@@ -43,7 +46,7 @@ declare global {
 export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
-  displacement: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
+  displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
   overlaysVersion: 0, cutTriangles: 0, stretchMax: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
 };

@@ -5,9 +5,10 @@ import type * as THREE from 'three';
 import { ChangeLog } from './changes';
 import { Code, describeError, isCode, SessionClient, type Frame, type Overlays, type SessionInfo } from './client';
 import { DeltaDecoder } from './decoder';
-import { applyDeltas, FrameError } from './frame';
+import { applyDeltaRanges, applyDeltas, FrameError, isChunked, isKeyframe, KeyedDeltas, largestDelta } from './frame';
 import { HandleEditor } from './handles';
 import { FRAME_EVENT, hook } from './hook';
+import { FrameMailbox } from './mailbox';
 import { CutWireframe } from './overlay-cut';
 import { OverlayFeed } from './overlay-feed';
 import { RegionsOverlay } from './overlay-regions';
@@ -26,13 +27,15 @@ const CLIENT_NAME = `web-${Array.from(crypto.getRandomValues(new Uint8Array(3)),
 const RECONNECT_MIN_MS = 500;
 const RECONNECT_MAX_MS = 10_000;
 
+// A frame and the Watch stream it came on (streams are numbered from 1).
+interface Arrival { frame: Frame; stream: number }
+
 // One session on this page: its mesh, its frame stream, its controls.
 class Viewer {
   private readonly client: SessionClient;
   private readonly decoder = new DeltaDecoder();
   private readonly stats = new StatsTracker();
   private readonly changes = new ChangeLog(byId<HTMLOListElement>('changes'));
-  private readonly abort = new AbortController();
   private view!: MeshView;
   private rest!: Float32Array;
   private baseRest: number[] = [];
@@ -44,8 +47,16 @@ class Viewer {
   private feed!: OverlayFeed;
   private handles!: HandleEditor;
   private lastVersion = 0n;
-  private waiting: Frame | null = null;  // the newest frame not yet applied
+  // The frames not yet applied: the newest one, and the keyframe it needs.
+  private readonly mailbox = new FrameMailbox<Arrival>(({ frame }) => isChunked(frame) && isKeyframe(frame));
   private applying = false;
+  private keyed!: KeyedDeltas;  // the chunked stream's keyframe and current deltas
+  // view.positions = rest + keyed.deltas. False after a single-format frame:
+  // the next chunked one then rewrites every vertex, not only what it changed.
+  private positionsFollowKeyed = true;
+  private stream = { number: 0, abort: new AbortController() };  // the current Watch
+  private resyncAsked = false;
+  private resyncDelayMs = 0;
   private nextPoseId = 1n;
 
   constructor(private readonly params: ViewerParams) {
@@ -70,6 +81,7 @@ class Viewer {
   private show(info: SessionInfo): void {
     const rest = info.rest!;
     this.rest = Float32Array.from(rest.positions);
+    this.keyed = new KeyedDeltas(rest.vertexCount);
     const faces = Uint32Array.from(rest.faces);
     this.view = new MeshView(byId('view'), this.rest, faces);
     const base = info.base!;
@@ -145,21 +157,37 @@ class Viewer {
   }
 
   // Watch until the session closes; reconnect (from the last version seen)
-  // while the server is unavailable, stop on any other error.
+  // while the server is unavailable, stop on any other error. After a lost
+  // keyframe (resync) the stream is reopened from version 0: the server sends
+  // the current frame again, its keyframe first.
   private async follow(): Promise<void> {
     let backoff = RECONNECT_MIN_MS;
     for (;;) {
+      const stream = { number: this.stream.number + 1, abort: new AbortController() };
+      this.stream = stream;
+      const afterVersion = this.resyncAsked ? 0n : this.lastVersion;
+      this.resyncAsked = false;
       try {
         hook.state = 'live';
         setStatus('Live.');
-        for await (const frame of this.client.watch(this.lastVersion, this.abort.signal)) {
+        for await (const frame of this.client.watch(afterVersion, stream.abort.signal)) {
           backoff = RECONNECT_MIN_MS;
-          this.onFrame(frame);
+          this.onFrame({ frame, stream: stream.number });
         }
         hook.state = 'closed';
         setStatus('The session was closed.');
         return;
       } catch (error) {
+        if (stream.abort.signal.aborted) {
+          // resync(): again at once the first time, then backing off, in
+          // case the server's keyframe itself cannot be decoded here.
+          ++hook.resyncs;
+          const delay = this.resyncDelayMs;
+          this.resyncDelayMs = Math.min(Math.max(2 * delay, RECONNECT_MIN_MS), RECONNECT_MAX_MS);
+          setStatus('Asking the server for a keyframe again…');
+          if (delay > 0) await new Promise((resolve) => window.setTimeout(resolve, delay));
+          continue;
+        }
         if (!isCode(error, Code.Unavailable)) {
           fail(describeError(error, this.params.sessionId, this.params.serverUrl));
           return;
@@ -172,10 +200,21 @@ class Viewer {
     }
   }
 
+  // The keyframe the next frames are relative to was lost (it could not be
+  // decoded, or never came): reopen the Watch, unless a newer keyframe waits.
+  private resync(): void {
+    if (this.resyncAsked || this.mailbox.hasKeyframe) return;
+    this.resyncAsked = true;
+    this.mailbox.clear();  // relative to the lost keyframe, all of them
+    this.stream.abort.abort();
+  }
+
   // Reads the stream as fast as it delivers: a frame that arrives while
-  // another is being decoded replaces the one waiting (a mailbox of one, like
-  // the server's), so a slow page skips frames instead of falling behind.
-  private onFrame(frame: Frame): void {
+  // another is being decoded replaces the one waiting (FrameMailbox: a
+  // keyframe waits until applied), so a slow page skips frames instead of
+  // falling behind.
+  private onFrame(arrival: Arrival): void {
+    const { frame } = arrival;
     this.stats.frameArrived(frame, performance.now());
     ++hook.framesReceived;
     this.lastVersion = frame.version;
@@ -185,49 +224,74 @@ class Viewer {
       // From the first frame on, the count includes this page's own Watch.
       pollPresence(() => this.client.entry(), (text) => { byId('presence').textContent = text; }, (e) => this.describe(e));
     }
-    if (this.waiting !== null) {
+    for (let superseded = this.mailbox.put(arrival); superseded > 0; --superseded) {
       ++hook.framesSkipped;
       this.stats.frameSkipped();
     }
-    this.waiting = frame;
     if (!this.applying) void this.applyWaiting();
   }
 
   private async applyWaiting(): Promise<void> {
     this.applying = true;
-    while (this.waiting !== null) {
-      const frame = this.waiting;
-      this.waiting = null;
-      await this.apply(frame);
-    }
+    for (let next = this.mailbox.take(); next !== null; next = this.mailbox.take()) await this.apply(next);
     this.applying = false;
   }
 
-  private async apply(frame: Frame): Promise<void> {
+  private async apply({ frame, stream }: Arrival): Promise<void> {
+    const chunked = isChunked(frame);
     try {
       if (frame.vertexCount !== hook.vertexCount) {
         throw new FrameError(`a frame of ${frame.vertexCount} vertices for a mesh of ${hook.vertexCount}`);
       }
-      if (frame.deltas.length === 0) {
-        this.view.positions.set(this.rest);  // every delta is 0: the rest mesh
-      } else {
-        const { deltas, decodeMs } = await this.decoder.decode(frame.deltas, frame.vertexCount);
-        applyDeltas(this.rest, deltas, this.view.positions);
-        this.stats.frameDecoded(decodeMs);
-      }
+      if (chunked) await this.applyChunked(frame);
+      else await this.applySingle(frame);
     } catch (error) {
-      // One bad frame is reported; the next good one repairs the view.
+      // One bad frame is reported; the next good one repairs the view (a
+      // sparse frame is whole against its keyframe), unless the next ones
+      // need the keyframe that failed or never came: then it is asked again.
       showError(`Frame ${frame.version} could not be shown: ${error instanceof Error ? error.message : error}`);
+      if (chunked && stream === this.stream.number &&
+        (isKeyframe(frame) || frame.keyframeVersion !== this.keyed.keyframeVersion)) this.resync();
       return;
     }
     this.view.positionsChanged();
     for (const overlay of this.overlays) overlay.update(this.view.positions);
     if (this.shown.has(this.stretch)) hook.stretchMax = this.stretch.maxDeviation;
     hook.version = Number(frame.version);
-    hook.displacement = frame.deltas.length === 0 ? 0
-      : Math.max(Math.abs(frame.deltaMin), Math.abs(frame.deltaMin + frame.deltaRange));
+    hook.frameKind = !chunked ? 'single' : isKeyframe(frame) ? 'keyframe' : 'sparse';
+    if (hook.frameKind === 'sparse') ++hook.framesSparse;
     ++hook.framesApplied;
     window.dispatchEvent(new Event(FRAME_EVENT));
+  }
+
+  // FRAME_FORMAT_SINGLE (a server without chunked frames): one buffer of every vertex.
+  private async applySingle(frame: Frame): Promise<void> {
+    if (frame.deltas.length === 0) {
+      this.view.positions.set(this.rest);  // every delta is 0: the rest mesh
+      hook.displacement = 0;
+    } else {
+      const { deltas, decodeMs } = await this.decoder.decode(frame.deltas, frame.vertexCount);
+      applyDeltas(this.rest, deltas, this.view.positions);
+      this.stats.frameDecoded(decodeMs);
+      hook.displacement = Math.max(Math.abs(frame.deltaMin), Math.abs(frame.deltaMin + frame.deltaRange));
+    }
+    this.positionsFollowKeyed = false;
+  }
+
+  // FRAME_FORMAT_CHUNKED: the chunks decode in the workers; the keyframe
+  // state is here, and only the vertex ranges that changed are rewritten.
+  private async applyChunked(frame: Frame): Promise<void> {
+    const present = this.keyed.check(frame);  // before decoding: a frame that cannot apply costs nothing
+    const { values, decodeMs } = await this.decoder.decodeChunks(frame.chunks, present);
+    const changed = this.keyed.apply(frame, values);
+    if (this.positionsFollowKeyed) applyDeltaRanges(this.rest, this.keyed.deltas, this.view.positions, changed);
+    else applyDeltas(this.rest, this.keyed.deltas, this.view.positions);
+    this.positionsFollowKeyed = true;
+    this.resyncDelayMs = 0;
+    this.stats.frameDecoded(decodeMs);
+    // Of the decoded deltas: a sparse frame's quantization ranges say nothing
+    // of the vertices it leaves out. One pass, cheaper than the normals' after it.
+    hook.displacement = largestDelta(this.keyed.deltas);
   }
 
   private setupOptions(info: SessionInfo): void {

@@ -2,6 +2,7 @@
 // interval, round trip of its own poses, bytes, decode time) next to what the
 // server reports per frame (Frame.stats).
 import type { Frame } from './client';
+import { isChunked, isKeyframe } from './frame';
 
 const WINDOW_MS = 2000;  // rates and means are over the last two seconds
 
@@ -10,7 +11,7 @@ export interface StatsSnapshot {
   lastIntervalMs: number | null;    // between the last two frame arrivals
   meanIntervalMs: number | null;    // over the window
   roundTripMs: number | null;       // own SubmitPose → the frame that includes it
-  bytesPerFrame: number;            // Frame.deltas of the last frame
+  bytesPerFrame: number;            // the delta bytes of the last frame (frameBytes)
   bytesPerVertex: number;
   decodeMs: number | null;          // in the worker, last frame
   framesSkipped: number;            // superseded before they were decoded (a slow page)
@@ -72,7 +73,7 @@ export class StatsTracker {
   snapshot(now: number): StatsSnapshot {
     const inWindow = this.arrivals.filter((t) => t >= now - WINDOW_MS);
     const n = this.arrivals.length;
-    const bytes = this.last?.deltas.length ?? 0;
+    const bytes = this.last ? frameBytes(this.last) : 0;
     return {
       framesPerSecond: inWindow.length / (WINDOW_MS / 1000),
       lastIntervalMs: this.lastInterval,
@@ -89,6 +90,38 @@ export class StatsTracker {
 
 const ms = (v: number | null | undefined) => (v == null ? '–' : `${v.toFixed(1)} ms`);
 
+// A frame's delta bytes as the server counts them (FrameStats.encoded_bytes):
+// the single buffer, or the chunks' buffers and 4 bytes per run.
+export function frameBytes(frame: Frame): number {
+  let bytes = frame.deltas.length;
+  for (const chunk of frame.chunks) bytes += chunk.deltas.length + 4 * chunk.runs.length;
+  return bytes;
+}
+
+// "single", "keyframe, 3 chunks", "sparse on keyframe 12: 420 of 1839 vertices in 1 chunk".
+function frameKind(f: Frame): string {
+  if (!isChunked(f)) return 'single';
+  const chunks = `${f.chunks.length} chunk${f.chunks.length === 1 ? '' : 's'}`;
+  if (isKeyframe(f)) return `keyframe, ${chunks}`;
+  let present = 0;
+  for (const chunk of f.chunks) {
+    if (chunk.runs.length === 0) present += chunk.vertexCount;
+    for (let r = 1; r < chunk.runs.length; r += 2) present += chunk.runs[r];
+  }
+  return `sparse on keyframe ${f.keyframeVersion}: ${present} of ${f.vertexCount} vertices in ${chunks}`;
+}
+
+// Chunks carry their own bits: their range.
+function quantization(f: Frame): string {
+  let bits = `${f.quantizationBits} bits`;
+  if (f.chunks.length > 0) {
+    const all = f.chunks.map((chunk) => chunk.quantizationBits);
+    const [low, high] = [Math.min(...all), Math.max(...all)];
+    bits = low === high ? `${low} bits` : `${low}–${high} bits`;
+  }
+  return `${bits}, max error ${f.maxError.toExponential(2)}`;
+}
+
 // The rows of the panel: [label, value].
 export function statsRows(s: StatsSnapshot): [string, string][] {
   const f = s.frame;
@@ -100,7 +133,8 @@ export function statsRows(s: StatsSnapshot): [string, string][] {
     ['arrival interval', s.lastIntervalMs == null ? '–' : `${ms(s.lastIntervalMs)} (mean ${ms(s.meanIntervalMs)})`],
     ['own pose → frame', ms(s.roundTripMs)],
     ['bytes/frame', f ? `${s.bytesPerFrame} (${s.bytesPerVertex.toFixed(2)} B/vertex)` : '–'],
-    ['quantization', f ? `${f.quantizationBits} bits, max error ${f.maxError.toExponential(2)}` : '–'],
+    ['frame', f ? frameKind(f) : '–'],
+    ['quantization', f ? quantization(f) : '–'],
     ['T', threshold],
     ['regions', st ? `${st.regions} (largest ${st.largestRegion}, ${st.regionVertices} vertices)` : '–'],
     ['cut nodes', st ? String(st.cutNodes) : '–'],

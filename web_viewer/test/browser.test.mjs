@@ -188,12 +188,15 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const done = await hookState(page);
     assert.ok(done.version > bent.version, `version grows: ${done.version} > ${bent.version}`);
     assert.ok(done.framesApplied > joined.framesApplied);
+    // The page asks for chunked frames, and applies them without losing a keyframe.
+    assert.notEqual(done.frameKind, 'single', 'the server sends the page chunked frames');
+    assert.equal(done.resyncs, 0, 'no keyframe was lost');
     const back = changedFraction(rest, png(await page.evaluate(() => window.__filigree.capture())));
     assert.ok(back < 0.002, `back at rest: ${(100 * back).toFixed(2)}% of pixels differ from the start`);
 
     t.diagnostic(`canvas luminance variance ${variance.toFixed(0)}; bent frame v${bent.version}: ` +
       `${(100 * moved).toFixed(1)}% of pixels changed; back at rest v${done.version}: ${(100 * back).toFixed(2)}%; ` +
-      `frames received ${done.framesReceived - joined.framesReceived}, skipped ${done.framesSkipped}`);
+      `frames received ${done.framesReceived - joined.framesReceived}, skipped ${done.framesSkipped}; last one ${done.frameKind}`);
     assert.match(await page.textContent('#changes'), /browser-test-bend: pose \d+, \d+ base vertices/);
     assert.match(await page.textContent('#stats'), /bytes\/frame\s*\d+ \(/);
     await page.context().close();
@@ -272,7 +275,8 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await editor.click('#clear-handles');
     await waitFor(editor, () => window.__filigree.handleCount === 0 && window.__filigree.handlesInSession === 0);
     t.diagnostic(`drag: v${start.version} → v${dragged.version}, displacement ${dragged.displacement.toFixed(4)} ` +
-      `(diagonal ${meshDiagonal.toFixed(3)}), ${dragged.handlesAnswered} SetHandles answered; watcher at v${seen.version}`);
+      `(diagonal ${meshDiagonal.toFixed(3)}), ${dragged.handlesAnswered} SetHandles answered, ` +
+      `${dragged.framesSparse} sparse frames applied; watcher at v${seen.version}`);
     await editor.context().close();
     await watcher.context().close();
   });

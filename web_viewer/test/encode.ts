@@ -63,3 +63,43 @@ export function quantizationBound(deltas: Float32Array, bits: number): number {
   for (const v of deltas) { min = Math.min(min, v); max = Math.max(max, v); }
   return (max - min) / (2 ** bits - 1) / 2 + 1e-6 * Math.max(Math.abs(min), Math.abs(max), 1);
 }
+
+// One DeltaChunk as the server makes it (core/codec/frame_encoder.h).
+export interface EncodedChunk { firstVertex: number; vertexCount: number; runs: number[]; deltas: Uint8Array }
+
+// Alternating (skip, take, …) counts of the present vertices of a range;
+// empty when all of them are present.
+export function runsOf(present: boolean[]): number[] {
+  if (present.every((p) => p)) return [];
+  const runs: number[] = [];
+  let i = 0;
+  while (i < present.length) {
+    const start = i;
+    while (i < present.length && !present[i]) ++i;
+    const skip = i - start;
+    while (i < present.length && present[i]) ++i;
+    if (i - start - skip === 0) break;  // a trailing skip is left out
+    runs.push(skip, i - start - skip);
+  }
+  return runs;
+}
+
+// Encodes the chunks of a frame over fixed ranges of `chunkVertices`: for each
+// range, the vertices `present` names (all when it is omitted: a keyframe),
+// each chunk quantized over its own values; a range with none is left out, and
+// a chunk whose present deltas are all 0 has no bytes.
+export async function encodeChunks(deltas: Float32Array, chunkVertices: number, bits: number,
+  present?: (vertex: number) => boolean): Promise<EncodedChunk[]> {
+  const n = deltas.length / 3;
+  const chunks: EncodedChunk[] = [];
+  for (let first = 0; first < n; first += chunkVertices) {
+    const count = Math.min(chunkVertices, n - first);
+    const mask = Array.from({ length: count }, (_, i) => present?.(first + i) ?? true);
+    if (!mask.includes(true)) continue;
+    const values: number[] = [];
+    mask.forEach((p, i) => { if (p) values.push(...deltas.subarray(3 * (first + i), 3 * (first + i + 1))); });
+    const bytes = values.every((v) => v === 0) ? new Uint8Array(0) : await encodeDeltas(Float32Array.from(values), bits);
+    chunks.push({ firstVertex: first, vertexCount: count, runs: runsOf(mask), deltas: bytes });
+  }
+  return chunks;
+}
