@@ -266,7 +266,7 @@ class FrameStream : public FrameSink {
       const std::uint64_t version = key->frame.version();
       if (written_keyframe_ != version && queued_keyframe_ != version) {
         queued_keyframe_ = version;
-        writer_.send(for_this_stream(frame->keyframe, &key->frame), /*droppable=*/false);
+        writer_.send(for_this_stream(frame->keyframe, &key->frame), /*droppable=*/false, /*supersede=*/true);
       }
     }
     writer_.send(for_this_stream(frame, &frame->frame), /*droppable=*/true);
@@ -291,8 +291,10 @@ class FrameStream : public FrameSink {
   StreamWriter<Reactor, v1::Frame> writer_;
   const std::uint64_t driver_;
   v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
-  std::atomic<std::uint64_t> written_keyframe_{0};
-  std::uint64_t queued_keyframe_ = 0;  // offer() runs on one session's threads, one at a time
+  // Versions of the keyframes written and queued; none yet (a keyframe may be version 0).
+  static constexpr std::uint64_t kNone = ~std::uint64_t{0};
+  std::atomic<std::uint64_t> written_keyframe_{kNone};
+  std::uint64_t queued_keyframe_ = kNone;  // offer() runs on one session's threads, one at a time
 };
 
 class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {

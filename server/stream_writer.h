@@ -24,14 +24,17 @@ class StreamWriter {
 
   // Queues a message. A droppable one replaces a waiting droppable one; a
   // non-droppable one is queued, written before any droppable one, and
-  // drops the droppable one waiting before it (it is older).
-  void send(std::shared_ptr<const Message> message, bool droppable) {
+  // drops the droppable one waiting before it (it is older). `supersede`: it
+  // also replaces the non-droppable ones not started yet (a newer keyframe
+  // makes an older one useless), so a stalled client's queue stays short.
+  void send(std::shared_ptr<const Message> message, bool droppable, bool supersede = false) {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
     if (closing_ || finished_) return;
     if (droppable) {
       waiting_ = std::move(message);
     } else {
       waiting_.reset();
+      if (supersede) must_send_.clear();
       must_send_.push_back(std::move(message));
     }
     pump();

@@ -7,11 +7,13 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
 #include "codec/delta_codec.h"
+#include "codec/keyed_deltas.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "hierarchy/hierarchy.h"
 #include "mesh/mesh_io.h"
@@ -649,6 +651,187 @@ TEST_F(ServiceTest, OverlaysShowRegionsThatFollowTheThreshold) {
   EXPECT_EQ(direct.cut_faces_size(), 3 * 3674);  // every node recovered: the original mesh
   wctx->TryCancel();
   watch->Finish();
+}
+
+// ---------------------------------------------------------------- chunked frames
+
+// A client's view of a chunked stream: KeyedDeltas fed every frame it reads.
+struct ChunkedClient {
+  explicit ChunkedClient(std::size_t n) : deltas(n) {}
+  void apply(const v1::Frame& f) {
+    std::vector<DeltaChunkView> views;
+    for (const v1::DeltaChunk& c : f.chunks())
+      views.push_back({c.first_vertex(), c.vertex_count(), {c.runs().data(), std::size_t(c.runs_size())}, c.deltas()});
+    deltas.apply(f.version(), f.keyframe_version(), views);
+    version = f.version();
+    max_error = f.max_error();
+  }
+  KeyedDeltas deltas;
+  std::uint64_t version = 0;
+  float max_error = 0.0f;
+};
+
+// A partial pose moving the base vertices within 10% of the diagonal of base
+// vertex `centre` up by h·diagonal.
+v1::DriveRequest local_pose(const v1::BaseMesh& base, int centre, double h, std::uint64_t pose_id) {
+  std::vector<Vec3> points;
+  for (int i = 0; i + 2 < base.positions_size(); i += 3) points.emplace_back(base.positions(i), base.positions(i + 1), base.positions(i + 2));
+  const double diag = bounding_box_diagonal(points);
+  h *= diag;
+  v1::DriveRequest r;
+  r.set_pose_id(pose_id);
+  r.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+  const Vec3 c(base.positions(3 * centre), base.positions(3 * centre + 1), base.positions(3 * centre + 2));
+  for (int i = 0; 3 * i < base.positions_size(); ++i) {
+    const Vec3 p(base.positions(3 * i), base.positions(3 * i + 1), base.positions(3 * i + 2));
+    if ((p - c).norm() > 0.1 * diag) continue;
+    r.add_indices(static_cast<std::uint32_t>(i));
+    r.add_positions(float(p.x())), r.add_positions(float(p.y() + h)), r.add_positions(float(p.z()));
+  }
+  return r;
+}
+
+TEST_F(ServiceTest, ChunkedFramesSparseLateJoinerAndSkippingWatcher) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id();
+  const std::size_t n = c.created.info().rest().vertex_count();
+  const v1::BaseMesh& base = c.created.info().base();
+
+  // A watcher that reads nothing until the end: it skips frames.
+  auto stalled_ctx = context(id, c.created.viewer_token());
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  wr.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+  auto stalled = stub_->Watch(stalled_ctx.get(), wr);
+
+  auto ctx = context(id, c.created.editor_token());
+  auto drive = stub_->Drive(ctx.get());
+  ChunkedClient driver(n);
+  int sparse = 0;
+  constexpr std::uint64_t kPoses = 12;
+  for (std::uint64_t p = 1; p <= kPoses; ++p) {
+    v1::DriveRequest r = local_pose(base, static_cast<int>(p % 3) * 40, 0.01 * double(p), p);
+    r.set_session_id(id);
+    ASSERT_TRUE(drive->Write(r));
+    v1::Frame f;
+    do {
+      ASSERT_TRUE(drive->Read(&f));
+      ASSERT_FALSE(f.chunks().empty() && f.keyframe_version() == 0 && f.version() != 0) << "chunked frames name their keyframe";
+      driver.apply(f);
+      if (f.keyframe_version() != f.version()) ++sparse;
+    } while (f.pose_id() != p);
+  }
+  EXPECT_GT(sparse, 0) << "local edits make sparse frames";
+
+  // The same state as one buffer, from GetState in the default format.
+  v1::GetStateRequest gr;
+  gr.set_session_id(id);
+  v1::SessionState single;
+  ASSERT_TRUE(stub_->GetState(context(id, c.created.viewer_token()).get(), gr, &single).ok());
+  ASSERT_EQ(single.frame().version(), driver.version);
+  ASSERT_TRUE(single.frame().chunks().empty());
+  const std::vector<Vec3> reference = decode(single.frame());
+  const auto expect_matches = [&](const ChunkedClient& client, const char* who) {
+    ASSERT_EQ(client.version, single.frame().version()) << who;
+    const double tolerance = double{client.max_error} + single.frame().max_error() + 1e-7;
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k)
+        ASSERT_NEAR(client.deltas.deltas()[3 * i + k], reference[i][k], tolerance) << who << ", vertex " << i;
+  };
+  expect_matches(driver, "the driver");
+
+  // A late joiner: the keyframe comes first, then the current frame.
+  auto late_ctx = context(id, c.created.viewer_token());
+  auto late = stub_->Watch(late_ctx.get(), wr);
+  ChunkedClient joiner(n);
+  v1::Frame f;
+  ASSERT_TRUE(late->Read(&f));
+  EXPECT_EQ(f.keyframe_version(), f.version()) << "a late joiner's first frame is a keyframe";
+  joiner.apply(f);
+  if (joiner.version != driver.version) {
+    ASSERT_TRUE(late->Read(&f));
+    joiner.apply(f);
+  }
+  expect_matches(joiner, "the late joiner");
+
+  // The stalled watcher now reads what it was left: every frame decodes.
+  ChunkedClient skipper(n);
+  while (skipper.version != driver.version && stalled->Read(&f)) skipper.apply(f);
+  expect_matches(skipper, "the watcher that skipped frames");
+
+  // GetState in the chunked format: the frame and, when sparse, its keyframe.
+  gr.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+  v1::SessionState chunked;
+  ASSERT_TRUE(stub_->GetState(context(id, c.created.viewer_token()).get(), gr, &chunked).ok());
+  ChunkedClient from_state(n);
+  if (chunked.has_keyframe()) from_state.apply(chunked.keyframe());
+  from_state.apply(chunked.frame());
+  expect_matches(from_state, "GetState (chunked)");
+
+  // A requested keyframe: the next frame lists every vertex.
+  v1::DriveRequest key;
+  key.set_session_id(id);
+  key.set_request_keyframe(true);
+  ASSERT_TRUE(drive->Write(key));
+  ASSERT_TRUE(drive->Read(&f));
+  EXPECT_EQ(f.keyframe_version(), f.version());
+  EXPECT_EQ(f.stats().present_vertices(), n);
+
+  drive->WritesDone();
+  while (drive->Read(&f)) {
+  }
+  EXPECT_TRUE(drive->Finish().ok());
+  for (auto* c2 : {stalled_ctx.get(), late_ctx.get()}) c2->TryCancel();
+  while (stalled->Read(&f)) {
+  }
+  while (late->Read(&f)) {
+  }
+  stalled->Finish();
+  late->Finish();
+}
+
+// 8 sessions driven at once on the server's shared scheduler: every one gets
+// every frame it asked for (none starves behind the others).
+TEST_F(ServiceTest, EightSessionsDrivenAtOnceAllProgress) {
+  const std::string bytes = file_bytes(kBunny);
+  std::vector<Created> sessions;
+  for (int i = 0; i < 8; ++i) {
+    sessions.push_back(upload(bytes, "obj"));
+    ASSERT_TRUE(sessions.back().status.ok());
+  }
+  constexpr std::uint64_t kPoses = 15;
+  std::vector<std::uint64_t> answered(sessions.size(), 0);
+  std::vector<std::thread> drivers;
+  for (std::size_t s = 0; s < sessions.size(); ++s)
+    drivers.emplace_back([&, s] {
+      const auto& info = sessions[s].created.info();
+      auto ctx = context(info.session_id(), sessions[s].created.editor_token());
+      auto drive = stub_->Drive(ctx.get());
+      std::vector<Vec3> base_rest;
+      for (int k = 0; k + 2 < info.base().positions_size(); k += 3)
+        base_rest.emplace_back(info.base().positions(k), info.base().positions(k + 1), info.base().positions(k + 2));
+      for (std::uint64_t p = 1; p <= kPoses; ++p) {
+        v1::DriveRequest r;
+        r.set_session_id(info.session_id());
+        r.set_pose_id(p);
+        r.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+        for (float x : pose_floats(procedural_pose(base_rest, Motion::kTwist, 0.1 * double(p)))) r.add_positions(x);
+        if (!drive->Write(r)) return;
+        v1::Frame f;
+        do {
+          if (!drive->Read(&f)) return;
+        } while (f.pose_id() != p);
+        answered[s] = p;
+      }
+      drive->WritesDone();
+      v1::Frame f;
+      while (drive->Read(&f)) {
+      }
+      drive->Finish();
+    });
+  for (auto& t : drivers) t.join();
+  for (std::size_t s = 0; s < sessions.size(); ++s) EXPECT_EQ(answered[s], kPoses) << "session " << s;
 }
 
 }  // namespace
