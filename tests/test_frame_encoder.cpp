@@ -258,5 +258,33 @@ TEST(KeyedDeltas, RejectsWhatCannotBeDecodedAndKeepsItsKeyframe) {
   EXPECT_NO_THROW(client.apply(sparse.version, sparse.keyframe_version, sparse.views()));
 }
 
+// After a motion that leaves half the mesh moved away from the keyframe, local
+// edits would carry that half forever; a fresh keyframe is made once what it
+// saves adds up to a whole frame, and local frames are small again after it.
+TEST(FrameEncoder, AStaleKeyframeIsRenewedWhenItCostsMoreThanAFrame) {
+  const TriMesh sphere = test::icosphere(4);
+  const std::vector<Vec3>& rest = sphere.positions;
+  const double target = 5e-5 * bounding_box_diagonal(rest);
+  Sender s{FrameEncoder(rest, {.chunk_vertices = 256, .bits = 0, .max_error = target})};
+  s.send(rest);  // keyframe: the rest pose
+  std::vector<Vec3> posed = rest;
+  for (std::size_t i = 0; i < rest.size(); ++i)
+    if (rest[i].x() > 0.0) posed[i] += Vec3(0.1, 0.05, 0.0) * rest[i].x();  // half the sphere moves once
+  const SentFrame half = s.send(posed);
+  EXPECT_GT(half.present, rest.size() / 4);
+  std::vector<std::size_t> present;
+  std::vector<bool> keyframe;
+  for (int frame = 0; frame < 8; ++frame) {
+    const SentFrame f = s.send(bump(posed, rest, rest[5], 0.1, 0.01 * (frame + 1)));
+    present.push_back(f.present);
+    keyframe.push_back(f.keyframe_version == f.version);
+  }
+  const auto first_key = std::find(keyframe.begin(), keyframe.end(), true);
+  ASSERT_NE(first_key, keyframe.end()) << "the stale keyframe was never renewed";
+  EXPECT_LE(first_key - keyframe.begin(), 4);
+  EXPECT_LT(present.back(), rest.size() / 10) << "local edits are small again after the new keyframe";
+  EXPECT_EQ(std::count(keyframe.begin(), keyframe.end(), true), 1) << "one renewal is enough";
+}
+
 }  // namespace
 }  // namespace filigree

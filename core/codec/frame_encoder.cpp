@@ -36,7 +36,9 @@ FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions optio
   decoded_.assign(3 * n, 0.0f);
 }
 
-void FrameEncoder::begin(bool force_keyframe) { force_ = force_keyframe || !have_keyframe_; }
+void FrameEncoder::begin(bool force_keyframe) {
+  force_ = force_keyframe || !have_keyframe_ || waste_ >= rest_.size();
+}
 
 void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions) {
   const auto start = Clock::now();
@@ -50,9 +52,11 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   // error (automatic bits), or the keyframe's own error (fixed bits).
   const double tolerance = options_.bits == 0 ? options_.max_error : keyframe_error_;
 
-  // Pass 1: validate, and which vertices moved away from the keyframe.
+  // Pass 1: validate, and which vertices moved away from the keyframe (and,
+  // to know when a fresh keyframe pays off, from the previous frame).
   slot.changed.assign(count, 1);
-  std::size_t changed = 0;
+  std::size_t changed = 0, moved_since_last = 0;
+  const std::vector<float>& previous = previous_is_keyframe_ ? keyframe_ : decoded_;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec3 d = positions[a + i] - rest_[a + i];
     for (int k = 0; k < 3; ++k) {
@@ -64,6 +68,9 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
       const float* key = &keyframe_[3 * (a + i)];
       const double moved = std::max({std::abs(d.x() - key[0]), std::abs(d.y() - key[1]), std::abs(d.z() - key[2])});
       slot.changed[i] = moved > tolerance ? 1 : 0;
+      const float* last = &previous[3 * (a + i)];
+      moved_since_last +=
+          std::max({std::abs(d.x() - last[0]), std::abs(d.y() - last[1]), std::abs(d.z() - last[2])}) > tolerance;
     }
     changed += slot.changed[i];
   }
@@ -71,6 +78,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   if (dense) std::fill(slot.changed.begin(), slot.changed.end(), std::uint8_t{1});
   out.kind = dense ? EncodedChunk::Kind::kDense : changed ? EncodedChunk::Kind::kSparse : EncodedChunk::Kind::kAbsent;
   out.present = static_cast<std::uint32_t>(dense ? count : changed);
+  out.moved_since_last = static_cast<std::uint32_t>(force_ ? count : moved_since_last);
   out.runs.clear();
   out.bytes.clear();
   out.max_error = 0.0;
@@ -152,11 +160,22 @@ EncodedFrameSummary FrameEncoder::finish() {
     s.present_vertices += slot.out.present;
     s.bytes += slot.out.bytes.size() + 4 * slot.out.runs.size();
   }
+  // decoded_ holds what clients now show, for every vertex; after a
+  // keyframe, that is keyframe_.
   if (s.keyframe) {
     keyframe_.swap(decoded_);
     have_keyframe_ = true;
     keyframe_error_ = s.max_error;
+    waste_ = 0;
+  } else {
+    // Vertices sent only because the keyframe is stale (they moved since it,
+    // not since the last frame): once they add up to a whole frame, a fresh
+    // keyframe costs less than carrying them on (the rent-or-buy rule).
+    std::size_t moved = 0;
+    for (const Slot& slot : chunks_) moved += slot.out.moved_since_last;
+    waste_ += s.present_vertices > moved ? s.present_vertices - moved : 0;
   }
+  previous_is_keyframe_ = s.keyframe;
   force_ = false;
   return s;
 }

@@ -9,7 +9,9 @@
 // A chunk with more than `dense_fraction` of its vertices present is sent
 // whole; one with none is left out; others list their present vertices as
 // runs. A frame in which every chunk is whole is a keyframe: clients replace
-// their keyframe with it, and so does the encoder.
+// their keyframe with it, and so does the encoder. When the vertices sent only
+// because the keyframe is old (they moved since it, not since the previous
+// frame) add up to a whole frame, the next frame is a keyframe.
 
 #include <cstddef>
 #include <cstdint>
@@ -37,6 +39,7 @@ struct EncodedChunk {
   Kind kind = Kind::kAbsent;
   std::uint32_t first = 0, count = 0;   // the range
   std::uint32_t present = 0;            // vertices carried
+  std::uint32_t moved_since_last = 0;   // vertices that moved since the previous frame
   std::vector<std::uint32_t> runs;      // kSparse: skip, take, skip, take …
   std::string bytes;                    // Draco buffer; empty: every present delta is 0
   DeltaQuantization quantization;
@@ -97,6 +100,8 @@ class FrameEncoder {
   std::vector<float> decoded_;   // this frame's decoded deltas (all of them when it is a keyframe)
   bool have_keyframe_ = false;
   bool force_ = false;
+  bool previous_is_keyframe_ = true;
+  std::size_t waste_ = 0;  // vertices sent since the keyframe only because it is stale
   double keyframe_error_ = 0.0;
 };
 
