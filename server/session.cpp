@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include <spdlog/spdlog.h>
 
@@ -53,6 +54,23 @@ FrameEncoderOptions encoder_options(const v1::SessionOptions& o, double diagonal
   e.bits = o.quantization_bits();
   e.max_error = kAutomaticError * std::max(diagonal, 1e-30);
   return e;
+}
+
+// The quantization of `values` with fixed bits, or with the fewest whose
+// exact error against exact(i) stays within `target`; and that error.
+template <class Exact>
+std::pair<DeltaQuantization, double> quantize_within(std::span<const float> values, std::uint32_t fixed, double target,
+                                                     const Exact& exact) {
+  DeltaQuantization q = quantization_over(values, fixed ? fixed : 8);
+  if (!fixed) q.bits = bits_for_error(q.range, target);
+  std::vector<float> decoded(values.size());
+  while (true) {
+    q.decode(values, decoded);
+    double error = 0.0;
+    for (std::size_t i = 0; i < values.size(); ++i) error = std::max(error, std::abs(double{decoded[i]} - exact(i)));
+    if (fixed || error <= target || q.bits >= 24) return {q, error};
+    ++q.bits;  // float rounding pushed past the target: one more bit
+  }
 }
 
 // The smallest float ≥ x.
@@ -194,16 +212,12 @@ std::shared_ptr<const PublishedFrame> Session::with_single(const std::shared_ptr
   single->clear_chunks();
   single->clear_keyframe_version();
   if (std::any_of(values.begin(), values.end(), [](float v) { return v != 0.0f; })) {
-    const std::uint32_t fixed = record_.options.quantization_bits();
-    DeltaQuantization q = quantization_over(values, fixed ? fixed : 8);
     const double target = kAutomaticError * std::max(assets_->rest_diagonal, 1e-30);
     // What is left of the target after the chunked frame's own error.
-    if (!fixed) q.bits = bits_for_error(q.range, std::max(target - frame->frame.max_error(), target / 4));
+    const auto [q, error] = quantize_within(values, record_.options.quantization_bits(),
+                                            std::max(target - frame->frame.max_error(), target / 4),
+                                            [&](std::size_t i) { return double{values[i]}; });
     single->set_deltas(encode_draco(values, q));
-    std::vector<float> requantized(values.size());
-    q.decode(values, requantized);
-    double error = 0.0;
-    for (std::size_t i = 0; i < values.size(); ++i) error = std::max(error, std::abs(double{requantized[i]} - values[i]));
     // Bounded, not exact: the chunked frame's error plus the requantization's.
     single->set_max_error(float_at_least(double{frame->frame.max_error()} + error));
     single->set_quantization_bits(q.bits);
@@ -391,21 +405,10 @@ void Session::quantize_part_of(InFlight& f, std::size_t c) {
     f.single_error = 0.0;
     return;
   }
-  const std::uint32_t fixed = record_.options.quantization_bits();
-  DeltaQuantization q = quantization_over(f.single_values, fixed ? fixed : 8);
   const double target = kAutomaticError * std::max(assets_->rest_diagonal, 1e-30);
-  if (!fixed) q.bits = bits_for_error(q.range, target);
-  std::vector<float> decoded(f.single_values.size());
-  while (true) {
-    q.decode(f.single_values, decoded);
-    double error = 0.0;
-    for (std::size_t i = 0; i < rest.size(); ++i)
-      for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(double{decoded[3 * i + k]} - (frame_[i][k] - rest[i][k])));
-    f.single_error = error;
-    if (fixed || error <= target || q.bits >= 24) break;
-    ++q.bits;
-  }
-  f.single_quantization = q;
+  std::tie(f.single_quantization, f.single_error) =
+      quantize_within(f.single_values, record_.options.quantization_bits(), target,
+                      [&](std::size_t i) { return frame_[i / 3][static_cast<int>(i % 3)] - rest[i / 3][static_cast<int>(i % 3)]; });
 }
 
 void Session::encode_part_of(InFlight& f, std::size_t c) {

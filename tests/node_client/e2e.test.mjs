@@ -130,6 +130,16 @@ function firstMessage(call, accept) {
 }
 
 // Rejects unless the call fails with `code`; resolves with the error.
+// Cancels a server stream and checks it ends with CANCELLED.
+async function cancelAndExpectCancelled(call) {
+  const cancelled = expectCode(new Promise((resolve, reject) => {
+    call.on('error', reject);
+    call.on('end', resolve);
+  }), grpc.status.CANCELLED);
+  call.cancel();
+  await cancelled;
+}
+
 function expectCode(promise, code) {
   return promise.then(
     () => assert.fail(`expected status ${code}, the call succeeded`),
@@ -587,12 +597,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     assert.equal(frame.version, drivenFrame.version, 'the current frame is the driven one');
     assert.equal(frame.vertex_count, REST_VERTICES);
     assert.deepEqual(Buffer.from(frame.deltas), Buffer.from(drivenFrame.deltas));
-    const cancelled = expectCode(new Promise((resolve, reject) => {
-      call.on('error', reject);
-      call.on('end', resolve);
-    }), grpc.status.CANCELLED);
-    call.cancel();
-    await cancelled;
+    await cancelAndExpectCancelled(call);
   });
 
   it('sends a late chunked watcher the current frame, its keyframe first', { timeout: TEST_TIMEOUT_MS }, async (t) => {
@@ -614,12 +619,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     assert.ok(worst <= tolerance, `vertex ${vertex} differs from the single frame by ${worst} > ${tolerance}`);
     t.diagnostic(`chunked watch: ${stream.frames.map(describeFrame).join(', ')}; ${frame.chunks.length} chunks`);
 
-    const cancelled = expectCode(new Promise((resolve, reject) => {
-      call.on('error', reject);
-      call.on('end', resolve);
-    }), grpc.status.CANCELLED);
-    call.cancel();
-    await cancelled;
+    await cancelAndExpectCancelled(call);
   });
 
   it('reports the driven pose in GetState', { timeout: TEST_TIMEOUT_MS }, async () => {
