@@ -257,6 +257,12 @@ class FrameStream : public FrameSink {
   v1::FrameFormat format() const override { return format_; }
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
+    // The session offers from its workers and, once, from subscribe(): one at
+    // a time, and never an older frame after a newer one.
+    std::lock_guard lock(offer_mutex_);
+    if (offered_any_ && frame->frame.version() <= offered_version_) return;
+    offered_any_ = true;
+    offered_version_ = frame->frame.version();
     if (format_ == v1::FRAME_FORMAT_SINGLE) {
       if (frame->single) writer_.send(for_this_stream(frame, frame->single.get()), /*droppable=*/true);
       return;
@@ -294,7 +300,10 @@ class FrameStream : public FrameSink {
   // Versions of the keyframes written and queued; none yet (a keyframe may be version 0).
   static constexpr std::uint64_t kNone = ~std::uint64_t{0};
   std::atomic<std::uint64_t> written_keyframe_{kNone};
-  std::uint64_t queued_keyframe_ = kNone;  // offer() runs on one session's threads, one at a time
+  std::mutex offer_mutex_;
+  std::uint64_t queued_keyframe_ = kNone;  // offer_mutex_
+  bool offered_any_ = false;               // offer_mutex_
+  std::uint64_t offered_version_ = 0;
 };
 
 class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {
