@@ -73,12 +73,6 @@ std::pair<DeltaQuantization, double> quantize_within(std::span<const float> valu
   }
 }
 
-// The smallest float ≥ x.
-float float_at_least(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
 
 }  // namespace
 
@@ -395,7 +389,8 @@ void Session::quantize_part_of(InFlight& f, std::size_t c) {
   for (std::size_t i = 0; i < rest.size(); ++i)
     for (int k = 0; k < 3; ++k) {
       const double d = frame_[i][k] - rest[i][k];
-      if (!std::isfinite(d) || std::abs(d) > 1e30) throw DeltaCodecError("delta of vertex " + std::to_string(i) + " is not finite");
+      if (!std::isfinite(d) || std::abs(d) > kMaxDeltaMagnitude)
+        throw DeltaCodecError("delta of vertex " + std::to_string(i) + " is not finite or implausibly large");
       f.single_values[3 * i + k] = static_cast<float>(d);
       all_zero &= d == 0.0;
     }
@@ -526,14 +521,14 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     }
     if (threshold) deformer_->set_threshold(*threshold);
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
-    f.at_rest = true;
-    for (std::size_t i = 0; i < m && f.at_rest; ++i)
-      for (int k = 0; k < 3; ++k) f.at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
+    bool at_rest = true;
+    for (std::size_t i = 0; i < m && at_rest; ++i)
+      for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
     // Deform anyway so the cut, regions and stats (overlays) follow this
     // frame; the deformer writes straight into the frame buffer.
     frame_.resize(h.vertex_count());
     f.stats = deformer_->deform(pose, frame_);
-    if (f.at_rest) std::copy(h.rest_positions.begin(), h.rest_positions.end(), frame_.begin());
+    if (at_rest) std::copy(h.rest_positions.begin(), h.rest_positions.end(), frame_.begin());
 
     // Overlays only while a viewer asks for them: they are O(n) per frame.
     bool want_overlays;

@@ -13,7 +13,6 @@
 
 #include <atomic>
 #include <chrono>
-#include <condition_variable>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -147,7 +146,7 @@ class Session {
     std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
     std::map<std::string, v1::Change> changes;
     std::shared_ptr<v1::Overlays> overlays;
-    bool at_rest = false, force_keyframe = false, single = false;
+    bool force_keyframe = false, single = false;
     std::chrono::steady_clock::time_point encode_start{};
     // The single buffer (FRAME_FORMAT_SINGLE), when one is made.
     std::vector<float> single_values;

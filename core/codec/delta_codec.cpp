@@ -49,10 +49,6 @@ namespace {
 constexpr std::uint32_t kMinBits = 8;
 constexpr std::uint32_t kMaxBits = 24;
 
-// Largest |delta| we encode. Far beyond any mesh, and small enough that min,
-// max, range and min + range all stay finite in float32.
-constexpr double kMaxMagnitude = 1e30;
-
 // The fixed part of a Draco header (draco/compression/point_cloud/
 // point_cloud_decoder.cc, DecodeHeader): "DRACO", major, minor, encoder type,
 // encoder method, uint16 flags. A sequential point cloud then starts with its
@@ -153,12 +149,6 @@ void decode_draco(std::string_view bytes, std::uint32_t count, std::span<float> 
   }
 }
 
-// The smallest float ≥ x (x finite, within float range).
-float float_at_least(double x) {
-  float f = static_cast<float>(x);
-  if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
-  return f;
-}
 
 }  // namespace
 
@@ -205,7 +195,7 @@ EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits)
       if (!std::isfinite(d)) {
         throw DeltaCodecError("delta " + std::to_string(i) + " is not finite");
       }
-      if (std::abs(d) > kMaxMagnitude) {
+      if (std::abs(d) > kMaxDeltaMagnitude) {
         throw DeltaCodecError("delta " + std::to_string(i) + " is implausibly large (|" + std::to_string(d) +
                               "| > 1e30)");
       }

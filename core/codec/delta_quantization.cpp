@@ -18,14 +18,13 @@ constexpr float kMinRange = 1e-20f;
 
 std::int32_t max_level(std::uint32_t bits) { return static_cast<std::int32_t>((1u << bits) - 1u); }
 
-// The smallest float ≥ x (x finite, within float range).
+}  // namespace
+
 float float_at_least(double x) {
   float f = static_cast<float>(x);
   if (static_cast<double>(f) < x) f = std::nextafter(f, std::numeric_limits<float>::infinity());
   return f;
 }
-
-}  // namespace
 
 void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
   // The same objects and arithmetic as AttributeQuantizationTransform's

@@ -23,6 +23,14 @@
 
 namespace filigree {
 
+// Largest |delta| a frame carries: far beyond any mesh, and small enough
+// that min, max, range and min + range all stay finite in float32.
+constexpr double kMaxDeltaMagnitude = 1e30;
+
+// The smallest float ≥ x (x finite, within float range): errors are stated
+// rounded up.
+float float_at_least(double x);
+
 struct DeltaQuantization {
   std::uint32_t bits = 14;  // 8…24
   float min = 0.0f;         // origin on every axis

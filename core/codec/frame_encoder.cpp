@@ -1,7 +1,6 @@
 #include "codec/frame_encoder.h"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -9,16 +8,6 @@
 #include "codec/delta_codec.h"
 
 namespace filigree {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-// Largest |delta| carried: far beyond any mesh, small enough for float32.
-constexpr double kMaxMagnitude = 1e30;
-
-double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
-
-}  // namespace
 
 FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions options) : rest_(rest), options_(options) {
   if (options_.chunk_vertices == 0) throw std::invalid_argument("frame chunks must hold at least one vertex");
@@ -41,7 +30,6 @@ void FrameEncoder::begin(bool force_keyframe) {
 }
 
 void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions) {
-  const auto start = Clock::now();
   Slot& slot = chunks_.at(c);
   EncodedChunk& out = slot.out;
   if (positions.size() != rest_.size())
@@ -52,17 +40,20 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   // error (automatic bits), or the keyframe's own error (fixed bits).
   const double tolerance = options_.bits == 0 ? options_.max_error : keyframe_error_;
 
-  // Pass 1: validate, and which vertices moved away from the keyframe (and,
-  // to know when a fresh keyframe pays off, from the previous frame).
+  // Pass 1: validate, stage the deltas in float32 (as Draco will store them),
+  // and which vertices moved away from the keyframe (and, to know when a
+  // fresh keyframe pays off, from the previous frame).
   slot.changed.assign(count, 1);
+  slot.values.resize(3 * count);
   std::size_t changed = 0, moved_since_last = 0;
   const std::vector<float>& previous = previous_is_keyframe_ ? keyframe_ : decoded_;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec3 d = positions[a + i] - rest_[a + i];
     for (int k = 0; k < 3; ++k) {
       if (!std::isfinite(d[k])) throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is not finite");
-      if (std::abs(d[k]) > kMaxMagnitude)
+      if (std::abs(d[k]) > kMaxDeltaMagnitude)
         throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is implausibly large");
+      slot.values[3 * i + k] = static_cast<float>(d[k]);
     }
     if (!force_) {
       const float* key = &keyframe_[3 * (a + i)];
@@ -96,18 +87,13 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
     }
   }
 
-  // The present deltas in float32, as Draco will store them.
-  slot.values.resize(3 * static_cast<std::size_t>(out.present));
-  bool all_zero = true;
-  for (std::size_t i = 0, j = 0; i < count; ++i) {
-    if (!slot.changed[i]) continue;
-    const Vec3 d = positions[a + i] - rest_[a + i];
-    for (int k = 0; k < 3; ++k) {
-      slot.values[3 * j + k] = static_cast<float>(d[k]);
-      all_zero &= d[k] == 0.0;
-    }
-    ++j;
+  // Only the present deltas, in order (in place: j ≤ i).
+  if (!dense) {
+    for (std::size_t i = 0, j = 0; i < count; ++i)
+      if (slot.changed[i]) std::copy_n(&slot.values[3 * i], 3, &slot.values[3 * j++]);
+    slot.values.resize(3 * static_cast<std::size_t>(out.present));
   }
+  const bool all_zero = std::all_of(slot.values.begin(), slot.values.end(), [](float v) { return v == 0.0f; });
 
   // Quantization: fixed bits, or the fewest whose exact error meets the target.
   DeltaQuantization q = quantization_over(slot.values, options_.bits ? options_.bits : 8);
@@ -141,14 +127,11 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   }
   out.quantization = all_zero ? DeltaQuantization{q.bits, 0.0f, 0.0f} : q;
   if (all_zero) slot.values.clear();  // nothing for Draco: an empty buffer means zeros
-  out.encode_ms = ms_since(start);
 }
 
 void FrameEncoder::encode_chunk(std::size_t c) {
-  const auto start = Clock::now();
   Slot& slot = chunks_.at(c);
   slot.out.bytes = encode_draco(slot.values, slot.out.quantization, options_.speed);
-  slot.out.encode_ms += ms_since(start);
 }
 
 EncodedFrameSummary FrameEncoder::finish() {
@@ -189,11 +172,5 @@ EncodedFrameSummary FrameEncoder::encode(std::span<const Vec3> positions, bool f
   return finish();
 }
 
-std::size_t FrameEncoder::memory_bytes() const {
-  std::size_t bytes = (keyframe_.capacity() + decoded_.capacity()) * sizeof(float);
-  for (const Slot& s : chunks_)
-    bytes += (s.values.capacity() + s.decoded.capacity()) * sizeof(float) + s.changed.capacity() + s.out.runs.capacity() * 4 + s.out.bytes.capacity();
-  return bytes;
-}
 
 }  // namespace filigree

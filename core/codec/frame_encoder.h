@@ -44,7 +44,6 @@ struct EncodedChunk {
   std::string bytes;                    // Draco buffer; empty: every present delta is 0
   DeltaQuantization quantization;
   double max_error = 0.0;               // over the whole range (absent vertices too)
-  double encode_ms = 0.0;               // quantize + Draco, this chunk
 };
 
 struct EncodedFrameSummary {
@@ -82,9 +81,6 @@ class FrameEncoder {
 
   // Convenience, one thread: the whole frame.
   EncodedFrameSummary encode(std::span<const Vec3> positions, bool force_keyframe);
-
-  // Bytes held per vertex between frames (the keyframe and scratch deltas).
-  std::size_t memory_bytes() const;
 
  private:
   struct Slot {

@@ -11,9 +11,9 @@
 namespace filigree {
 namespace {
 
-// Checks a frame's chunks; returns each chunk's present count.
-std::vector<std::uint32_t> check_chunks(std::span<const DeltaChunkView> chunks, std::size_t n) {
-  std::vector<std::uint32_t> present(chunks.size());
+// Checks a frame's chunks; `present` gets each chunk's present count.
+void check_chunks(std::span<const DeltaChunkView> chunks, std::size_t n, std::vector<std::uint32_t>& present) {
+  present.resize(chunks.size());
   std::uint64_t next = 0;
   for (std::size_t c = 0; c < chunks.size(); ++c) {
     const DeltaChunkView& k = chunks[c];
@@ -33,7 +33,6 @@ std::vector<std::uint32_t> check_chunks(std::span<const DeltaChunkView> chunks, 
     if (covered > k.count) throw DeltaCodecError(which + " has runs covering " + std::to_string(covered) + " vertices");
     present[c] = static_cast<std::uint32_t>(taken);
   }
-  return present;
 }
 
 // Runs `work(c)` for every chunk on up to `threads` threads; rethrows the first error.
@@ -70,7 +69,8 @@ std::span<const float> KeyedDeltas::deltas() const { return showing_keyframe_ ? 
 void KeyedDeltas::apply(std::uint64_t version, std::uint64_t keyframe_version, std::span<const DeltaChunkView> chunks,
                         unsigned threads) {
   const std::size_t n = vertex_count();
-  const std::vector<std::uint32_t> present = check_chunks(chunks, n);
+  std::vector<std::uint32_t>& present = present_;
+  check_chunks(chunks, n, present);
   const std::string where = "frame " + std::to_string(version) + ": ";
 
   if (version == keyframe_version) {
@@ -101,7 +101,8 @@ void KeyedDeltas::apply(std::uint64_t version, std::uint64_t keyframe_version, s
     throw DeltaCodecError(where + "is relative to keyframe " + std::to_string(keyframe_version) +
                           ", and the keyframe held is " + std::to_string(keyframe_version_));
   // Present values of every chunk, decoded before anything changes.
-  std::vector<std::size_t> offset(chunks.size() + 1, 0);
+  std::vector<std::size_t>& offset = offset_;
+  offset.assign(chunks.size() + 1, 0);
   for (std::size_t c = 0; c < chunks.size(); ++c) offset[c + 1] = offset[c] + 3 * std::size_t{present[c]};
   scratch_.resize(offset.back());
   try {

@@ -39,6 +39,8 @@ class KeyedDeltas {
 
  private:
   std::vector<float> keyframe_, current_, scratch_;
+  std::vector<std::uint32_t> present_;  // per chunk of the frame applied (reused)
+  std::vector<std::size_t> offset_;     // where each chunk's values start in scratch_
   std::uint64_t keyframe_version_ = 0;
   bool showing_keyframe_ = true;    // deltas() is the keyframe itself
   bool current_from_keyframe_ = false;  // current_ equals keyframe_ outside dirty_
