@@ -18,6 +18,8 @@
 #include <Eigen/Geometry>
 #include <tiny_gltf.h>
 
+#include "mesh/gltf_accessor.h"
+#include "mesh/gltf_skin.h"
 #include "mesh/mesh_io.h"
 
 namespace filigree {
@@ -57,9 +59,10 @@ const char* mode_name(int mode) {
 
 class GltfReader {
  public:
-  GltfReader(const tinygltf::Model& model, const std::string& name) : model_(model), name_(name) {}
+  GltfReader(const tinygltf::Model& model, const std::string& name)
+      : model_(model), name_(name), accessors_(model, name) {}
 
-  TriMesh read() {
+  RiggedMesh read() {
     std::vector<int> roots;
     if (!model_.scenes.empty()) {
       std::size_t scene = 0;
@@ -81,17 +84,16 @@ class GltfReader {
       }
     }
     add_nodes(roots);
-    return std::move(mesh_);
+    RiggedMesh result;
+    if (!skinned_.empty()) result.rig = read_gltf_rig(model_, accessors_, skinned_, mesh_.positions);
+    result.mesh = std::move(mesh_);
+    return result;
   }
 
  private:
-  struct Elements {
-    const unsigned char* data = nullptr;
-    std::size_t count = 0;
-    std::size_t stride = 0;
-  };
+  using Elements = GltfAccessors::Elements;
 
-  [[noreturn]] void fail(const std::string& reason) const { throw MeshIoError(name_ + ": " + reason); }
+  [[noreturn]] void fail(const std::string& reason) const { accessors_.fail(reason); }
 
   // Depth-first, parents before children, with an explicit stack so that a deep
   // hierarchy cannot overflow ours. glTF node graphs are trees, so a node seen
@@ -114,7 +116,9 @@ class GltfReader {
       visited[item.node] = true;
       const tinygltf::Node& node = model_.nodes[item.node];
       const Eigen::Affine3d world = item.parent * local_transform(node, item.node);
-      if (node.mesh >= 0) add_mesh(node.mesh, world);
+      // A skinned mesh ignores its node's transform (glTF 2.0 §3.7.3.3): its
+      // vertices are read in bind space and posed by the skin afterwards.
+      if (node.mesh >= 0) add_mesh(node.mesh, node.skin >= 0 ? Eigen::Affine3d::Identity() : world, item.node, node.skin);
       for (auto it = node.children.rbegin(); it != node.children.rend(); ++it) stack.push_back({*it, world});
     }
   }
@@ -145,14 +149,17 @@ class GltfReader {
     return transform;
   }
 
-  void add_mesh(int mesh_index, const Eigen::Affine3d& transform) {
+  void add_mesh(int mesh_index, const Eigen::Affine3d& transform, int node, int skin) {
     if (static_cast<std::size_t>(mesh_index) >= model_.meshes.size()) {
       fail("mesh " + std::to_string(mesh_index) + " does not exist");
     }
     const tinygltf::Mesh& mesh = model_.meshes[mesh_index];
     const std::string label = mesh.name.empty() ? "mesh #" + std::to_string(mesh_index) : "mesh '" + mesh.name + "'";
     for (std::size_t p = 0; p < mesh.primitives.size(); ++p) {
-      add_primitive(mesh.primitives[p], "primitive " + std::to_string(p) + " of " + label, transform);
+      const std::size_t first = mesh_.positions.size();
+      const std::string what = "primitive " + std::to_string(p) + " of " + label;
+      add_primitive(mesh.primitives[p], what, transform);
+      if (skin >= 0) skinned_.push_back({node, skin, first, mesh_.positions.size() - first, &mesh.primitives[p], what});
     }
   }
 
@@ -251,53 +258,23 @@ class GltfReader {
   }
 
   const tinygltf::Accessor& accessor(int index, const std::string& what) const {
-    if (index < 0 || static_cast<std::size_t>(index) >= model_.accessors.size()) {
-      fail(what + ": accessor " + std::to_string(index) + " does not exist");
-    }
-    const tinygltf::Accessor& result = model_.accessors[index];
-    if (result.sparse.isSparse) fail(what + ": sparse accessors are not supported");
-    return result;
+    return accessors_.accessor(index, what);
   }
-
-  // Locates an accessor's elements, checking that all of them lie inside its
-  // bufferView and the bufferView inside its buffer.
-  Elements elements(const tinygltf::Accessor& accessor, std::size_t element_size, const std::string& what) const {
-    if (accessor.bufferView < 0 || static_cast<std::size_t>(accessor.bufferView) >= model_.bufferViews.size()) {
-      fail(what + ": accessor has no valid bufferView");
-    }
-    const tinygltf::BufferView& view = model_.bufferViews[accessor.bufferView];
-    if (view.buffer < 0 || static_cast<std::size_t>(view.buffer) >= model_.buffers.size()) {
-      fail(what + ": bufferView refers to a missing buffer");
-    }
-    const std::vector<unsigned char>& buffer = model_.buffers[view.buffer].data;
-    if (view.byteOffset > buffer.size() || view.byteLength > buffer.size() - view.byteOffset) {
-      fail(what + ": bufferView (offset " + std::to_string(view.byteOffset) + ", length " +
-           std::to_string(view.byteLength) + ") exceeds its buffer of " + std::to_string(buffer.size()) + " bytes");
-    }
-    const std::size_t stride = view.byteStride != 0 ? view.byteStride : element_size;
-    if (stride < element_size) {
-      fail(what + ": byteStride " + std::to_string(stride) + " is smaller than an element (" +
-           std::to_string(element_size) + " bytes)");
-    }
-    if (accessor.count == 0) return {};
-    const std::size_t length = view.byteLength;
-    if (accessor.byteOffset > length || element_size > length - accessor.byteOffset ||
-        accessor.count - 1 > (length - accessor.byteOffset - element_size) / stride) {
-      fail(what + ": accessor (offset " + std::to_string(accessor.byteOffset) + ", " +
-           std::to_string(accessor.count) + " elements) reads past the end of its bufferView");
-    }
-    return {buffer.data() + view.byteOffset + accessor.byteOffset, accessor.count, stride};
+  Elements elements(const tinygltf::Accessor& a, std::size_t element_size, const std::string& what) const {
+    return accessors_.elements(a, element_size, what);
   }
 
   const tinygltf::Model& model_;
   const std::string& name_;
+  GltfAccessors accessors_;
   TriMesh mesh_;
+  std::vector<SkinnedPrimitive> skinned_;
 };
 
 }  // namespace
 
-TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name_for_errors,
-                  const std::filesystem::path& base_dir) {
+RiggedMesh read_gltf_rigged(const std::string& bytes, bool binary, const std::string& name_for_errors,
+                            const std::filesystem::path& base_dir) {
   if (bytes.size() > std::numeric_limits<unsigned int>::max()) {
     throw MeshIoError(name_for_errors + ": file too large for glTF (4 GiB limit)");
   }
@@ -327,6 +304,11 @@ TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name
   return GltfReader(model, name_for_errors).read();
 }
 
+TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name_for_errors,
+                  const std::filesystem::path& base_dir) {
+  return read_gltf_rigged(bytes, binary, name_for_errors, base_dir).mesh;
+}
+
 void write_glb(const TriMesh& mesh, const std::filesystem::path& path) { write_glb_animation(mesh, {}, 0.0, path); }
 
 void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3>>& frames, double fps,
@@ -339,82 +321,23 @@ void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3
     if (f.size() != mesh.positions.size()) throw MeshIoError(name + ": an animation frame has the wrong vertex count");
 
   const std::size_t n = mesh.positions.size(), frame_count = frames.size();
-  const std::size_t position_bytes = n * 3 * sizeof(float);
-  const std::size_t index_bytes = mesh.faces.size() * 3 * sizeof(Index);
-  const std::size_t time_bytes = frame_count * sizeof(float);
-  const std::size_t weight_bytes = frame_count * frame_count * sizeof(float);
-  tinygltf::Buffer buffer;
-  buffer.data.resize(position_bytes * (1 + frame_count) + index_bytes + time_bytes + weight_bytes);
-  unsigned char* out = buffer.data.data();
-
-  // Writes float32 vectors (positions, or morph deltas) with their min/max,
-  // which glTF requires for POSITION accessors and JSON cannot hold as NaN/Inf.
-  auto put_vectors = [&](auto&& value_of, std::vector<double>& lo, std::vector<double>& hi) {
-    lo.assign(3, std::numeric_limits<double>::infinity());
-    hi.assign(3, -std::numeric_limits<double>::infinity());
-    for (std::size_t i = 0; i < n; ++i) {
-      const Vec3 p = value_of(i);
-      const float xyz[3] = {static_cast<float>(p.x()), static_cast<float>(p.y()), static_cast<float>(p.z())};
-      for (int k = 0; k < 3; ++k) {
-        if (!std::isfinite(xyz[k])) throw MeshIoError(name + ": cannot write a non-finite position as GLB");
-        lo[k] = std::min(lo[k], static_cast<double>(xyz[k]));
-        hi[k] = std::max(hi[k], static_cast<double>(xyz[k]));
-      }
-      std::memcpy(out, xyz, sizeof xyz);
-      out += sizeof xyz;
-    }
-  };
   tinygltf::Model model;
   model.asset.version = "2.0";
   model.asset.generator = "filigree";
-  auto add_view = [&](std::size_t offset, std::size_t length, int target) {
-    tinygltf::BufferView view;
-    view.buffer = 0;
-    view.byteOffset = offset;
-    view.byteLength = length;
-    view.target = target;
-    model.bufferViews.push_back(view);
-    return static_cast<int>(model.bufferViews.size() - 1);
-  };
-  auto add_accessor = [&](int view, int component, int type, std::size_t count, std::vector<double> lo = {},
-                          std::vector<double> hi = {}) {
-    tinygltf::Accessor a;
-    a.bufferView = view;
-    a.componentType = component;
-    a.type = type;
-    a.count = count;
-    a.minValues = std::move(lo);
-    a.maxValues = std::move(hi);
-    model.accessors.push_back(a);
-    return static_cast<int>(model.accessors.size() - 1);
-  };
-
-  std::vector<double> lo, hi;
-  put_vectors([&](std::size_t i) { return mesh.positions[i]; }, lo, hi);
-  const int positions = add_accessor(add_view(0, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER),
-                                     TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, lo, hi);
-  for (const Triangle& f : mesh.faces) {
-    std::memcpy(out, f.data(), 3 * sizeof(Index));
-    out += 3 * sizeof(Index);
-  }
-  const int indices = add_accessor(add_view(position_bytes, index_bytes, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER),
-                                   TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, TINYGLTF_TYPE_SCALAR, mesh.faces.size() * 3);
-
+  GlbBuilder glb(model);
   tinygltf::Primitive primitive;
-  primitive.attributes["POSITION"] = positions;
-  primitive.indices = indices;
+  primitive.attributes["POSITION"] = glb.add_vec3s(mesh.positions, name);
+  primitive.indices = glb.add(mesh.faces.data(), mesh.faces.size() * sizeof(Triangle), TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
+                              TINYGLTF_TYPE_SCALAR, mesh.faces.size() * 3, TINYGLTF_TARGET_ELEMENT_ARRAY_BUFFER);
   primitive.mode = TINYGLTF_MODE_TRIANGLES;
   tinygltf::Mesh gltf_mesh;
   // One morph target per frame (POSITION deltas from the rest mesh), and an
   // animation that shows frame i alone at time i/fps (STEP weights).
-  std::size_t offset = position_bytes + index_bytes;
+  std::vector<Vec3> delta(n);
   for (const auto& frame : frames) {
-    put_vectors([&](std::size_t i) { return Vec3(frame[i] - mesh.positions[i]); }, lo, hi);
-    const int target = add_accessor(add_view(offset, position_bytes, TINYGLTF_TARGET_ARRAY_BUFFER),
-                                    TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_VEC3, n, lo, hi);
-    primitive.targets.push_back({{"POSITION", target}});
+    for (std::size_t i = 0; i < n; ++i) delta[i] = frame[i] - mesh.positions[i];
+    primitive.targets.push_back({{"POSITION", glb.add_vec3s(delta, name)}});
     gltf_mesh.weights.push_back(0.0);
-    offset += position_bytes;
   }
   gltf_mesh.primitives.push_back(primitive);
   model.meshes.push_back(gltf_mesh);
@@ -422,24 +345,16 @@ void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3
   node.mesh = 0;
   model.nodes.push_back(node);
   if (frame_count > 0) {
+    std::vector<float> times(frame_count), weights(frame_count * frame_count, 0.0f);
     for (std::size_t i = 0; i < frame_count; ++i) {
-      const float t = static_cast<float>(static_cast<double>(i) / fps);
-      std::memcpy(out, &t, sizeof t);
-      out += sizeof t;
+      times[i] = static_cast<float>(static_cast<double>(i) / fps);
+      weights[i * frame_count + i] = 1.0f;
     }
-    for (std::size_t i = 0; i < frame_count; ++i)
-      for (std::size_t j = 0; j < frame_count; ++j) {
-        const float w = i == j ? 1.0f : 0.0f;
-        std::memcpy(out, &w, sizeof w);
-        out += sizeof w;
-      }
-    const int times = add_accessor(add_view(offset, time_bytes, 0), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR,
-                                   frame_count, {0.0}, {static_cast<double>(frame_count - 1) / fps});
-    const int weights = add_accessor(add_view(offset + time_bytes, weight_bytes, 0), TINYGLTF_COMPONENT_TYPE_FLOAT,
-                                     TINYGLTF_TYPE_SCALAR, frame_count * frame_count);
     tinygltf::AnimationSampler sampler;
-    sampler.input = times;
-    sampler.output = weights;
+    sampler.input = glb.add(times.data(), times.size() * sizeof(float), TINYGLTF_COMPONENT_TYPE_FLOAT, TINYGLTF_TYPE_SCALAR,
+                            frame_count, 0, {0.0}, {static_cast<double>(frame_count - 1) / fps});
+    sampler.output = glb.add(weights.data(), weights.size() * sizeof(float), TINYGLTF_COMPONENT_TYPE_FLOAT,
+                             TINYGLTF_TYPE_SCALAR, weights.size());
     sampler.interpolation = "STEP";
     tinygltf::AnimationChannel channel;
     channel.sampler = 0;
@@ -451,20 +366,11 @@ void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3
     animation.channels.push_back(channel);
     model.animations.push_back(animation);
   }
-  model.buffers.push_back(std::move(buffer));
   tinygltf::Scene scene;
   scene.nodes.push_back(0);
   model.scenes.push_back(scene);
   model.defaultScene = 0;
-
-  // WriteGltfSceneToFile ignores stream errors (it returns true even when the
-  // file cannot be created), so we own the stream and check it.
-  std::ofstream file(path, std::ios::binary);
-  if (!file) throw MeshIoError(name + ": cannot open for writing: " + std::strerror(errno));
-  tinygltf::TinyGLTF writer;
-  if (!writer.WriteGltfSceneToStream(&model, file, false, true)) throw MeshIoError(name + ": GLB serialisation failed");
-  file.close();
-  if (!file) throw MeshIoError(name + ": write failed");
+  save_glb(model, path);
 }
 
 }  // namespace filigree

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/mesh_io.h"  // RiggedMesh
 #include "mesh/tri_mesh.h"
 
 namespace filigree {
@@ -16,6 +17,9 @@ namespace filigree {
 // Throws MeshIoError whose message starts with `name_for_errors`.
 TriMesh read_gltf(const std::string& bytes, bool binary, const std::string& name_for_errors,
                   const std::filesystem::path& base_dir = {});
+// The same, with the rig of skinned primitives (see read_rigged_mesh()).
+RiggedMesh read_gltf_rigged(const std::string& bytes, bool binary, const std::string& name_for_errors,
+                            const std::filesystem::path& base_dir = {});
 
 // Writes one mesh / primitive / node / scene with float32 positions and uint32
 // indices in a single binary buffer. Throws MeshIoError on failure.
@@ -26,5 +30,11 @@ void write_glb(const TriMesh& mesh, const std::filesystem::path& path);
 // time i / fps. Every frame must have one position per vertex.
 void write_glb_animation(const TriMesh& mesh, const std::vector<std::vector<Vec3>>& frames, double fps,
                          const std::filesystem::path& path);
+
+// Writes a skinned mesh: `bind_mesh` holds the bind positions (rig.bind_positions
+// must equal them), one skin binding every joint (rig.bindings[j].joint == j),
+// joints as nodes with their rest TRS, weights as JOINTS_n/WEIGHTS_n (4 per
+// set), and the rig's clips as animations. Throws MeshIoError on failure.
+void write_glb_rigged(const TriMesh& bind_mesh, const Rig& rig, const std::filesystem::path& path);
 
 }  // namespace filigree

@@ -585,14 +585,14 @@ void write_ply(const TriMesh& mesh, const std::filesystem::path& path) {
   out.finish();
 }
 
-TriMesh parse(const std::string& bytes, const std::string& format, const std::string& name,
-              const std::filesystem::path& base_dir) {
+RiggedMesh parse(const std::string& bytes, const std::string& format, const std::string& name,
+                 const std::filesystem::path& base_dir) {
   try {
-    if (format == "obj") return parse_obj(bytes, name);
-    if (format == "off") return parse_off(bytes, name);
-    if (format == "ply") return parse_ply(bytes, name);
+    if (format == "obj") return {parse_obj(bytes, name), std::nullopt};
+    if (format == "off") return {parse_off(bytes, name), std::nullopt};
+    if (format == "ply") return {parse_ply(bytes, name), std::nullopt};
     // Accept a binary container under either extension: the magic decides.
-    if (format == "gltf" || format == "glb") return read_gltf(bytes, bytes.starts_with("glTF"), name, base_dir);
+    if (format == "gltf" || format == "glb") return read_gltf_rigged(bytes, bytes.starts_with("glTF"), name, base_dir);
   } catch (const std::bad_alloc&) {
     fail(name, "out of memory while reading");
   }
@@ -605,7 +605,13 @@ bool is_readable(const std::string& format) {
 
 }  // namespace
 
-TriMesh read_mesh(const std::filesystem::path& path) {
+TriMesh read_mesh(const std::filesystem::path& path) { return read_rigged_mesh(path).mesh; }
+
+TriMesh read_mesh_from_memory(const std::string& bytes, const std::string& format) {
+  return read_rigged_mesh_from_memory(bytes, format).mesh;
+}
+
+RiggedMesh read_rigged_mesh(const std::filesystem::path& path) {
   const std::string name = path.string();
   const std::string format = normalized_format(path.extension().string());
   if (!is_readable(format)) fail_unsupported(name, format, kReadable);
@@ -618,7 +624,7 @@ TriMesh read_mesh(const std::filesystem::path& path) {
   return parse(bytes, format, name, path.parent_path().empty() ? std::filesystem::path(".") : path.parent_path());
 }
 
-TriMesh read_mesh_from_memory(const std::string& bytes, const std::string& format) {
+RiggedMesh read_rigged_mesh_from_memory(const std::string& bytes, const std::string& format) {
   const std::string normalized = normalized_format(format);
   return parse(bytes, normalized, "<memory>." + normalized, {});
 }

@@ -7,7 +7,10 @@
 #include <string>
 #include <vector>
 
+#include <optional>
+
 #include "mesh/tri_mesh.h"
+#include "skinning/rig.h"
 
 namespace filigree {
 
@@ -32,6 +35,21 @@ TriMesh read_mesh(const std::filesystem::path& path);
 // Same as read_mesh, from bytes in memory; `format` is an extension such as
 // "obj" or ".glb".
 TriMesh read_mesh_from_memory(const std::string& bytes, const std::string& format);
+
+// A mesh and, for a skinned glTF/GLB, its rig (one entry per mesh vertex).
+struct RiggedMesh {
+  TriMesh mesh;
+  std::optional<Rig> rig;
+};
+
+// read_mesh / read_mesh_from_memory keeping the skin of a glTF/GLB: every
+// skinned primitive's vertices are placed by skinning at the joints' rest
+// transforms (what a viewer shows), and the rig says how they move. Other
+// formats, and glTF without skins, give no rig. A skin with an invalid joint
+// index, weights that do not sum to 1 (within 0.01), joints or inverse bind
+// matrices that are missing or not finite is a MeshIoError.
+RiggedMesh read_rigged_mesh(const std::filesystem::path& path);
+RiggedMesh read_rigged_mesh_from_memory(const std::string& bytes, const std::string& format);
 
 // Writes positions and faces in the given vertex and face order. PLY is binary
 // little-endian; GLB stores float32 positions and uint32 indices.

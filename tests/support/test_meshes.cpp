@@ -59,6 +59,32 @@ TriMesh torus(int rings, int sides, double major, double minor) {
   return m;
 }
 
+TriMesh capped_tube(int rings, int sides, double length, double radius) {
+  TriMesh m;
+  for (int i = 0; i < rings; ++i) {
+    const double x = length * i / (rings - 1);
+    for (int j = 0; j < sides; ++j) {
+      const double a = 2.0 * std::numbers::pi * j / sides;
+      m.positions.emplace_back(x, radius * std::cos(a), radius * std::sin(a));
+    }
+  }
+  auto id = [&](int i, int j) { return static_cast<Index>(i * sides + (j % sides)); };
+  for (int i = 0; i + 1 < rings; ++i)
+    for (int j = 0; j < sides; ++j) {
+      m.faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+      m.faces.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+    }
+  const auto start = static_cast<Index>(m.positions.size());
+  m.positions.emplace_back(-0.5 * radius, 0.0, 0.0);
+  m.positions.emplace_back(length + 0.5 * radius, 0.0, 0.0);
+  for (int j = 0; j < sides; ++j) {
+    // Each cap edge runs opposite to the wall face's use of it (consistent orientation).
+    m.faces.push_back({start, id(0, j), id(0, j + 1)});
+    m.faces.push_back({static_cast<Index>(start + 1), id(rings - 1, j + 1), id(rings - 1, j)});
+  }
+  return m;
+}
+
 TriMesh wavy_grid(int n) {
   TriMesh m;
   for (int i = 0; i <= n; ++i)

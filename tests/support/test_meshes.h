@@ -15,6 +15,9 @@ TriMesh torus(int rings, int sides, double major = 1.0, double minor = 0.35);
 TriMesh wavy_grid(int n);
 // Two icospheres side by side: two components.
 TriMesh two_spheres(int levels);
+// A closed tube along +x from 0 to `length` (a limb), radius `radius`, with
+// `rings` × `sides` wall vertices and a centre vertex capping each end.
+TriMesh capped_tube(int rings, int sides, double length = 4.0, double radius = 0.5);
 // A mesh shipped in tests/data, read with read_mesh.
 TriMesh shipped_mesh(const std::string& file_name);
 std::string shipped_path(const std::string& file_name);
