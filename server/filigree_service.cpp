@@ -1,6 +1,8 @@
 #include "server/filigree_service.h"
 
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <limits>
 #include <optional>
 #include <thread>
@@ -15,6 +17,8 @@
 #include "preprocess/preprocess.h"
 #include "runtime/pose.h"
 #include "server/stream_writer.h"
+#include "skinning/animation_clip.h"
+#include "skinning/rig_file.h"
 
 namespace filigree::server {
 namespace {
@@ -23,6 +27,19 @@ std::string metadata(const grpc::CallbackServerContext& context, const char* key
   const auto& md = context.client_metadata();
   const auto it = md.find(key);
   return it == md.end() ? std::string() : std::string(it->second.data(), it->second.size());
+}
+
+// A DriveRequest's pose: positions (full or partial) or joints, not both.
+// request_keyframe goes with the pose: the frame that includes it is a keyframe.
+void submit_pose(Session& session, std::uint64_t driver, const v1::DriveRequest& r) {
+  const PoseOrigin origin{driver, r.client_name(), r.pose_id(), r.request_keyframe()};
+  if (r.has_joints()) {
+    if (!r.positions().empty() || !r.indices().empty())
+      throw PoseError("a pose gives positions or joints, not both");
+    return session.submit_joints(origin, r.joints());
+  }
+  session.submit(origin, {r.indices().data(), static_cast<std::size_t>(r.indices().size())},
+                 {r.positions().data(), static_cast<std::size_t>(r.positions().size())});
 }
 
 grpc::ServerUnaryReactor* finish_unary(grpc::CallbackServerContext* context, const grpc::Status& status) {
@@ -168,7 +185,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   grpc::Status process() {
     try {
       progress("validating", 0.0);
-      const TriMesh input = read_mesh_from_memory(bytes_, begin_.format());
+      RiggedMesh upload = read_rigged_mesh_from_memory(bytes_, begin_.format());
+      const TriMesh& input = upload.mesh;
       if (input.vertex_count() > service_.limits().max_vertices)
         return {grpc::StatusCode::RESOURCE_EXHAUSTED, "mesh has " + std::to_string(input.vertex_count()) +
                                                           " vertices, over the server's limit of " +
@@ -193,12 +211,22 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
         return {grpc::StatusCode::INVALID_ARGUMENT, "quantization_bits must be between 8 and 24"};
       if (!(o.threshold() >= 0.0) || std::isinf(o.threshold()))
         return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+      if (!v1::SkinningMethod_IsValid(o.skinning()))
+        return {grpc::StatusCode::INVALID_ARGUMENT, "skinning method " + std::to_string(o.skinning()) + " is unknown"};
 
       std::string key;
       bool built = false;
       auto h = service_.cache().get_or_build(mesh, pre, &key, &built);
       progress("starting", 1.0);
-      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id());
+      // A skinned upload keeps its rig for the base vertices: base vertex k
+      // is session vertex base_vertices[k], which is uploaded vertex uploaded_ids[…].
+      std::string rig;
+      if (upload.rig) {
+        std::vector<Index> base_uploaded(h->base_vertices.size());
+        for (std::size_t k = 0; k < base_uploaded.size(); ++k) base_uploaded[k] = uploaded_ids[h->base_vertices[k]];
+        rig = serialize_rig(upload.rig->restricted_to(base_uploaded));
+      }
+      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig));
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
       *created->mutable_info() = session->info();
@@ -254,6 +282,9 @@ class FrameStream : public FrameSink {
 
   // Set once, before the stream subscribes.
   void set_format(v1::FrameFormat format) { format_ = format; }
+  // Called after every offer (with the frame) and on close (with null);
+  // set once, before the stream subscribes. Must not block.
+  void on_event(std::function<void(const PublishedFrame*)> observer) { observer_ = std::move(observer); }
   v1::FrameFormat format() const override { return format_; }
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
@@ -263,6 +294,17 @@ class FrameStream : public FrameSink {
     if (offered_any_ && frame->frame.version() <= offered_version_) return;
     offered_any_ = true;
     offered_version_ = frame->frame.version();
+    write(frame);
+    if (observer_) observer_(frame.get());
+  }
+  void close(bool session_closed, const std::string& why) override {
+    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
+    if (observer_) observer_(nullptr);
+  }
+  StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
+
+ private:
+  void write(const std::shared_ptr<const PublishedFrame>& frame) {
     if (format_ == v1::FRAME_FORMAT_SINGLE) {
       if (frame->single) writer_.send(for_this_stream(frame, frame->single.get()), /*droppable=*/true);
       return;
@@ -277,12 +319,7 @@ class FrameStream : public FrameSink {
     }
     writer_.send(for_this_stream(frame, &frame->frame), /*droppable=*/true);
   }
-  void close(bool session_closed, const std::string& why) override {
-    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
-  }
-  StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
 
- private:
   // Watchers all write the one encoded frame (aliasing its PublishedFrame); a
   // driver's copy names the newest of its poses in the frame.
   std::shared_ptr<const v1::Frame> for_this_stream(const std::shared_ptr<const PublishedFrame>& published,
@@ -295,6 +332,7 @@ class FrameStream : public FrameSink {
   }
 
   StreamWriter<Reactor, v1::Frame> writer_;
+  std::function<void(const PublishedFrame*)> observer_;
   const std::uint64_t driver_;
   v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
   // Versions of the keyframes written and queued; none yet (a keyframe may be version 0).
@@ -305,6 +343,17 @@ class FrameStream : public FrameSink {
   bool offered_any_ = false;               // offer_mutex_
   std::uint64_t offered_version_ = 0;
 };
+
+// A driving stream's end (OnDone): it no longer subscribes or drives, and
+// its writer never touches the reactor again.
+template <class Reactor>
+void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream, std::uint64_t driver) {
+  if (session) {
+    session->unsubscribe(&stream);
+    session->driver_left(driver);
+  }
+  stream.writer().detach();
+}
 
 class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {
  public:
@@ -325,15 +374,14 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
       stream_->set_format(request_.frame_format());
       session_->subscribe(stream_, session_->version());
     }
-    if (request_.request_keyframe()) session_->request_keyframe();
-    if (request_.request_keyframe() && request_.positions().empty() && request_.indices().empty()) {
-      StartRead(&request_);  // only the keyframe request: no pose to merge
+    if (request_.request_keyframe() && request_.positions().empty() && request_.indices().empty() &&
+        !request_.has_joints()) {
+      session_->request_keyframe();  // only the keyframe request: no pose to merge
+      StartRead(&request_);
       return;
     }
     try {
-      session_->submit(driver_, request_.client_name(), request_.pose_id(),
-                       {request_.indices().data(), static_cast<std::size_t>(request_.indices().size())},
-                       {request_.positions().data(), static_cast<std::size_t>(request_.positions().size())});
+      submit_pose(*session_, driver_, request_);
     } catch (const PoseError& e) {
       return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
     } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
@@ -344,11 +392,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
   void OnDone() override {
-    if (session_) {
-      session_->unsubscribe(stream_.get());
-      session_->driver_left(driver_);
-    }
-    stream_->writer().detach();
+    leave(session_, *stream_, driver_);
     delete this;
   }
 
@@ -389,7 +433,130 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
   std::shared_ptr<Session> session_;
 };
 
+// Plays a clip of the session's rig: a thread samples it at the stream's
+// clock and submits each sample as a skeletal pose of this stream, waiting
+// for the frame that includes one before sampling the next (so a slow
+// session lowers the sample rate instead of queueing poses).
+class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
+ public:
+  PlayClipReactor(FiligreeService& service, grpc::CallbackServerContext* context, const v1::PlayClipRequest& request)
+      : service_(service), request_(request), driver_(service.next_driver_id()),
+        stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
+    grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kEditor, &session_);
+    if (status.ok()) status = check();
+    if (!status.ok()) {
+      session_.reset();
+      stream_->writer().finish(status);
+      return;
+    }
+    stream_->set_format(request.frame_format());
+    // The session may offer after this reactor is gone: the observer owns what it touches.
+    stream_->on_event([state = state_, driver = driver_](const PublishedFrame* frame) {
+      std::lock_guard lock(state->mutex);
+      if (!frame) {
+        state->ended = true;  // the session closed or left: the stream is finished already
+      } else if (const auto it = frame->pose_of_driver.find(driver); it != frame->pose_of_driver.end()) {
+        state->shown = std::max(state->shown, it->second);
+      }
+      state->changed.notify_all();
+    });
+    if (!service_.begin_job()) {
+      session_.reset();
+      stream_->writer().finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+      return;
+    }
+    session_->subscribe(stream_, session_->version());
+    player_ = std::thread([this] {
+      const grpc::Status status = play();
+      service_.end_job();
+      stream_->writer().finish(status, /*flush=*/true);
+    });
+  }
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override {
+    state_->end();
+    stream_->writer().finish(grpc::Status::CANCELLED);
+  }
+  void OnDone() override {
+    state_->end();
+    if (player_.joinable()) player_.get_id() == std::this_thread::get_id() ? player_.detach() : player_.join();
+    leave(session_, *stream_, driver_);
+    delete this;
+  }
+
+ private:
+  static constexpr double kMostSamplesPerSecond = 60.0;
+
+  grpc::Status check() {
+    if (!session_->has_skeleton())
+      return {grpc::StatusCode::FAILED_PRECONDITION, "session " + session_->id() + " has no skeleton (its upload was not a skinned glTF)"};
+    clip_ = session_->clip(request_.clip());
+    if (!clip_) return {grpc::StatusCode::NOT_FOUND, "session " + session_->id() + " has no clip '" + request_.clip() + "'"};
+    if (!std::isfinite(request_.speed()) || request_.speed() < 0.0 || !std::isfinite(request_.start_seconds()) ||
+        !std::isfinite(request_.max_rate()) || request_.max_rate() < 0.0)
+      return {grpc::StatusCode::INVALID_ARGUMENT, "speed, start_seconds and max_rate must be finite, speed and max_rate ≥ 0"};
+    return grpc::Status::OK;
+  }
+
+  grpc::Status play() {
+    using Clock = std::chrono::steady_clock;
+    const double duration = clip_->duration();
+    const double speed = request_.speed() > 0.0 ? request_.speed() : 1.0;
+    const double rate = request_.max_rate() > 0.0 ? std::min(request_.max_rate(), kMostSamplesPerSecond) : kMostSamplesPerSecond;
+    const auto interval = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate));
+    const auto start = Clock::now();
+    const std::string name = request_.client_name().empty() ? "clip " + request_.clip() : request_.client_name();
+    for (std::uint64_t id = 1;; ++id) {
+      const auto tick = Clock::now();
+      double t = request_.start_seconds() + speed * std::chrono::duration<double>(tick - start).count();
+      const bool last = !request_.loop() && t >= duration;
+      if (last) t = duration;
+      if (request_.loop() && duration > 0.0) t = std::fmod(t, duration);
+      try {
+        session_->submit_clip_sample({driver_, name, id}, *clip_, t);
+      } catch (const PoseError& e) {
+        return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+      } catch (const StoreUnavailable& e) {
+        return {grpc::StatusCode::UNAVAILABLE, e.what()};
+      }
+      PlayState& s = *state_;
+      std::unique_lock lock(s.mutex);
+      // The next sample once this one is shown, and not before the rate allows.
+      s.changed.wait(lock, [&] { return s.ended || s.shown >= id; });
+      if (s.ended) return grpc::Status::CANCELLED;
+      if (last) return grpc::Status::OK;
+      s.changed.wait_until(lock, tick + interval, [&] { return s.ended; });
+      if (s.ended) return grpc::Status::CANCELLED;
+    }
+  }
+
+  FiligreeService& service_;
+  const v1::PlayClipRequest request_;
+  const std::uint64_t driver_;
+  std::shared_ptr<FrameStream<PlayClipReactor>> stream_;
+  std::shared_ptr<Session> session_;
+  const AnimationClip* clip_ = nullptr;  // owned by the session's rig
+  struct PlayState {
+    std::mutex mutex;
+    std::condition_variable changed;
+    bool ended = false;       // cancelled, done, or the session's streams closed
+    std::uint64_t shown = 0;  // the newest sample a frame includes
+    void end() {
+      std::lock_guard lock(mutex);
+      ended = true;
+      changed.notify_all();
+    }
+  };
+  const std::shared_ptr<PlayState> state_ = std::make_shared<PlayState>();
+  std::thread player_;
+};
+
 }  // namespace
+
+grpc::ServerWriteReactor<v1::Frame>* FiligreeService::PlayClip(grpc::CallbackServerContext* context,
+                                                               const v1::PlayClipRequest* request) {
+  return new PlayClipReactor(*this, context, *request);
+}
 
 grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* FiligreeService::CreateSession(
     grpc::CallbackServerContext*) {
@@ -422,9 +589,7 @@ grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContex
   if (status.ok()) {
     try {
       response->set_accepted_at_version(s->accepted_version());
-      s->submit(/*driver=*/0, request->client_name(), request->pose_id(),
-                {request->indices().data(), static_cast<std::size_t>(request->indices().size())},
-                {request->positions().data(), static_cast<std::size_t>(request->positions().size())});
+      submit_pose(*s, /*driver=*/0, *request);
     } catch (const PoseError& e) {
       status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const StoreUnavailable& e) {

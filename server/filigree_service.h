@@ -31,6 +31,8 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const v1::JoinSessionRequest* request,
                                         v1::SessionInfo* response) override;
   grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* Drive(grpc::CallbackServerContext* context) override;
+  grpc::ServerWriteReactor<v1::Frame>* PlayClip(grpc::CallbackServerContext* context,
+                                                const v1::PlayClipRequest* request) override;
   grpc::ServerUnaryReactor* SubmitPose(grpc::CallbackServerContext* context, const v1::DriveRequest* request,
                                        v1::SubmitPoseResponse* response) override;
   grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,

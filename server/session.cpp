@@ -14,9 +14,31 @@
 #include "runtime/deformer.h"
 #include "runtime/handle_solver.h"
 #include "runtime/pose.h"
+#include "skinning/animation_clip.h"
+#include "skinning/rig_file.h"
+#include "skinning/skinning.h"
 
 namespace filigree::server {
 namespace {
+
+v1::Skeleton skeleton_info(const Rig& rig) {
+  v1::Skeleton out;
+  for (const Joint& j : rig.joints) {
+    v1::Skeleton::Joint& joint = *out.add_joints();
+    joint.set_name(j.name);
+    joint.set_parent(j.parent);
+    const JointTransform& t = j.rest;
+    for (const double v : {t.translation.x(), t.translation.y(), t.translation.z(), t.rotation.x(), t.rotation.y(),
+                           t.rotation.z(), t.rotation.w(), t.scale.x(), t.scale.y(), t.scale.z()})
+      joint.add_rest(static_cast<float>(v));
+  }
+  for (const AnimationClip& c : rig.clips) {
+    v1::Skeleton::Clip& clip = *out.add_clips();
+    clip.set_name(c.name);
+    clip.set_duration_seconds(c.duration());
+  }
+  return out;
+}
 
 using Clock = std::chrono::steady_clock;
 
@@ -84,6 +106,15 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
   const Hierarchy& h = assets_->hierarchy();
   const v1::BaseMesh& base = assets_->base;
   if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base.positions().begin(), base.positions().end());
+  if (!record_.rig.empty()) {
+    auto rig = std::make_unique<Rig>(deserialize_rig(record_.rig, "session " + record_.id + " rig"));
+    if (rig->vertex_count() != h.base_vertices.size())
+      throw RigError("session " + record_.id + " rig: " + std::to_string(rig->vertex_count()) + " vertices for a base of " +
+                     std::to_string(h.base_vertices.size()));
+    joint_pose_ = std::make_unique<SkeletonPose>(SkeletonPose::rest(*rig));
+    skeleton_info_ = skeleton_info(*rig);
+    rig_ = std::move(rig);
+  }
   assigned_version_ = record_.version;
 
   deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
@@ -120,8 +151,7 @@ Role Session::authorize(const std::string& token) const {
 
 void Session::touch() { last_activity_ = Clock::now(); }
 
-void Session::submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
-                     std::span<const std::uint32_t> indices, std::span<const float> positions) {
+void Session::submit(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions) {
   const std::size_t m = assets_->hierarchy().base_vertices.size();
   const std::size_t count = indices.empty() ? m : indices.size();
   if (positions.size() != 3 * count)
@@ -133,20 +163,29 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
                       " is out of range: the base mesh has " + std::to_string(m) + " vertices");
   for (std::size_t i = 0; i < positions.size(); ++i)
     if (!std::isfinite(positions[i])) throw PoseError("pose coordinate " + std::to_string(i) + " is not finite (NaN or Inf)");
+  merge(origin, indices, positions, /*skinned=*/false);
+}
 
+void Session::merge(const PoseOrigin& origin,
+                    std::span<const std::uint32_t> indices, std::span<const float> positions, bool skinned) {
+  const std::size_t count = indices.empty() ? positions.size() / 3 : indices.size();
   std::uint64_t seq;
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     if (closed_) return;
+    // Handles edit on top of the skeleton: solved again from the new skinned base.
+    if (skinned && !handles_.empty()) handles_dirty_ = true;
     for (std::size_t i = 0; i < count; ++i) {
       const std::size_t v = indices.empty() ? i : indices[i];
       for (int k = 0; k < 3; ++k) record_.pose[3 * v + k] = positions[3 * i + k];
     }
-    if (driver != 0) latest_pose_of_driver_[driver] = pose_id;  // 0: a unary pose, no stream to answer
-    v1::Change& change = changes_[client_name];
-    change.set_client_name(client_name);
-    change.set_pose_id(pose_id);
+    if (origin.driver != 0) latest_pose_of_driver_[origin.driver] = origin.pose_id;  // 0: unary, no stream to answer
+    // Under the lock of the merge: the frame that takes this pose is the keyframe.
+    if (origin.keyframe) keyframe_requested_ = true;
+    v1::Change& change = changes_[origin.client_name];
+    change.set_client_name(origin.client_name);
+    change.set_pose_id(origin.pose_id);
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
     seq = ++journal_seq_;
     if (journal_) progress = progress_with_change_locked();
@@ -155,6 +194,104 @@ void Session::submit(std::uint64_t driver, const std::string& client_name, std::
     touch();
   }
   journal(progress, seq);
+}
+
+void Session::submit_joints(const PoseOrigin& origin, const v1::JointPose& joints) {
+  if (!rig_)
+    throw PoseError("session " + record_.id + " has no skeleton (its upload was not a skinned glTF): pose it by positions");
+  const bool model = joints.space() == v1::JointPose::SPACE_MODEL_MATRIX;
+  if (!model && joints.space() != v1::JointPose::SPACE_LOCAL_TRS)
+    throw PoseError("joint pose space " + std::to_string(joints.space()) + " is unknown");
+  const std::size_t per = model ? 16 : 10, n = rig_->joints.size();
+  const std::size_t count = joints.joint_indices().empty() ? n : static_cast<std::size_t>(joints.joint_indices_size());
+  if (static_cast<std::size_t>(joints.values_size()) != per * count)
+    throw PoseError("joint pose has " + std::to_string(joints.values_size()) + " values for " + std::to_string(count) +
+                    " joints; expected " + std::to_string(per * count) + " (" + std::to_string(per) + " per joint)");
+  std::vector<bool> seen(n, false);
+  for (int i = 0; i < joints.joint_indices_size(); ++i) {
+    const std::uint32_t j = joints.joint_indices(i);
+    if (j >= n)
+      throw PoseError("joint index " + std::to_string(j) + " at position " + std::to_string(i) +
+                      " is out of range: the skeleton has " + std::to_string(n) + " joints");
+    if (seen[j]) throw PoseError("joint " + std::to_string(j) + " is named twice in one pose");
+    seen[j] = true;
+  }
+  for (int i = 0; i < joints.values_size(); ++i)
+    if (!std::isfinite(joints.values(i)))
+      throw PoseError("joint pose value " + std::to_string(i) + " (joint " + std::to_string(static_cast<std::size_t>(i) / per) +
+                      ") is not finite (NaN or Inf)");
+  // Parse all joints before changing the state: a bad one changes nothing.
+  std::vector<JointTransform> locals(model ? 0 : count);
+  std::vector<Mat4> matrices(model ? count : 0);
+  for (std::size_t k = 0; k < count; ++k) {
+    const float* v = joints.values().data() + per * k;
+    if (model) {
+      Mat4 m;
+      for (int c = 0; c < 16; ++c) m(c % 4, c / 4) = v[c];  // column-major
+      if (std::abs(m(3, 0)) > 1e-6 || std::abs(m(3, 1)) > 1e-6 || std::abs(m(3, 2)) > 1e-6 || std::abs(m(3, 3) - 1.0) > 1e-6)
+        throw PoseError("joint matrix " + std::to_string(k) + " is not affine (its last row must be 0 0 0 1)");
+      matrices[k] = m;
+    } else {
+      JointTransform& t = locals[k];
+      t.translation = Vec3(v[0], v[1], v[2]);
+      const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);  // given x y z w
+      if (!(q.norm() > 1e-6)) throw PoseError("joint " + std::to_string(k) + " of the pose has a zero rotation quaternion");
+      t.rotation = q.normalized();
+      t.scale = Vec3(v[7], v[8], v[9]);
+    }
+  }
+  std::lock_guard lock(skeleton_mutex_);
+  const SkeletonPose before = *joint_pose_;
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::size_t j = joints.joint_indices().empty() ? k : joints.joint_indices(static_cast<int>(k));
+    if (model) {
+      joint_pose_->model[j] = matrices[k];
+    } else {
+      joint_pose_->local[j] = locals[k];
+      joint_pose_->model[j].reset();
+    }
+  }
+  try {
+    submit_skinned_locked(origin);
+  } catch (const PoseError&) {
+    *joint_pose_ = before;  // a refused pose changes nothing
+    throw;
+  }
+}
+
+const AnimationClip* Session::clip(const std::string& name) const { return rig_ ? rig_->clip(name) : nullptr; }
+
+void Session::submit_clip_sample(const PoseOrigin& origin, const AnimationClip& clip, double seconds) {
+  std::lock_guard lock(skeleton_mutex_);
+  for (const ClipChannel& c : clip.channels) {
+    joint_pose_->local[c.joint] = rig_->joints[c.joint].rest;
+    joint_pose_->model[c.joint].reset();
+  }
+  sample_clip(clip, seconds, joint_pose_->local);
+  submit_skinned_locked(origin);
+}
+
+void Session::submit_skinned_locked(const PoseOrigin& origin) {
+  const std::size_t m = rig_->vertex_count();
+  std::vector<Vec3> skinned(m);
+  try {
+    const std::vector<Mat4> model = model_transforms(*rig_, *joint_pose_);
+    skin(*rig_, model,
+         record_.options.skinning() == v1::SKINNING_DUAL_QUATERNION ? SkinningMethod::kDualQuaternion
+                                                                    : SkinningMethod::kLinearBlend,
+         skinned);
+  } catch (const RigError& e) {
+    throw PoseError(std::string("the joint pose cannot skin the base: ") + e.what());
+  }
+  skinned_.resize(3 * m);
+  for (std::size_t i = 0; i < m; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double c = skinned[i][k];
+      if (!(std::abs(c) <= std::numeric_limits<float>::max()))
+        throw PoseError("the joint pose moves base vertex " + std::to_string(i) + " out of float range");
+      skinned_[3 * i + k] = static_cast<float>(c);
+    }
+  merge(origin, {}, skinned_, /*skinned=*/true);
 }
 
 void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<std::uint64_t> after_version) {
@@ -371,8 +508,7 @@ void Session::compute_task() {
 void Session::start_encode_locked() {
   encoding_ = std::move(computed_);
   InFlight* f = encoding_.get();
-  f->force_keyframe = keyframe_requested_ || !keyframe_;
-  keyframe_requested_ = false;
+  f->force_keyframe = f->force_keyframe || std::exchange(keyframe_needed_, false) || !keyframe_;
   encoder_.begin(f->force_keyframe);
   f->encode_start = Clock::now();
   const std::size_t parts = encoder_.chunk_count() + (f->single ? 1 : 0);
@@ -436,7 +572,7 @@ void Session::part_task(InFlight* f, std::size_t c) {
   } else {
     encoder_.finish();
     std::lock_guard lock(mutex_);
-    keyframe_requested_ = true;  // clients' state must not depend on a frame never sent
+    keyframe_needed_ = true;  // clients' state must not depend on a frame never sent
   }
   std::lock_guard lock(mutex_);
   encoding_.reset();
@@ -472,24 +608,32 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     for (std::size_t i = 0; i < m; ++i)
       pose.positions[i] = Vec3(record_.pose[3 * i], record_.pose[3 * i + 1], record_.pose[3 * i + 2]);
     f.pose_of_driver = latest_pose_of_driver_;
+    f.force_keyframe = std::exchange(keyframe_requested_, false);
     f.changes.swap(changes_);
     threshold.swap(pending_threshold_);
     seq = journal_seq_;
   }
-  // A version given out but never published is taken back (computes are
-  // serial, so no later one exists yet).
+  // A version (and keyframe request) given out but never published is taken
+  // back (computes are serial, so no later one exists yet).
   const auto give_back = [&] {
     std::lock_guard lock(mutex_);
     if (!keep_version) --assigned_version_;
+    keyframe_requested_ |= f.force_keyframe;  // still owed to the next frame
   };
   try {
     if (!handle_targets.empty()) {
       // Handles move the whole base pose (as-rigid-as-possible from the current one).
       pose = handle_solver_->solve(handle_targets, pose);
       std::lock_guard lock(mutex_);
-      for (std::size_t i = 0; i < m; ++i)
-        for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
-      seq = ++journal_seq_;
+      if (journal_seq_ == seq) {
+        for (std::size_t i = 0; i < m; ++i)
+          for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+        seq = ++journal_seq_;
+      } else {
+        // A pose was merged while this solved: keep it (writing back would
+        // lose it) and solve the handles again on top of it next frame.
+        handles_dirty_ = true;
+      }
     }
     if (journal_) {
       // Nothing is acknowledged (published) before it is journaled: the pose of this frame.
@@ -675,6 +819,7 @@ v1::SessionInfo Session::info() const {
   info.mutable_rest()->mutable_uploaded_ids()->Add(record_.uploaded_ids.begin(), record_.uploaded_ids.end());
   *info.mutable_options() = record_.options;
   info.set_version(record_.version);
+  if (rig_) *info.mutable_skeleton() = skeleton_info_;
   return info;
 }
 

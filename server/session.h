@@ -35,6 +35,9 @@
 
 namespace filigree {
 class HandleSolver;
+struct Rig;
+struct AnimationClip;
+struct SkeletonPose;
 }
 
 namespace filigree::server {
@@ -50,6 +53,16 @@ struct PublishedFrame {
   // FRAME_FORMAT_SINGLE, encoded only while a subscriber wants it.
   std::shared_ptr<const v1::Frame> single;
   std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+};
+
+// Where a pose comes from: the driver stream (0: a unary call, no stream to
+// answer), the client it names in frames' changes and its pose id.
+// `keyframe`: the frame that first includes this pose is a keyframe.
+struct PoseOrigin {
+  std::uint64_t driver = 0;
+  std::string client_name;
+  std::uint64_t pose_id = 0;
+  bool keyframe = false;
 };
 
 // A subscriber's mailbox; implemented by the streaming reactors.
@@ -92,8 +105,23 @@ class Session {
   // NaN/Inf, without changing anything. With a journal, returns once the
   // change is journaled, and throws what the journal throws (the change is
   // then merged here but not acknowledged).
-  void submit(std::uint64_t driver, const std::string& client_name, std::uint64_t pose_id,
-              std::span<const std::uint32_t> indices, std::span<const float> positions);
+  void submit(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions);
+
+  // Skeletal poses (sessions of a skinned upload). Merges `joints` into the
+  // session's joint state, skins the base mesh with it (options.skinning)
+  // and merges that as a full pose of `driver`, as submit() does; handles
+  // are then solved again on top. Throws PoseError (→ INVALID_ARGUMENT)
+  // without changing anything for a session without a skeleton, a joint out
+  // of range or named twice, a wrong value count, NaN/Inf, a zero
+  // quaternion or a matrix that is not affine.
+  void submit_joints(const PoseOrigin& origin, const v1::JointPose& joints);
+  // The clip called `name` of the session's rig, or null (none, or no rig).
+  const AnimationClip* clip(const std::string& name) const;
+  // Samples `clip` (one of clip()'s) at `seconds` into the joint state (the
+  // joints it animates restart from their rest transform) and merges the
+  // skinned base as submit_joints() does.
+  void submit_clip_sample(const PoseOrigin& origin, const AnimationClip& clip, double seconds);
+  bool has_skeleton() const { return rig_ != nullptr; }
 
   // Registers a subscriber; it is offered the current frame at once if its
   // version is newer than `after_version` (always, when that is nullopt).
@@ -175,6 +203,11 @@ class Session {
   // client would, encoded as one buffer); becomes the current frame if
   // `frame` was. Throws DeltaCodecError if the frame cannot be decoded.
   std::shared_ptr<const PublishedFrame> with_single(const std::shared_ptr<const PublishedFrame>& frame);
+  // Skins the base with joint_pose_ and merges it (skeleton_mutex_ held).
+  void submit_skinned_locked(const PoseOrigin& origin);
+  // Merges a validated pose; `skinned` re-solves handles on top of it.
+  void merge(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions,
+             bool skinned);
   // Builds and publishes the encoded frame.
   void publish(InFlight& f);
   void touch();
@@ -186,6 +219,14 @@ class Session {
   std::uint64_t in_flight_locked() const { return assigned_version_ - record_.version; }
 
   const std::shared_ptr<const SessionAssets> assets_;  // shared by every session of the mesh
+  // The base mesh's rig and the joint state skeletal poses merge into; null
+  // without a skinned upload. skeleton_mutex_ orders skeletal poses (taken
+  // before mutex_, never after).
+  std::unique_ptr<const Rig> rig_;
+  v1::Skeleton skeleton_info_;
+  std::mutex skeleton_mutex_;
+  std::unique_ptr<SkeletonPose> joint_pose_;
+  std::vector<float> skinned_;
   std::unique_ptr<Deformer> deformer_;
   std::unique_ptr<HandleSolver> handle_solver_;
   FrameScheduler& scheduler_;
@@ -202,7 +243,11 @@ class Session {
   std::uint64_t assigned_version_ = 0;  // the newest frame's version, published or not
   std::size_t positions_busy_ = 0;      // parts of the encoding frame still reading frame_
   std::size_t parts_left_ = 0;          // parts of the encoding frame not encoded yet
+  // Asked for by a client: the next frame to read the pose is a keyframe
+  // (taken at compute, with the pose it goes with).
   bool keyframe_requested_ = false;
+  // The encoder must send a keyframe next (a frame failed to encode).
+  bool keyframe_needed_ = false;
   std::shared_ptr<const PublishedFrame> keyframe_;
   std::optional<double> pending_threshold_;
   std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;

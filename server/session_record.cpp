@@ -21,6 +21,7 @@ std::string encode_session_record(const SessionRecord& r) {
   p.mutable_pose()->Add(r.pose.begin(), r.pose.end());
   p.set_version(r.version);
   p.mutable_uploaded_ids()->Add(r.uploaded_ids.begin(), r.uploaded_ids.end());
+  p.set_rig(r.rig);
   return p.SerializeAsString();
 }
 
@@ -39,6 +40,7 @@ SessionRecord decode_session_record(const std::string& bytes) {
   r.pose.assign(p.pose().begin(), p.pose().end());
   r.version = p.version();
   r.uploaded_ids.assign(p.uploaded_ids().begin(), p.uploaded_ids().end());
+  r.rig = p.rig();
   return r;
 }
 

@@ -22,6 +22,7 @@ struct SessionRecord {
   // or the next frame's while a change is journaled but not yet published.
   std::uint64_t version = 0;
   std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
+  std::string rig;  // serialize_rig() of the base mesh's rig; empty: no skeleton
 };
 
 // Session ids are 20 lowercase hex digits (80 random bits): safe as file

@@ -47,12 +47,13 @@ class StreamWriter {
   }
 
   // Finishes the stream once the write in flight (and a waiting
-  // non-droppable message) is done; later calls are ignored.
-  void finish(grpc::Status status) {
+  // non-droppable message) is done; later calls are ignored. `flush`: the
+  // waiting droppable message is written first too (a stream's last frame).
+  void finish(grpc::Status status, bool flush = false) {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
     if (closing_ || finished_) return;
     closing_ = std::move(status);
-    waiting_.reset();
+    if (!flush) waiting_.reset();
     pump();
   }
 
