@@ -20,13 +20,14 @@ constexpr char kServiceConfig[] = R"({"methodConfig": [{
   "retryPolicy": {"maxAttempts": 5, "initialBackoff": "0.25s", "maxBackoff": "1.5s",
                   "backoffMultiplier": 2, "retryableStatusCodes": ["UNAVAILABLE"]}}]})";
 
-std::shared_ptr<grpc::Channel> make_channel(const std::string& target) {
+std::shared_ptr<grpc::Channel> make_channel(const std::string& target,
+                                            const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
   grpc::ChannelArguments args;
   // A SessionInfo carries the whole rest mesh: 1M vertices ≈ 36 MiB, over
   // gRPC's 4 MiB default.
   args.SetMaxReceiveMessageSize(-1);
   args.SetServiceConfigJSON(kServiceConfig);
-  return grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args);
+  return grpc::CreateCustomChannel(target, credentials, args);
 }
 
 // 20 random lowercase hex digits: a new session's id, chosen here so that a
@@ -56,7 +57,10 @@ Response call(v1::Filigree::Stub& stub,
 
 }  // namespace
 
-Client::Client(const std::string& target) : Client(make_channel(target)) {}
+Client::Client(const std::string& target) : Client(make_channel(target, grpc::InsecureChannelCredentials())) {}
+
+Client::Client(const std::string& target, const std::shared_ptr<grpc::ChannelCredentials>& credentials)
+    : Client(make_channel(target, credentials)) {}
 
 Client::Client(std::shared_ptr<grpc::Channel> channel)
     : channel_(std::move(channel)), stub_(v1::Filigree::NewStub(channel_)) {}
@@ -136,6 +140,25 @@ void Client::set_threshold(const std::string& session_id, const std::string& tok
   call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_);
 }
 
+std::uint32_t Client::set_handles(const std::string& session_id, const std::string& token,
+                                  const std::string& client_name, std::span<const std::uint32_t> vertices,
+                                  std::span<const std::array<float, 3>> targets) {
+  if (vertices.size() != targets.size())
+    throw ClientError(grpc::StatusCode::INVALID_ARGUMENT, std::to_string(vertices.size()) + " handle vertices but " +
+                                                              std::to_string(targets.size()) + " targets");
+  v1::SetHandlesRequest request;
+  request.set_session_id(session_id);
+  request.set_client_name(client_name);
+  for (std::size_t i = 0; i < vertices.size(); ++i) {
+    v1::Handle* h = request.add_handles();
+    h->set_vertex(vertices[i]);
+    h->set_x(targets[i][0]);
+    h->set_y(targets[i][1]);
+    h->set_z(targets[i][2]);
+  }
+  return call(*stub_, &v1::Filigree::Stub::SetHandles, session_id, token, request, routing_).handles_in_session();
+}
+
 void Client::close(const std::string& session_id, const std::string& token) {
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
@@ -163,6 +186,21 @@ std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::
 std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
                                        std::uint64_t after_version) {
   return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version, routing_));
+}
+
+std::unique_ptr<Watcher> Client::play_clip(const std::string& session_id, const std::string& token,
+                                           const std::string& clip, const ClipPlayback& playback,
+                                           const std::string& client_name) {
+  v1::PlayClipRequest request;
+  request.set_session_id(session_id);
+  request.set_clip(clip);
+  request.set_speed(playback.speed);
+  request.set_loop(playback.loop);
+  request.set_start_seconds(playback.start_seconds);
+  request.set_max_rate(playback.max_rate);
+  request.set_client_name(client_name);
+  request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+  return std::unique_ptr<Watcher>(new Watcher(*stub_, request, token, routing_));
 }
 
 }  // namespace filigree

@@ -32,6 +32,7 @@ bool Driver::write() {
 bool Driver::send(std::uint64_t pose_id, std::span<const float> positions) {
   request_.set_pose_id(pose_id);
   request_.clear_indices();
+  request_.clear_joints();
   request_.mutable_positions()->Assign(positions.begin(), positions.end());
   return write();
 }
@@ -42,8 +43,29 @@ bool Driver::send_partial(std::uint64_t pose_id, std::span<const std::uint32_t> 
     throw std::invalid_argument("send_partial: " + std::to_string(positions.size()) + " coordinates for " +
                                 std::to_string(indices.size()) + " indices (3 per index expected)");
   request_.set_pose_id(pose_id);
+  request_.clear_joints();
   request_.mutable_indices()->Assign(indices.begin(), indices.end());
   request_.mutable_positions()->Assign(positions.begin(), positions.end());
+  return write();
+}
+
+bool Driver::send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std::span<const std::uint32_t> joints,
+                         std::span<const float> values) {
+  const std::size_t per_joint = space == v1::JointPose::SPACE_MODEL_MATRIX ? 16 : 10;
+  if (!joints.empty() && values.size() != per_joint * joints.size())
+    throw std::invalid_argument("send_joints: " + std::to_string(values.size()) + " values for " +
+                                std::to_string(joints.size()) + " joints (" + std::to_string(per_joint) +
+                                " per joint expected)");
+  if (joints.empty() && values.size() % per_joint != 0)
+    throw std::invalid_argument("send_joints: " + std::to_string(values.size()) + " values is not a multiple of " +
+                                std::to_string(per_joint));
+  request_.set_pose_id(pose_id);
+  request_.clear_indices();
+  request_.clear_positions();
+  v1::JointPose& pose = *request_.mutable_joints();
+  pose.set_space(space);
+  pose.mutable_joint_indices()->Assign(joints.begin(), joints.end());
+  pose.mutable_values()->Assign(values.begin(), values.end());
   return write();
 }
 

@@ -14,6 +14,12 @@ Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const 
   stream_ = stub.Watch(&context_, request);
 }
 
+Watcher::Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token,
+                 Routing routing) {
+  set_session_metadata(context_, request.session_id(), token, routing);
+  stream_ = stub.PlayClip(&context_, request);
+}
+
 Watcher::~Watcher() {
   if (status_) return;
   context_.TryCancel();  // so the drain in finish() cannot wait for the session

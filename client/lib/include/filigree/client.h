@@ -17,9 +17,11 @@
 // The generated types (filigree::v1::…, "filigree/v1/filigree.pb.h") are the
 // contract; stub() gives the raw gRPC stub for anything not wrapped here.
 
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -45,6 +47,14 @@ struct SessionHandle {
   SessionMesh mesh;     // what join() would return, without a second request
 };
 
+// How Client::play_clip() plays a clip (PlayClipRequest's fields).
+struct ClipPlayback {
+  double speed = 1.0;          // playback rate
+  bool loop = false;           // until the stream is cancelled
+  double start_seconds = 0.0;  // clip time of the first sample
+  double max_rate = 0.0;       // samples per second at most; 0: as fast as frames compute, up to 60
+};
+
 // Upload progress: stage "uploading" (bytes sent), then the server's stages
 // ("validating", "simplifying", "starting"); fraction is 0…1 within a stage.
 using ProgressCallback = std::function<void(const std::string& stage, double fraction)>;
@@ -56,7 +66,9 @@ class Client {
   // tens of MiB). Connects lazily: a server that is down makes the first
   // call fail with UNAVAILABLE.
   explicit Client(const std::string& target);
-  // Any channel (TLS, custom arguments).
+  // The same channel settings with other credentials (TLS: grpc::SslCredentials).
+  Client(const std::string& target, const std::shared_ptr<grpc::ChannelCredentials>& credentials);
+  // Any channel (custom arguments).
   explicit Client(std::shared_ptr<grpc::Channel> channel);
 
   // Uploads `mesh_bytes` (a file of `format`: "obj", "ply", "off", "gltf",
@@ -72,6 +84,11 @@ class Client {
   v1::SessionState state(const std::string& session_id, const std::string& token);
   // Changes the cut threshold (editor token); whole_mesh means T = ∞.
   void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh);
+  // Replaces `client_name`'s handles (editor token): detailed-mesh vertex
+  // `vertices[i]` (session order) should go to `targets[i]`. An empty set
+  // removes that client's handles. Returns every participant's handle count.
+  std::uint32_t set_handles(const std::string& session_id, const std::string& token, const std::string& client_name,
+                            std::span<const std::uint32_t> vertices, std::span<const std::array<float, 3>> targets);
   // Ends the session for everyone (editor token).
   void close(const std::string& session_id, const std::string& token);
   // The server's sessions (no token needed; with replicas, this replica's).
@@ -88,6 +105,11 @@ class Client {
   std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token,
                                  std::uint64_t after_version = 0);
 
+  // Plays the session's clip `clip` (SessionMesh::skeleton.clips) on the
+  // server (editor token): the returned stream carries the frames, as a
+  // Drive stream does, and ends after the clip's last sample unless looping.
+  std::unique_ptr<Watcher> play_clip(const std::string& session_id, const std::string& token, const std::string& clip,
+                                     const ClipPlayback& playback = {}, const std::string& client_name = "clip");
   // Routing::kDirect for an engine that calls the replica locate() named
   // instead of a load balancer (default: kLoadBalanced).
   void set_routing(Routing routing) { routing_ = routing; }

@@ -34,6 +34,13 @@ class Driver {
   // Sends a partial pose: the base vertices `indices` move to `positions`
   // (3 floats per index). Throws std::invalid_argument if the sizes disagree.
   bool send_partial(std::uint64_t pose_id, std::span<const std::uint32_t> indices, std::span<const float> positions);
+  // Sends a skeletal pose (sessions with a skeleton, SessionMesh::skeleton):
+  // `values` holds 10 floats per joint for kLocalTrs (translation xyz,
+  // rotation quaternion xyzw, scale xyz) or 16 for kModelMatrix (column-major);
+  // `joints` names which joints (empty: all, in skeleton order). The server
+  // skins the base mesh. Throws std::invalid_argument if the sizes disagree.
+  bool send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std::span<const std::uint32_t> joints,
+                   std::span<const float> values);
 
   // Blocks for the next frame; nullopt once the stream has ended.
   std::optional<v1::Frame> read();

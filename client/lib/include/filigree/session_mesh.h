@@ -25,6 +25,9 @@ struct SessionMesh {
   std::uint32_t quantization_bits = 14;
   std::uint64_t version = 0;  // version of the session's frame when this was read
   v1::SessionOptions options;
+  // The skeleton of a skinned upload (joints and clips), empty otherwise:
+  // what Driver::send_joints() poses and Client::play_clip() plays.
+  v1::Skeleton skeleton;
 
   std::size_t vertex_count() const { return rest_positions.size() / 3; }
   std::size_t base_vertex_count() const { return base_positions.size() / 3; }

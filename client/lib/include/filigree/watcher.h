@@ -13,7 +13,8 @@
 
 namespace filigree {
 
-// Made by Client::watch(). A slow reader skips frames (it always gets the
+// Made by Client::watch() (or Client::play_clip(), whose stream carries the
+// frames of the clip it plays and ends after the clip's last one). A slow reader skips frames (it always gets the
 // newest) and never slows the session. cancel() may be called from any
 // thread, e.g. to wake a thread blocked in read(); finish() once no other
 // thread is inside read().
@@ -41,6 +42,7 @@ class Watcher {
   friend class Client;
   Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::uint64_t after_version,
           Routing routing);
+  Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token, Routing routing);
 
   grpc::ClientContext context_;  // declared before stream_: must outlive it
   std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;

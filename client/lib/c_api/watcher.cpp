@@ -1,0 +1,137 @@
+// Watchers: a Watch or PlayClip stream whose frames a FrameStream decodes in
+// the background, for a callback or for polls.
+
+#include <chrono>
+
+#include "c_api/internal.h"
+
+namespace filigree::c_api {
+namespace {
+
+// Wraps a Watcher made by `open` (Client::watch or Client::play_clip) in a handle.
+template <class Open>
+int open_watcher(filigree_session& s, const char* function, filigree_frame_callback callback, void* user,
+                 filigree_watcher** out, Open&& open) {
+  if (!out) return null_argument(&s.error, function, "out");
+  *out = nullptr;
+  auto handle = std::make_unique<filigree_watcher>();
+  handle->connection = s.connection;
+  handle->watcher = open();
+  filigree::Watcher* w = handle->watcher.get();
+  FrameStream::Hooks hooks{[w] { return w->read(); }, [w] { return w->finish(); }, [w] { w->cancel(); }};
+  handle->stream = std::make_unique<FrameStream>(std::move(hooks), s.mesh.rest_positions,
+                                                 s.connection->decode_threads.load(), callback, user);
+  return hand_out(std::move(handle), out);
+}
+
+int wrong_thread(filigree_watcher& w, const char* function) {
+  return fail(&w.error, FILIGREE_ERROR_WRONG_THREAD,
+              std::string(function) + ": called from the watcher's own callback (it would wait for itself)");
+}
+
+int end_status(filigree_watcher& w, const char* function) {
+  const FrameStream::End end = w.stream->end();
+  if (end.status == FILIGREE_OK) return FILIGREE_OK;
+  return fail(&w.error, end.status, std::string(function) + ": the stream ended: " + end.message);
+}
+
+}  // namespace
+}  // namespace filigree::c_api
+
+using namespace filigree::c_api;
+
+extern "C" {
+
+int filigree_watcher_open(filigree_session* session, const char* token, uint64_t after_version,
+                          filigree_frame_callback callback, void* user, filigree_watcher** out) {
+  constexpr const char* kFunction = "filigree_watcher_open";
+  return with_handle(session, kFunction, [&](filigree_session& s) -> int {
+    return open_watcher(s, kFunction, callback, user, out, [&] {
+      return s.connection->client.watch(s.mesh.session_id, token ? token : s.token, after_version);
+    });
+  });
+}
+
+int filigree_play_clip(filigree_session* session, const char* token, const char* clip, double speed, int loop,
+                       filigree_frame_callback callback, void* user, filigree_watcher** out) {
+  constexpr const char* kFunction = "filigree_play_clip";
+  return with_handle(session, kFunction, [&](filigree_session& s) -> int {
+    if (!clip) return null_argument(&s.error, kFunction, "clip");
+    filigree::ClipPlayback playback;
+    playback.speed = speed;
+    playback.loop = loop != 0;
+    return open_watcher(s, kFunction, callback, user, out, [&] {
+      return s.connection->client.play_clip(s.mesh.session_id, token ? token : s.token, clip, playback, "filigree-c");
+    });
+  });
+}
+
+int filigree_watcher_poll(filigree_watcher* watcher, float* positions, size_t capacity, uint64_t* version,
+                          uint64_t* pose_id, int* updated) {
+  constexpr const char* kFunction = "filigree_watcher_poll";
+  return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
+    return w.stream->poll(w.error, kFunction, positions, capacity, version, pose_id, updated);
+  });
+}
+
+int filigree_watcher_frame_info(const filigree_watcher* watcher, filigree_frame_info* info) {
+  constexpr const char* kFunction = "filigree_watcher_frame_info";
+  return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
+    if (!info) return null_argument(&w.error, kFunction, "info");
+    *info = w.stream->info();
+    return FILIGREE_OK;
+  });
+}
+
+int filigree_watcher_wait(filigree_watcher* watcher, int64_t timeout_ms) {
+  constexpr const char* kFunction = "filigree_watcher_wait";
+  return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
+    if (timeout_ms != 0 && w.stream->on_own_thread()) return wrong_thread(w, kFunction);
+    if (!w.stream->wait(timeout_of(timeout_ms)))
+      return fail(&w.error, FILIGREE_DEADLINE_EXCEEDED, std::string(kFunction) + ": the stream is still going");
+    return end_status(w, kFunction);
+  });
+}
+
+int filigree_watcher_wait_frame(filigree_watcher* watcher, int64_t timeout_ms) {
+  constexpr const char* kFunction = "filigree_watcher_wait_frame";
+  return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
+    return w.stream->wait_frame(w.error, kFunction, timeout_of(timeout_ms));
+  });
+}
+
+int filigree_watcher_changes(const filigree_watcher* watcher, char* buffer, size_t capacity, size_t* required) {
+  constexpr const char* kFunction = "filigree_watcher_changes";
+  return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
+    return copy_string(&w.error, kFunction, w.stream->changes(), buffer, capacity, required);
+  });
+}
+
+int filigree_watcher_close(filigree_watcher* watcher) {
+  constexpr const char* kFunction = "filigree_watcher_close";
+  return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
+    if (w.stream->on_own_thread()) return wrong_thread(w, kFunction);
+    w.stream->stop();
+    w.stream->join();
+    return end_status(w, kFunction);
+  });
+}
+
+const char* filigree_watcher_last_error(const filigree_watcher* watcher) {
+  return is_handle(watcher, filigree_watcher::kKind) ? watcher->error.get() : invalid_handle_message();
+}
+
+int filigree_watcher_free(filigree_watcher* watcher) {
+  if (!watcher) return FILIGREE_OK;
+  constexpr const char* kInvalid =
+      "filigree_watcher_free: not a live filigree_watcher (freed, or another kind of handle)";
+  if (!is_handle(watcher, filigree_watcher::kKind)) return fail(nullptr, FILIGREE_ERROR_INVALID_HANDLE, kInvalid);
+  if (watcher->stream->on_own_thread()) return wrong_thread(*watcher, "filigree_watcher_free");
+  if (!unregister_handle(watcher, filigree_watcher::kKind))
+    return fail(nullptr, FILIGREE_ERROR_INVALID_HANDLE, kInvalid);
+  // The stream goes first (declared last): cancelled, its thread joined.
+  delete watcher;
+  return FILIGREE_OK;
+}
+
+}  // extern "C"

@@ -1,0 +1,424 @@
+/*
+ * filigree.h: the C API of the Filigree client, for game engines (Unity
+ * P/Invoke, Unreal, Godot GDExtension) and foreign-function interfaces
+ * (Python ctypes, …). Plain C99; no C++ type crosses it.
+ *
+ * Library: libfiligree.so (SONAME libfiligree.so.0), which exports only
+ * filigree_* symbols. pkg-config: `pkg-config --cflags --libs filigree`;
+ * CMake: find_package(filigree) and target_link_libraries(app filigree::c).
+ *
+ * Conventions
+ *   - Every function returns an int status (enum filigree_status), except the
+ *     few that return a string (filigree_version_string, filigree_status_name
+ *     and the *_last_error functions), which never return NULL.
+ *   - Handles are opaque pointers, made by one function (*out) and released
+ *     by the matching *_free. A handle that is NULL, already freed, or of
+ *     another kind gives FILIGREE_ERROR_INVALID_HANDLE (a freed handle is
+ *     recognised unless a new handle of the same kind took its address).
+ *   - Output buffers belong to the caller and come with their capacity in
+ *     elements (floats, uint32s, or chars including the terminating NUL). A
+ *     buffer that is too small gives FILIGREE_ERROR_BUFFER_TOO_SMALL, writes
+ *     nothing to it, and stores the elements needed through `required` when
+ *     that is not NULL. (NULL, 0, &required) therefore asks for the size; a
+ *     NULL buffer with a nonzero capacity gives FILIGREE_ERROR_NULL_ARGUMENT.
+ *   - Failures leave a message: in the handle the call was made on
+ *     (filigree_client_last_error, …) and in the calling thread
+ *     (filigree_last_error, also for calls that fail before a handle exists
+ *     or are given a bad one). Successful calls do not clear them. A handle's
+ *     message stays valid until its next failed call or its free; when
+ *     several threads use one handle, prefer the thread's message.
+ *   - Strings are UTF-8, NUL-terminated.
+ *   - No C++ exception crosses the API: each becomes a status and a message.
+ *
+ * Threading
+ *   - Any function may be called from any thread, and the calls on one handle
+ *     are synchronised inside: e.g. the engine's game thread sends poses to a
+ *     driver while its render thread polls the same driver.
+ *   - Exception: *_free must be the last call on a handle, with no other
+ *     thread inside a call on it. Handles may be freed in any order: a
+ *     session, driver or watcher keeps the connection it came from alive.
+ *   - Every driver and watcher owns one background thread that reads the
+ *     stream and decodes its frames (Draco deltas → positions). A watcher's
+ *     callback runs on that thread; it may call any function except
+ *     filigree_watcher_close / filigree_watcher_free on its own watcher
+ *     (FILIGREE_ERROR_WRONG_THREAD). While the callback runs, that watcher
+ *     receives nothing: copy and return (the server skips frames for a slow
+ *     watcher and never waits for it).
+ *   - What blocks: filigree_create_session, filigree_join and
+ *     filigree_close_session (network round trips; an upload lasts as long as
+ *     the server preprocesses), *_close (until the stream has ended) and
+ *     filigree_watcher_wait. Sends block only while the transport is
+ *     flow-controlled. Polls never wait for the network.
+ *
+ * Usage (errors unchecked for brevity):
+ *
+ *   filigree_client* client;
+ *   filigree_session* session;
+ *   filigree_driver* driver;
+ *   filigree_connect("127.0.0.1:50051", NULL, &client);
+ *   filigree_create_session(client, bytes, size, "obj", NULL, "my-engine", &session);
+ *   size_t n, m;
+ *   filigree_session_vertex_count(session, &n);       // detailed mesh: what you render
+ *   filigree_session_base_vertex_count(session, &m);  // base mesh: what you pose
+ *   filigree_driver_open(session, NULL, "my-engine", &driver);
+ *   for (uint64_t tick = 1; running; ++tick) {
+ *     filigree_driver_send_positions(driver, tick, pose, 3 * m);
+ *     uint64_t version, pose_id;
+ *     int updated;
+ *     if (filigree_driver_poll(driver, vertex_buffer, 3 * n, &version, &pose_id, &updated) != FILIGREE_OK)
+ *       fprintf(stderr, "%s\n", filigree_driver_last_error(driver));
+ *     else if (updated) upload_to_gpu(vertex_buffer);
+ *   }
+ *   filigree_driver_close(driver);
+ *   filigree_driver_free(driver);
+ *   filigree_session_free(session);
+ *   filigree_client_free(client);
+ *
+ * C# (Unity) P/Invoke: handles are IntPtr, size_t is UIntPtr (or nuint),
+ * uint64_t is ulong, strings are UTF-8:
+ *
+ *   [DllImport("filigree")] static extern int filigree_connect(
+ *       [MarshalAs(UnmanagedType.LPUTF8Str)] string target, IntPtr options, out IntPtr client);
+ *   [DllImport("filigree")] static extern int filigree_driver_send_positions(
+ *       IntPtr driver, ulong poseId, float[] positions, UIntPtr floatCount);
+ *   [DllImport("filigree")] static extern int filigree_driver_poll(
+ *       IntPtr driver, float[] positions, UIntPtr capacity, out ulong version, out ulong poseId, out int updated);
+ *   [DllImport("filigree")] static extern IntPtr filigree_driver_last_error(IntPtr driver);
+ *       // Marshal.PtrToStringUTF8(...)
+ *   delegate void FrameCallback(IntPtr positions, UIntPtr floatCount, ulong version, IntPtr user);
+ *       // [UnmanagedFunctionPointer(CallingConvention.Cdecl)]; keep the delegate alive while the watcher lives
+ */
+#ifndef FILIGREE_FILIGREE_H
+#define FILIGREE_FILIGREE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#if defined(_WIN32)
+/* Untested: the library is only built for Linux here. */
+#if defined(FILIGREE_C_BUILD)
+#define FILIGREE_API __declspec(dllexport)
+#else
+#define FILIGREE_API __declspec(dllimport)
+#endif
+#else
+#define FILIGREE_API
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ------------------------------------------------------------ status codes */
+
+/* 1…16 are the gRPC status codes with the same numbers (what the server
+ * answered, or the client library's equivalent); 100 and up are this API's. */
+typedef enum filigree_status {
+  FILIGREE_OK = 0,
+  FILIGREE_CANCELLED = 1,
+  FILIGREE_UNKNOWN = 2,
+  FILIGREE_INVALID_ARGUMENT = 3, /* malformed mesh or pose, wrong sizes, bad index */
+  FILIGREE_DEADLINE_EXCEEDED = 4, /* also: filigree_watcher_wait timed out */
+  FILIGREE_NOT_FOUND = 5,         /* unknown or closed session, unknown clip */
+  FILIGREE_ALREADY_EXISTS = 6,
+  FILIGREE_PERMISSION_DENIED = 7, /* wrong token, or a viewer token where an editor's is needed */
+  FILIGREE_RESOURCE_EXHAUSTED = 8,
+  FILIGREE_FAILED_PRECONDITION = 9, /* e.g. joints for a session without a skeleton */
+  FILIGREE_ABORTED = 10,
+  FILIGREE_OUT_OF_RANGE = 11, /* also: a joint or clip index ≥ its count */
+  FILIGREE_UNIMPLEMENTED = 12,
+  FILIGREE_INTERNAL = 13,
+  FILIGREE_UNAVAILABLE = 14, /* server down or restarting, session moving between replicas: retry */
+  FILIGREE_DATA_LOSS = 15,   /* a frame that does not decode, inconsistent session data */
+  FILIGREE_UNAUTHENTICATED = 16,
+
+  FILIGREE_ERROR_INVALID_HANDLE = 100,   /* NULL, freed, or another kind of handle */
+  FILIGREE_ERROR_BUFFER_TOO_SMALL = 101, /* `required` says how many elements */
+  FILIGREE_ERROR_NULL_ARGUMENT = 102,    /* a pointer that must not be NULL was */
+  FILIGREE_ERROR_OUT_OF_MEMORY = 103,
+  FILIGREE_ERROR_STREAM_ENDED = 104, /* the stream ended normally (closed): nothing more to send or poll */
+  FILIGREE_ERROR_WRONG_THREAD = 105  /* a watcher closed or freed from its own callback */
+} filigree_status;
+
+/* "OK", "NOT_FOUND", "ERROR_BUFFER_TOO_SMALL", …; "UNKNOWN_STATUS" for other values. */
+FILIGREE_API const char* filigree_status_name(int status);
+
+/* The library's version, "MAJOR.MINOR.PATCH". */
+FILIGREE_API const char* filigree_version_string(void);
+
+/* The message of the calling thread's latest failed call ("" if none). Valid
+ * until that thread's next failed call. */
+FILIGREE_API const char* filigree_last_error(void);
+
+/* ------------------------------------------------------------ connection */
+
+typedef struct filigree_client filigree_client;
+typedef struct filigree_session filigree_session;
+typedef struct filigree_driver filigree_driver;
+typedef struct filigree_watcher filigree_watcher;
+
+/* TLS settings. Passing options at all means TLS; each field may be NULL:
+ * no pem_root_certs means the system's roots; pem_cert_chain and
+ * pem_private_key (both or neither) authenticate the client. */
+typedef struct filigree_connect_options {
+  const char* pem_root_certs;
+  const char* pem_cert_chain;
+  const char* pem_private_key;
+} filigree_connect_options;
+
+/* A channel to `target` ("127.0.0.1:50051", "dns:///host:port"), insecure
+ * when `options` is NULL. Connects lazily: a server that is down makes the
+ * first call that needs it fail with FILIGREE_UNAVAILABLE. */
+FILIGREE_API int filigree_connect(const char* target, const filigree_connect_options* options, filigree_client** out);
+
+/* Threads each driver or watcher opened afterwards (from this client's
+ * sessions) uses to decode one frame; 0 (the default) means the hardware's.
+ * Engines that keep their cores busy may want 1 or 2. */
+FILIGREE_API int filigree_client_set_decode_threads(filigree_client* client, uint32_t threads);
+
+FILIGREE_API const char* filigree_client_last_error(const filigree_client* client);
+
+/* Releases the handle; the connection closes once no session, driver or
+ * watcher made from it is left. NULL is accepted and ignored (FILIGREE_OK). */
+FILIGREE_API int filigree_client_free(filigree_client* client);
+
+/* ------------------------------------------------------------ sessions */
+
+/* How the server preprocesses an upload (SessionOptions in the contract).
+ * Zero fields mean the server's defaults, so {0} is a valid value. */
+typedef struct filigree_session_options {
+  uint32_t base_vertices;     /* target base size in vertices, or 0 */
+  double base_ratio;          /* target base size as a fraction of the vertices, or 0 */
+  double threshold;           /* performance threshold T of the cut; 0: direct recovery only */
+  int32_t whole_mesh;         /* nonzero: whole-mesh optimisation (T = infinity) */
+  uint32_t quantization_bits; /* frame deltas, 8…24 bits; 0: chosen per frame */
+  int32_t skinning;           /* skinned glTF uploads: 0 linear blend, 1 dual quaternion */
+} filigree_session_options;
+
+/* Uploads a mesh file's bytes (`format`: "obj", "ply", "off", "gltf", "glb")
+ * and waits while the server preprocesses it. `options` may be NULL (the
+ * server's defaults); `client_name` may be NULL. The new session carries the
+ * editor and viewer tokens. */
+FILIGREE_API int filigree_create_session(filigree_client* client, const void* mesh_bytes, size_t size,
+                                         const char* format, const filigree_session_options* options,
+                                         const char* client_name, filigree_session** out);
+
+/* Joins an existing session with either of its tokens. */
+FILIGREE_API int filigree_join(filigree_client* client, const char* session_id, const char* token,
+                               filigree_session** out);
+
+/* Strings, copied with their NUL (`capacity` and `required` count it). The
+ * tokens are empty for a joined session. */
+FILIGREE_API int filigree_session_id(const filigree_session* session, char* buffer, size_t capacity, size_t* required);
+FILIGREE_API int filigree_session_editor_token(const filigree_session* session, char* buffer, size_t capacity,
+                                               size_t* required);
+FILIGREE_API int filigree_session_viewer_token(const filigree_session* session, char* buffer, size_t capacity,
+                                               size_t* required);
+
+/* n: vertices of the detailed (rest) mesh, what frames carry and you render. */
+FILIGREE_API int filigree_session_vertex_count(const filigree_session* session, size_t* count);
+/* m: vertices of the base mesh, what poses move. */
+FILIGREE_API int filigree_session_base_vertex_count(const filigree_session* session, size_t* count);
+
+/* The meshes, as they were when the session was made or joined. Positions
+ * are x y z interleaved (3·n or 3·m floats), faces 3 indices each. Rest
+ * arrays are in the session's vertex order (frames use it); uploaded_ids[i]
+ * is the vertex of the uploaded file that session vertex i is. Base arrays
+ * are in base order (poses use it); base_original_ids[j] is the session
+ * vertex that base vertex j is. */
+FILIGREE_API int filigree_session_rest_positions(const filigree_session* session, float* buffer, size_t capacity,
+                                                 size_t* required);
+FILIGREE_API int filigree_session_rest_faces(const filigree_session* session, uint32_t* buffer, size_t capacity,
+                                             size_t* required);
+FILIGREE_API int filigree_session_uploaded_ids(const filigree_session* session, uint32_t* buffer, size_t capacity,
+                                               size_t* required);
+FILIGREE_API int filigree_session_base_positions(const filigree_session* session, float* buffer, size_t capacity,
+                                                 size_t* required);
+FILIGREE_API int filigree_session_base_faces(const filigree_session* session, uint32_t* buffer, size_t capacity,
+                                             size_t* required);
+FILIGREE_API int filigree_session_base_original_ids(const filigree_session* session, uint32_t* buffer,
+                                                    size_t capacity, size_t* required);
+
+/* The skeleton of a skinned glTF/GLB upload (0 joints and clips otherwise).
+ * Joints are in skeleton order, parents before children; parent -1 is a
+ * root. joint_rest gives the rest local transform, 10 floats (translation
+ * xyz, rotation quaternion xyzw, scale xyz). An index ≥ the count gives
+ * FILIGREE_OUT_OF_RANGE. */
+FILIGREE_API int filigree_session_joint_count(const filigree_session* session, size_t* count);
+FILIGREE_API int filigree_session_joint_name(const filigree_session* session, size_t joint, char* buffer,
+                                             size_t capacity, size_t* required);
+FILIGREE_API int filigree_session_joint_parent(const filigree_session* session, size_t joint, int32_t* parent);
+FILIGREE_API int filigree_session_joint_rest(const filigree_session* session, size_t joint, float* buffer,
+                                             size_t capacity, size_t* required);
+FILIGREE_API int filigree_session_clip_count(const filigree_session* session, size_t* count);
+FILIGREE_API int filigree_session_clip_name(const filigree_session* session, size_t clip, char* buffer,
+                                            size_t capacity, size_t* required);
+FILIGREE_API int filigree_session_clip_duration(const filigree_session* session, size_t clip, double* seconds);
+
+/* Replaces the handles of `client_name` (NULL: "filigree-c") with these
+ * (editor token; NULL: the session's): detailed-mesh vertex vertices[k]
+ * (session order, < n) should go to targets 3k…3k+2. The server moves the
+ * base as rigidly as it can to meet every participant's handles, on top of
+ * the poses. vertex_count 0 removes this client's handles.
+ * *handles_in_session (may be NULL) gets every participant's handle count. */
+FILIGREE_API int filigree_set_handles(filigree_session* session, const char* token, const char* client_name,
+                                      const uint32_t* vertices, size_t vertex_count, const float* targets,
+                                      size_t float_count, uint32_t* handles_in_session);
+
+/* Sets the performance threshold T of the cut (editor token; NULL: the
+ * session's); whole_mesh nonzero means T = infinity. Thresholds must be
+ * finite and >= 0. Every participant's frames follow from the next one. */
+FILIGREE_API int filigree_set_threshold(filigree_session* session, const char* token, double threshold,
+                                        int whole_mesh);
+
+/* Ends the session on the server for everyone (editor token; NULL: the one
+ * the session was made or joined with). The handle stays to be freed. */
+FILIGREE_API int filigree_close_session(filigree_session* session, const char* token);
+
+FILIGREE_API const char* filigree_session_last_error(const filigree_session* session);
+/* Releases the handle (the session goes on on the server). NULL: FILIGREE_OK. */
+FILIGREE_API int filigree_session_free(filigree_session* session);
+
+/* ------------------------------------------------------------ frames */
+
+/* What one decoded frame was, besides its positions. */
+typedef struct filigree_frame_info {
+  uint64_t version;         /* the session's frame number */
+  uint64_t pose_id;         /* for a driver: its newest pose the frame includes (0: none) */
+  uint64_t encoded_bytes;   /* compressed size on the wire */
+  uint64_t frames_received; /* frames decoded by this stream so far, polled or not */
+  float max_error;          /* largest |decoded − exact| coordinate error of the frame */
+  int32_t keyframe;         /* 1: a keyframe, 0: a sparse frame */
+} filigree_frame_info;
+
+/* With a callback, a watcher hands each decoded frame to it on its
+ * background thread: 3·n floats, valid only during the call. */
+typedef void (*filigree_frame_callback)(const float* positions, size_t float_count, uint64_t version, void* user);
+
+/* ------------------------------------------------------------ driving */
+
+typedef enum filigree_joint_space {
+  FILIGREE_JOINTS_LOCAL_TRS = 0,   /* 10 floats per joint: translation xyz, quaternion xyzw, scale xyz */
+  FILIGREE_JOINTS_MODEL_MATRIX = 1 /* 16 floats per joint: 4×4 model matrix, column-major */
+} filigree_joint_space;
+
+/* Opens a Drive stream (editor token; NULL: the one the session was made or
+ * joined with). Its background thread starts decoding the frames that come
+ * back. A refused token or a closed session shows in a later send or poll. */
+FILIGREE_API int filigree_driver_open(filigree_session* session, const char* token, const char* client_name,
+                                      filigree_driver** out);
+
+/* Sends a full pose: 3·m floats, base order. `pose_id` must increase from
+ * one pose to the next; frames echo it. Sizes are checked here, so a
+ * malformed pose gives FILIGREE_INVALID_ARGUMENT and the stream goes on.
+ * Once the stream has ended, returns why (FILIGREE_ERROR_STREAM_ENDED
+ * after filigree_driver_close or a normal end). */
+FILIGREE_API int filigree_driver_send_positions(filigree_driver* driver, uint64_t pose_id, const float* positions,
+                                                size_t float_count);
+
+/* Sends a partial pose: base vertices indices[k] (< m) move to positions
+ * 3k…3k+2; float_count must be 3·index_count. The others keep their place. */
+FILIGREE_API int filigree_driver_send_partial(filigree_driver* driver, uint64_t pose_id, const uint32_t* indices,
+                                              size_t index_count, const float* positions, size_t float_count);
+
+/* Sends a skeletal pose (sessions with a skeleton): `values` holds 10 or 16
+ * floats per joint as `space` says (filigree_joint_space), for the joints
+ * `joints` (joint_count indices), or for all joints in order when `joints`
+ * is NULL (joint_count is then ignored). Joints not named keep their
+ * previous transform. The server skins the base mesh. */
+FILIGREE_API int filigree_driver_send_joints(filigree_driver* driver, uint64_t pose_id, int space,
+                                             const uint32_t* joints, size_t joint_count, const float* values,
+                                             size_t value_count);
+
+/* Copies the newest decoded frame into `positions` (3·n floats, session
+ * order) if it is newer than the last one polled, and sets *updated to 1;
+ * otherwise leaves `positions` alone and sets *updated to 0. Frames in
+ * between are skipped. `version`, `pose_id` and `updated` may be NULL; they
+ * describe the latest frame polled. capacity < 3·n gives
+ * FILIGREE_ERROR_BUFFER_TOO_SMALL whether or not a frame is waiting. Once
+ * the stream has ended and its last frame was polled, returns why it ended
+ * (FILIGREE_ERROR_STREAM_ENDED for a normal end). Never waits for the
+ * network. */
+FILIGREE_API int filigree_driver_poll(filigree_driver* driver, float* positions, size_t capacity, uint64_t* version,
+                                      uint64_t* pose_id, int* updated);
+
+/* The latest polled frame (frames_received counts every decoded one). */
+FILIGREE_API int filigree_driver_frame_info(const filigree_driver* driver, filigree_frame_info* info);
+
+/* Waits up to timeout_ms (negative: without limit; 0: just checks) for a
+ * frame newer than the last one polled: FILIGREE_OK when poll will return
+ * one, FILIGREE_DEADLINE_EXCEEDED when none came in time, and once the
+ * stream has ended without one, why it ended (as poll). */
+FILIGREE_API int filigree_driver_wait_frame(filigree_driver* driver, int64_t timeout_ms);
+
+/* Who changed the session in the frames up to the latest one polled (since
+ * the poll before it): one line per participant, by name,
+ * "client_name<TAB>newest pose_id<TAB>base vertices moved<LF>" (tabs and line
+ * breaks in names become spaces; the vertex counts of several frames add
+ * up). "" when nobody did. A string, as filigree_session_id. */
+FILIGREE_API int filigree_driver_changes(const filigree_driver* driver, char* buffer, size_t capacity,
+                                         size_t* required);
+
+/* Ends the stream: tells the server no more poses come, waits for the
+ * server to end the stream and the background thread to stop, and returns
+ * the stream's status (FILIGREE_OK for a normal end; else why it failed).
+ * The newest frame can still be polled. Idempotent. */
+FILIGREE_API int filigree_driver_close(filigree_driver* driver);
+
+FILIGREE_API const char* filigree_driver_last_error(const filigree_driver* driver);
+/* Cancels the stream if it was not closed, then releases the handle. NULL: FILIGREE_OK. */
+FILIGREE_API int filigree_driver_free(filigree_driver* driver);
+
+/* ------------------------------------------------------------ watching */
+
+/* Opens a Watch stream (either token; NULL: the session's): the session's
+ * frames newer than `after_version`, as they are computed. With a callback,
+ * frames go to it (on the background thread) and cannot be polled; without,
+ * filigree_watcher_poll gets them. `callback` and `user` may be NULL. */
+FILIGREE_API int filigree_watcher_open(filigree_session* session, const char* token, uint64_t after_version,
+                                       filigree_frame_callback callback, void* user, filigree_watcher** out);
+
+/* Plays the session's clip `clip` (its name, see filigree_session_clip_name)
+ * on the server (editor token; NULL: the session's) at `speed` (0 means 1),
+ * looping while `loop` is nonzero: a watcher over the frames of the clip,
+ * which ends normally after the clip's last sample unless looping. */
+FILIGREE_API int filigree_play_clip(filigree_session* session, const char* token, const char* clip, double speed,
+                                    int loop, filigree_frame_callback callback, void* user, filigree_watcher** out);
+
+/* As filigree_driver_poll (pose_id is 0 for a Watch stream; for a clip,
+ * the server's number of the sample). A watcher with a callback gives
+ * FILIGREE_FAILED_PRECONDITION. */
+FILIGREE_API int filigree_watcher_poll(filigree_watcher* watcher, float* positions, size_t capacity,
+                                       uint64_t* version, uint64_t* pose_id, int* updated);
+
+/* The latest frame polled, or handed to the callback. */
+FILIGREE_API int filigree_watcher_frame_info(const filigree_watcher* watcher, filigree_frame_info* info);
+
+/* As filigree_driver_wait_frame and filigree_driver_changes (with a
+ * callback, the changes are the handed frame's, and wait_frame gives
+ * FILIGREE_FAILED_PRECONDITION). */
+FILIGREE_API int filigree_watcher_wait_frame(filigree_watcher* watcher, int64_t timeout_ms);
+FILIGREE_API int filigree_watcher_changes(const filigree_watcher* watcher, char* buffer, size_t capacity,
+                                          size_t* required);
+
+/* Waits up to timeout_ms (negative: without limit; 0: just checks) for the
+ * stream to end, e.g. a clip to finish playing: returns the stream's status
+ * (FILIGREE_OK for a normal end), or FILIGREE_DEADLINE_EXCEEDED if it is
+ * still going. */
+FILIGREE_API int filigree_watcher_wait(filigree_watcher* watcher, int64_t timeout_ms);
+
+/* Stops watching now (cancels the stream), waits for the background thread
+ * and returns FILIGREE_OK, or why the stream had failed before. Idempotent.
+ * Not from the watcher's own callback. */
+FILIGREE_API int filigree_watcher_close(filigree_watcher* watcher);
+
+FILIGREE_API const char* filigree_watcher_last_error(const filigree_watcher* watcher);
+/* Closes the watcher if needed and releases the handle. NULL: FILIGREE_OK.
+ * Not from the watcher's own callback. */
+FILIGREE_API int filigree_watcher_free(filigree_watcher* watcher);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* FILIGREE_FILIGREE_H */
