@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -16,6 +17,9 @@
 #include "runtime/deformer.h"
 #include "runtime/pose_io.h"
 #include "runtime/procedural_motion.h"
+#include "skinning/animation_clip.h"
+#include "skinning/rig_file.h"
+#include "skinning/skinning.h"
 
 namespace filigree::cli {
 namespace {
@@ -35,7 +39,7 @@ struct DeformArgs : RuntimeArgs {
 };
 
 struct AnimateArgs : RuntimeArgs {
-  std::string motion = "bend";
+  std::string motion = "bend", clip, rig, skinning = "linear";
   int frames = 30;
   double fps = 30.0;
 };
@@ -99,20 +103,70 @@ void deform(const DeformArgs& a) {
   if (a.stats) print_stats(r.stats, frames);
 }
 
+// The base pose of frame f: the procedural motion, or the clip sampled
+// evenly over its duration and skinned.
+class BaseMotion {
+ public:
+  BaseMotion(const AnimateArgs& a, const Hierarchy& h) : base_rest_(h.base_mesh().positions) {
+    if (a.clip.empty()) {
+      const auto motion = parse_motion(a.motion);
+      if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
+      motion_ = *motion;
+      return;
+    }
+    const std::filesystem::path rig_path =
+        a.rig.empty() ? std::filesystem::path(a.hierarchy).replace_extension(".rig") : std::filesystem::path(a.rig);
+    if (!std::filesystem::exists(rig_path))
+      throw std::invalid_argument(rig_path.string() + " does not exist: --clip needs the rig `filigree preprocess` writes for a skinned glTF");
+    Rig full = load_rig(rig_path);
+    if (full.vertex_count() != h.vertex_count())
+      throw std::invalid_argument(rig_path.string() + " is the rig of another mesh (" + std::to_string(full.vertex_count()) +
+                                  " vertices, the hierarchy has " + std::to_string(h.vertex_count()) + ")");
+    rig_ = full.restricted_to(h.base_vertices);
+    clip_ = rig_->clip(a.clip);
+    if (!clip_) {
+      std::string names;
+      for (const AnimationClip& c : rig_->clips) names += (names.empty() ? "" : ", ") + c.name;
+      throw std::invalid_argument("no clip '" + a.clip + "' (the rig has: " + (names.empty() ? "none" : names) + ")");
+    }
+    if (a.skinning == "dual-quaternion") method_ = SkinningMethod::kDualQuaternion;
+    else if (a.skinning != "linear") throw std::invalid_argument("--skinning takes linear or dual-quaternion, not '" + a.skinning + "'");
+  }
+
+  Pose at(int frame, int frames) const {
+    if (!clip_) {
+      // One back-and-forth of the motion over the requested frames.
+      const double phase = frames > 1 ? std::sin(M_PI * frame / (frames - 1)) : 1.0;
+      return procedural_pose(base_rest_, motion_, phase);
+    }
+    SkeletonPose pose = SkeletonPose::rest(*rig_);
+    sample_clip(*clip_, frames > 1 ? clip_->duration() * frame / (frames - 1) : 0.0, pose.local);
+    Pose out;
+    out.positions.resize(rig_->vertex_count());
+    skin(*rig_, model_transforms(*rig_, pose), method_, out.positions);
+    return out;
+  }
+
+  std::string name(const AnimateArgs& a) const { return clip_ ? "clip " + a.clip : a.motion; }
+
+ private:
+  std::vector<Vec3> base_rest_;
+  Motion motion_{};
+  std::optional<Rig> rig_;
+  const AnimationClip* clip_ = nullptr;
+  SkinningMethod method_ = SkinningMethod::kLinearBlend;
+};
+
 void animate(const AnimateArgs& a) {
-  const auto motion = parse_motion(a.motion);
-  if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
   const Hierarchy h = load_hierarchy(a.hierarchy);
-  const std::vector<Vec3> base_rest = h.base_mesh().positions;
+  const BaseMotion motion(a, h);
   Deformer deformer(h, options_of(a));
   std::vector<std::vector<Vec3>> frames;
   double total_ms = 0.0;
   const std::filesystem::path out(a.output);
   const bool glb = out.extension() == ".glb";
   for (int f = 0; f < a.frames; ++f) {
-    // One back-and-forth of the motion over the requested frames.
-    const double phase = a.frames > 1 ? std::sin(M_PI * f / (a.frames - 1)) : 1.0;
-    DeformResult r = deformer.deform(procedural_pose(base_rest, *motion, phase));
+    DeformResult r = deformer.deform(motion.at(f, a.frames));
     total_ms += r.stats.total_ms;
     if (glb) {
       frames.push_back(std::move(r.positions));
@@ -127,7 +181,7 @@ void animate(const AnimateArgs& a) {
   }
   if (glb) write_glb_animation(h.original_mesh(), frames, a.fps, out);
   std::printf("%s: %d frames of '%s', %.2f ms per frame on average (%zu vertices)\n", a.output.c_str(), a.frames,
-              a.motion.c_str(), total_ms / std::max(a.frames, 1), h.vertex_count());
+              motion.name(a).c_str(), total_ms / std::max(a.frames, 1), h.vertex_count());
 }
 
 }  // namespace
@@ -148,6 +202,9 @@ void add_deform_commands(CLI::App& app) {
   animate_cmd->add_option("--motion", an->motion, "bend, twist, wave, bump or fold");
   animate_cmd->add_option("--frames", an->frames, "Number of frames")->check(CLI::Range(1, 100000));
   animate_cmd->add_option("--fps", an->fps, "Frame rate of the glTF animation")->check(CLI::PositiveNumber);
+  animate_cmd->add_option("--clip", an->clip, "Play this animation clip of a skinned input instead of --motion (needs H.rig from `preprocess`)");
+  animate_cmd->add_option("--rig", an->rig, "The rig file (default: the hierarchy's name with .rig)");
+  animate_cmd->add_option("--skinning", an->skinning, "linear (default) or dual-quaternion");
   animate_cmd->callback([an] { animate(*an); });
 }
 

@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   filigree::cli::add_deform_commands(app);
   filigree::cli::add_compare_command(app);
   filigree::cli::add_service_commands(app);
+  filigree::cli::add_rig_command(app);
   filigree::cli::add_health_command(app);
   try {
     app.parse(argc, argv);

@@ -17,6 +17,7 @@
 #include "mesh/mesh_validation.h"
 #include "preprocess/preprocess.h"
 #include "util/content_hash.h"
+#include "skinning/rig_file.h"
 #include "util/memory_usage.h"
 
 namespace filigree::cli {
@@ -34,7 +35,8 @@ struct PreprocessArgs {
 
 void run(const PreprocessArgs& a) {
   const auto start = std::chrono::steady_clock::now();
-  const TriMesh input = read_mesh(a.mesh);
+  const RiggedMesh rigged = read_rigged_mesh(a.mesh);
+  const TriMesh& input = rigged.mesh;
   const ValidationReport report = validate_mesh(input);
   std::printf("input      %s: %zu vertices, %zu faces\n", a.mesh.c_str(), input.vertex_count(), input.face_count());
   if (report.components > 1 || report.boundary_loops > 0)
@@ -64,6 +66,13 @@ void run(const PreprocessArgs& a) {
   const Hierarchy h = preprocess(mesh, options);
   bar.finish();
   save_hierarchy(h, a.output);
+  if (rigged.rig) {
+    // A skinned input keeps its rig beside the hierarchy (H.rig), in hierarchy vertex order.
+    const std::filesystem::path rig_path = std::filesystem::path(a.output).replace_extension(".rig");
+    save_rig(rigged.rig->restricted_to(repair.new_to_old_vertex), rig_path);
+    std::printf("rig        %s: %zu joints, %zu clips (`filigree animate %s --clip NAME`)\n", rig_path.c_str(),
+                rigged.rig->joints.size(), rigged.rig->clips.size(), a.output.c_str());
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   std::printf("base       %zu vertices, %zu faces (%.2f%% of the vertices)\n", h.base_vertices.size(), h.base_faces.size(),

@@ -37,6 +37,7 @@ struct UploadArgs {
   unsigned base_vertices = 0, bits = 0;
   double threshold = 0.0;
   bool whole_mesh = false;
+  std::string skinning = "linear";
 };
 
 struct SessionArgs {
@@ -48,6 +49,11 @@ struct DriveArgs : SessionArgs {
   std::string motion, name = "filigree-cli";
   std::vector<std::string> poses;
   double rate = 60.0;
+};
+
+struct PlayArgs : SessionArgs {
+  std::string clip, name = "filigree-cli";
+  double speed = 1.0, fps = 30.0;
 };
 
 struct WatchArgs : SessionArgs {
@@ -117,6 +123,11 @@ void upload(const UploadArgs& a) {
   v1::SessionOptions options;
   options.set_base_vertices(a.base_vertices);
   options.set_threshold(a.threshold);
+  if (a.skinning == "dual-quaternion") {
+    options.set_skinning(v1::SKINNING_DUAL_QUATERNION);
+  } else if (a.skinning != "linear") {
+    throw std::invalid_argument("--skinning takes linear or dual-quaternion, not '" + a.skinning + "'");
+  }
   options.set_whole_mesh(a.whole_mesh);
   options.set_quantization_bits(a.bits);
   const std::string bytes = read_file(a.mesh);
@@ -137,6 +148,11 @@ void upload(const UploadArgs& a) {
               s.viewer_token.c_str());
   std::printf("cached: %s\nvertices: %zu\nbase_vertices: %zu\n", s.cached ? "yes" : "no", s.mesh.vertex_count(),
               s.mesh.base_vertex_count());
+  if (s.mesh.skeleton.joints_size() > 0) {
+    std::printf("joints: %d\nclips:", s.mesh.skeleton.joints_size());
+    for (const auto& c : s.mesh.skeleton.clips()) std::printf(" %s (%.2f s)", c.name().c_str(), c.duration_seconds());
+    std::printf("\n");
+  }
 }
 
 // ---------------------------------------------------------------- drive
@@ -293,6 +309,33 @@ void watch(const WatchArgs& a) {
   if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
 }
 
+// ---------------------------------------------------------------- play
+
+void play(const PlayArgs& a) {
+  Client client(a.server);
+  const SessionMesh session = client.join(a.session, a.token);
+  if (session.skeleton.joints().empty())
+    throw std::runtime_error("session " + a.session + " has no skeleton (its upload was not a skinned glTF)");
+  FrameDecoder decoder(session.rest_positions);
+  ClipPlayback playback;
+  playback.speed = a.speed;
+  playback.max_rate = a.fps;
+  auto stream = client.play_clip(a.session, a.token, a.clip, playback, a.name);
+  std::vector<std::vector<Vec3>> frames;
+  std::size_t bytes = 0;
+  while (auto frame = stream->read()) {
+    const DecodedFrame d = decoder.decode(*frame);
+    bytes += d.encoded_bytes;
+    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+    if (a.frames > 0 && static_cast<int>(frames.size()) >= a.frames) stream->cancel();
+    std::printf("version %llu  sample %llu  bytes %zu  max_error %.3g\n", static_cast<unsigned long long>(d.version),
+                static_cast<unsigned long long>(d.pose_id), d.encoded_bytes, d.max_error);
+  }
+  const grpc::Status status = stream->finish();
+  if (!(a.frames > 0 && status.error_code() == grpc::StatusCode::CANCELLED)) throw_if_error(status);
+  if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
+}
+
 void locate(const std::string& server, const std::string& session) {
   Client client(server);
   const v1::SessionLocation where = client.locate(session);
@@ -338,6 +381,7 @@ void add_service_commands(CLI::App& app) {
   up->add_flag("--whole-mesh", u->whole_mesh, "Whole-mesh optimisation (T = infinity)")->excludes(t);
   up->add_option("--bits", u->bits, "Quantization bits of frame deltas (8-24; default: per frame, the fewest that keep the error within 5e-5 of the diagonal)")->check(CLI::Range(8, 24));
   up->add_option("--name", u->name, "Client name shown to other participants");
+  up->add_option("--skinning", u->skinning, "How skeletal poses skin a skinned glTF's base: linear (default) or dual-quaternion");
   up->callback([u] { upload(*u); });
 
   auto d = std::make_shared<DriveArgs>();
@@ -364,6 +408,16 @@ void add_service_commands(CLI::App& app) {
   wa->add_option("--after", w->after, "Skip frames up to this version");
   wa->add_option("--fps", w->fps, "Frame rate of the .glb animation")->check(CLI::PositiveNumber);
   wa->callback([w] { watch(*w); });
+
+  auto pl = std::make_shared<PlayArgs>();
+  CLI::App* pc = app.add_subcommand("play", "Play one of a skinned session's animation clips on the server, and record its frames");
+  add_session_options(pc, *pl, "Write the received frames: .glb animation, other formats the last frame");
+  pc->add_option("--clip", pl->clip, "Clip name (SessionInfo.skeleton.clips; `filigree inspect` of the upload lists them)")->required();
+  pc->add_option("--speed", pl->speed, "Playback rate")->check(CLI::PositiveNumber);
+  pc->add_option("--fps", pl->fps, "Samples per second at most, and the .glb frame rate")->check(CLI::Range(1.0, 60.0));
+  pc->add_option("--frames", pl->frames, "Stop after N frames")->check(CLI::Range(1, 1000000));
+  pc->add_option("--name", pl->name, "Client name shown to other participants");
+  pc->callback([pl] { play(*pl); });
 
   auto server = std::make_shared<std::string>(kDefaultServer);
   auto located = std::make_shared<std::pair<std::string, std::string>>(kDefaultServer, "");
