@@ -42,6 +42,14 @@ export class SessionClient {
     return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED }, { signal });
   }
 
+  // Plays one of the session's clips on the server (editor token): its
+  // frames arrive here and on every Watch stream; ends after the clip's last
+  // sample (never when looping: abort `signal` to stop).
+  playClip(clip: string, loop: boolean, clientName: string, signal: AbortSignal): AsyncIterable<Frame> {
+    return this.client.playClip({ sessionId: this.sessionId, clip, loop, clientName, frameFormat: FrameFormat.CHUNKED },
+      { signal });
+  }
+
   // Chunked too: state.frame may be relative to state.keyframe (framesOfState).
   getState(): Promise<SessionState> {
     return this.client.getState({ sessionId: this.sessionId, frameFormat: FrameFormat.CHUNKED });

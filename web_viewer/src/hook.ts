@@ -30,6 +30,9 @@ export interface TestHook {
   overlaysVersion: number;          // the frame those overlays describe
   cutTriangles: number;             // triangles of that cut mesh
   stretchMax: number;       // largest |L2 − 1| of the last stretch map (0 while it is off)
+  clips: string[];          // the session's animation clips (skinned uploads)
+  clipState: 'idle' | 'playing' | 'done' | 'stopped' | 'error';
+  clipFrames: number;       // frames of the clip stream received
   capture(): string | null; // the canvas as a PNG data URL, null before the mesh exists
   // Page coordinates where vertex i is drawn now (null before the mesh exists).
   screenPointOfVertex(i: number): { x: number; y: number } | null;
@@ -47,6 +50,6 @@ export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
   displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
-  overlaysVersion: 0, cutTriangles: 0, stretchMax: 0,
+  overlaysVersion: 0, cutTriangles: 0, stretchMax: 0, clips: [], clipState: 'idle', clipFrames: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
 };

@@ -115,6 +115,7 @@ class Viewer {
     hook.vertexAt = (x, y) => this.handles.vertexAt(x, y);
     showSession(info, this.params.serverUrl, CLIENT_NAME);
     this.setupOptions(info);
+    this.setupClips(info);
     byId('round-trip').addEventListener('click', () => void this.timeRoundTrip());
     window.setInterval(() => showStats(statsRows(this.stats.snapshot(performance.now()))), 250);
     byId('live').hidden = false;
@@ -292,6 +293,55 @@ class Viewer {
     // Of the decoded deltas: a sparse frame's quantization ranges say nothing
     // of the vertices it leaves out. One pass, cheaper than the normals' after it.
     hook.displacement = largestDelta(this.keyed.deltas);
+  }
+
+  // Clips of a skinned upload: played by the server (PlayClip); the frames
+  // show through this page's Watch stream like anyone's, so the clip stream
+  // is only drained and counted here.
+  private setupClips(info: SessionInfo): void {
+    const clips = info.skeleton?.clips ?? [];
+    hook.clips = clips.map((c) => c.name);
+    if (clips.length === 0) return;
+    byId('clips-section').hidden = false;
+    const select = byId<HTMLSelectElement>('clip');
+    select.replaceChildren(...clips.map((c) => {
+      const option = document.createElement('option');
+      option.value = c.name;
+      option.textContent = `${c.name} (${c.durationSeconds.toFixed(2)} s)`;
+      return option;
+    }));
+    let playing: AbortController | null = null;
+    byId('clip-stop').addEventListener('click', () => {
+      playing?.abort();
+    });
+    byId<HTMLFormElement>('clips').addEventListener('submit', async (event) => {
+      event.preventDefault();
+      playing?.abort();
+      const controller = new AbortController();
+      playing = controller;
+      const name = select.value;
+      hook.clipState = 'playing';
+      hook.clipFrames = 0;
+      setNote('clip-status', `Playing ${name}…`);
+      try {
+        const stream = this.client.playClip(name, byId<HTMLInputElement>('clip-loop').checked, CLIENT_NAME, controller.signal);
+        for await (const _frame of stream) ++hook.clipFrames;
+        hook.clipState = 'done';
+        setNote('clip-status', `Played ${name} (${hook.clipFrames} frames).`);
+      } catch (error) {
+        if (controller.signal.aborted) {
+          hook.clipState = 'stopped';
+          setNote('clip-status', `Stopped ${name}.`);
+        } else {
+          hook.clipState = 'error';
+          setNote('clip-status', isCode(error, Code.PermissionDenied)
+            ? 'Playing a clip needs the editor token; this page was opened with another token.'
+            : describeError(error, this.params.sessionId, this.params.serverUrl), true);
+        }
+      } finally {
+        if (playing === controller) playing = null;
+      }
+    });
   }
 
   private setupOptions(info: SessionInfo): void {

@@ -202,6 +202,37 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await page.context().close();
   });
 
+  it('lists a skinned session\'s clips and plays one: the mesh moves, the clip ends', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    // A skinned GLB made from the shipped bunny by `filigree rig` (bend and twist clips).
+    const rigged = join(dataDir, 'bunny_rigged.glb');
+    await cli(['rig', MESH, '-o', rigged, '--joints', '4']);
+    const skinned = await upload(grpcAddress, rigged, 'browser-test-rig');
+    const page = await open(`?session=${skinned.session_id}&token=${skinned.editor_token}`);
+    await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
+    assert.deepEqual((await hookState(page)).clips, ['bend', 'twist']);
+    assert.equal(await page.isVisible('#clips-section'), true);
+    const rest = png(await page.evaluate(() => window.__filigree.capture()));
+    await page.selectOption('#clip', 'bend');
+    await page.click('#clip-play');
+    // The bend peaks a quarter into the clip: the page shows a displaced frame.
+    await waitFor(page, (d) => window.__filigree.displacement > 0.02 * d, meshDiagonal);
+    const bent = png(await page.evaluate(() => window.__filigree.capture()));
+    const moved = changedFraction(rest, bent);
+    assert.ok(moved > 0.005, `the bent mesh looks like the rest mesh (${moved} of the pixels changed)`);
+    await waitFor(page, () => window.__filigree.clipState === 'done');
+    const { clipFrames } = await hookState(page);
+    assert.ok(clipFrames >= 2, `clip stream frames: ${clipFrames}`);
+    assert.match(await page.textContent('#clip-status'), /^Played bend \(\d+ frames\)\.$/);
+    t.diagnostic(`clip 'bend': ${clipFrames} frames, ${(100 * moved).toFixed(1)}% of the pixels moved at the peak`);
+    // A viewer token may not play.
+    const viewer = await open(`?session=${skinned.session_id}&token=${skinned.viewer_token}`);
+    await waitFor(viewer, () => window.__filigree?.state === 'live');
+    await viewer.click('#clip-play');
+    await waitFor(viewer, () => /editor token/.test(document.querySelector('#clip-status').textContent));
+    await viewer.context().close();
+    await page.context().close();
+  });
+
   it('refuses a threshold change with the viewer token, readably', { timeout: TEST_TIMEOUT_MS }, async () => {
     const page = await open(viewerUrl(session.viewer_token));
     await waitFor(page, () => window.__filigree?.state === 'live');
