@@ -51,6 +51,7 @@ bench: build
 	$(BUILD)/bench/filigree_bench_runtime
 	$(BUILD)/bench/filigree_bench_service
 	$(BUILD)/bench/filigree_bench_cluster
+	$(BUILD)/bench/filigree_bench_upstream
 
 clean:
 	rm -rf $(BUILD) out

@@ -45,6 +45,18 @@ echo "editor view (handles, threshold): http://$HTTP/?session=$SESSION&token=$ED
 echo "  (in the page: Overlays → Regions and set T = 1000000 to see the regions; press on the mesh and drag to pull it)"
 "$FILIGREE" drive --server "$ADDRESS" --session "$SESSION" --token "$EDITOR" --motion bend --frames 120 --rate 60 \
   -o "$OUT/armadillo_driven.glb"
+
+echo
+echo "== skeletal: rig the Armadillo (a chain of joints, bend and twist clips), upload the skinned GLB, play a clip on the server"
+"$FILIGREE" rig data/armadillo.off -o "$OUT/armadillo_rigged.glb" --joints 6
+"$FILIGREE" preprocess "$OUT/armadillo_rigged.glb" -o "$OUT/armadillo_rigged.fgh" | grep -E '^(rig|base) '
+"$FILIGREE" animate "$OUT/armadillo_rigged.fgh" --clip twist --frames 30 -o "$OUT/armadillo_clip_twist.glb"
+"$FILIGREE" upload "$OUT/armadillo_rigged.glb" --server "$ADDRESS" --name demo-rig > "$OUT/rig_session.txt"
+grep -E '^(session_id|joints|clips)' "$OUT/rig_session.txt"
+RIG_SESSION=$(sed -n 's/^session_id: //p' "$OUT/rig_session.txt")
+RIG_EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/rig_session.txt")
+"$FILIGREE" play --server "$ADDRESS" --session "$RIG_SESSION" --token "$RIG_EDITOR" --clip bend --fps 30 \
+  -o "$OUT/armadillo_clip_bend.glb" | tail -n 2
 kill -TERM $SERVER_PID
 wait $SERVER_PID
 trap - EXIT
@@ -52,4 +64,5 @@ echo "server stopped (exit 0); its log is $OUT/server.log. To keep one running w
 
 echo
 echo "Demo outputs are in $OUT/: base mesh (GLB/OBJ), a partial cut, the fully recovered mesh,"
-echo "a local bend animation (armadillo_bend.glb) and the frames received from the server (armadillo_driven.glb)."
+echo "a local bend animation (armadillo_bend.glb), the frames received from the server (armadillo_driven.glb)"
+echo "and the skinned Armadillo's bend clip played by the server (armadillo_clip_bend.glb)."
