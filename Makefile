@@ -4,7 +4,7 @@
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: all deps configure build test test-cluster demo bench clean viewer serve image test-container
+.PHONY: all deps configure build test test-cluster demo bench clean viewer serve image test-container install
 
 all: build viewer
 
@@ -45,6 +45,13 @@ demo: build viewer
 # A server with the demo session, for a person with a browser (Ctrl-C stops it).
 serve: build viewer
 	bash scripts/serve.sh $(BUILD)
+
+# The client library, libfiligree.so, the CLI and server, and the Python
+# package into /usr/local (PREFIX=...), then the loader's cache.
+PREFIX ?= /usr/local
+install: build
+	cmake --install $(BUILD) --prefix $(PREFIX)
+	ldconfig
 
 bench: build
 	$(BUILD)/bench/filigree_bench_preprocess

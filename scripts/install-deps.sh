@@ -13,6 +13,7 @@ PACKAGES=(
   libboost-dev libhiredis-dev
   redis-server nginx
   chromium fonts-liberation
+  python3-numpy python3-pytest python3-venv python3-setuptools python3-pip
 )
 
 container=false

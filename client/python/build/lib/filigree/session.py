@@ -1,0 +1,173 @@
+"""A session: its meshes and skeleton, and what can be done to it."""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Optional, Sequence
+
+import numpy as np
+
+from . import _library
+from ._library import check, lib, read_string
+
+if TYPE_CHECKING:
+    from .streams import Driver, Watcher
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint of the skeleton (parents before children; parent -1: a root).
+    `rest` is the rest local transform: translation xyz, rotation quaternion
+    xyzw, scale xyz."""
+
+    name: str
+    parent: int
+    rest: np.ndarray
+
+
+@dataclass(frozen=True)
+class Clip:
+    """An animation clip of a skinned upload."""
+
+    name: str
+    duration: float
+
+
+def _array(function, handle, ctype, dtype, columns: int) -> np.ndarray:
+    required = ctypes.c_size_t(0)
+    status = function(handle, None, 0, ctypes.byref(required))
+    if status not in (0, 101):
+        check(status)
+    out = np.empty(required.value, dtype=dtype)
+    if required.value:
+        check(function(handle, out.ctypes.data_as(ctypes.POINTER(ctype)), out.size, None))
+    out = out.reshape(-1, columns) if columns > 1 else out
+    out.flags.writeable = False  # the session's copy: users copy before editing
+    return out
+
+
+def _token(token: Optional[str]) -> Optional[bytes]:
+    return token.encode() if token is not None else None
+
+
+class Session:
+    """A session made (Client.create_session, which holds both tokens) or
+    joined (Client.join, with one token). Meshes are numpy arrays: positions
+    (k, 3) float32, faces (f, 3) uint32. The rest mesh is what frames carry
+    (n vertices, session order); the base mesh is what poses move (m
+    vertices). Use as a context manager, or call free(): the session goes
+    on on the server until end()."""
+
+    def __init__(self, handle: ctypes.c_void_p, client) -> None:
+        self._handle = handle
+        self._client = client  # keeps the connection's Python object alive
+        self.id: str = read_string(lib.filigree_session_id, handle)
+        self.editor_token: str = read_string(lib.filigree_session_editor_token, handle)
+        self.viewer_token: str = read_string(lib.filigree_session_viewer_token, handle)
+        count = ctypes.c_size_t(0)
+        check(lib.filigree_session_vertex_count(handle, ctypes.byref(count)))
+        self.vertex_count: int = count.value
+        check(lib.filigree_session_base_vertex_count(handle, ctypes.byref(count)))
+        self.base_vertex_count: int = count.value
+        self.rest_positions = _array(lib.filigree_session_rest_positions, handle, ctypes.c_float, np.float32, 3)
+        self.rest_faces = _array(lib.filigree_session_rest_faces, handle, ctypes.c_uint32, np.uint32, 3)
+        self.uploaded_ids = _array(lib.filigree_session_uploaded_ids, handle, ctypes.c_uint32, np.uint32, 1)
+        self.base_positions = _array(lib.filigree_session_base_positions, handle, ctypes.c_float, np.float32, 3)
+        self.base_faces = _array(lib.filigree_session_base_faces, handle, ctypes.c_uint32, np.uint32, 3)
+        self.base_original_ids = _array(lib.filigree_session_base_original_ids, handle, ctypes.c_uint32, np.uint32, 1)
+        self.joints: list[Joint] = self._joints()
+        self.clips: list[Clip] = self._clips()
+
+    def _joints(self) -> list[Joint]:
+        count = ctypes.c_size_t(0)
+        check(lib.filigree_session_joint_count(self._handle, ctypes.byref(count)))
+        joints = []
+        for j in range(count.value):
+            parent = ctypes.c_int32(0)
+            check(lib.filigree_session_joint_parent(self._handle, j, ctypes.byref(parent)))
+            rest = np.empty(10, dtype=np.float32)
+            check(lib.filigree_session_joint_rest(self._handle, j, rest.ctypes.data_as(_library._F), 10, None))
+            joints.append(Joint(read_string(lib.filigree_session_joint_name, self._handle, j), parent.value, rest))
+        return joints
+
+    def _clips(self) -> list[Clip]:
+        count = ctypes.c_size_t(0)
+        check(lib.filigree_session_clip_count(self._handle, ctypes.byref(count)))
+        clips = []
+        for c in range(count.value):
+            seconds = ctypes.c_double(0)
+            check(lib.filigree_session_clip_duration(self._handle, c, ctypes.byref(seconds)))
+            clips.append(Clip(read_string(lib.filigree_session_clip_name, self._handle, c), seconds.value))
+        return clips
+
+    @property
+    def handle(self) -> ctypes.c_void_p:
+        if not self._handle:
+            raise ValueError("the session handle was freed")
+        return self._handle
+
+    # ------------------------------------------------------------ streams
+
+    def drive(self, client_name: str = "filigree-python", token: Optional[str] = None) -> "Driver":
+        """Opens a Drive stream (editor token; None: the session's)."""
+        from .streams import Driver
+
+        return Driver(self, client_name, token)
+
+    def watch(self, after_version: int = 0, token: Optional[str] = None) -> "Watcher":
+        """Opens a Watch stream (either token): frames newer than `after_version`."""
+        from .streams import Watcher
+
+        return Watcher.open(self, after_version, token)
+
+    def play_clip(self, clip: str, speed: float = 1.0, loop: bool = False, token: Optional[str] = None) -> "Watcher":
+        """Plays one of `clips` on the server: a Watcher over its frames,
+        which ends after the last sample unless `loop`."""
+        from .streams import Watcher
+
+        return Watcher.play(self, clip, speed, loop, token)
+
+    # ------------------------------------------------------------ editing
+
+    def set_handles(self, vertices: Sequence[int] | np.ndarray, targets: np.ndarray,
+                    client_name: str = "filigree-python", token: Optional[str] = None) -> int:
+        """Replaces `client_name`'s handles: rest vertex vertices[k] (session
+        order) should go to targets[k] (k × 3). Empty arrays remove them.
+        Returns every participant's handle count."""
+        ids = np.ascontiguousarray(vertices, dtype=np.uint32).reshape(-1)
+        points = np.ascontiguousarray(targets, dtype=np.float32).reshape(-1)
+        total = ctypes.c_uint32(0)
+        check(lib.filigree_set_handles(self.handle, _token(token), client_name.encode(),
+                                       ids.ctypes.data_as(_library._U32) if ids.size else None, ids.size,
+                                       points.ctypes.data_as(_library._F) if points.size else None, points.size,
+                                       ctypes.byref(total)))
+        return total.value
+
+    def set_threshold(self, threshold: float, whole_mesh: bool = False, token: Optional[str] = None) -> None:
+        """Sets the cut's performance threshold T (whole_mesh: T = ∞)."""
+        check(lib.filigree_set_threshold(self.handle, _token(token), float(threshold), int(bool(whole_mesh))))
+
+    def end(self, token: Optional[str] = None) -> None:
+        """Ends the session on the server for everyone (editor token)."""
+        check(lib.filigree_close_session(self.handle, _token(token)))
+
+    # ------------------------------------------------------------ lifetime
+
+    def free(self) -> None:
+        """Releases the handle (the session goes on on the server). Idempotent."""
+        if self._handle:
+            lib.filigree_session_free(self._handle)
+            self._handle = None
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.free()
+
+    def __del__(self) -> None:
+        self.free()
+
+    def __repr__(self) -> str:
+        return f"Session({self.id!r}, {self.vertex_count} vertices, base {self.base_vertex_count})"

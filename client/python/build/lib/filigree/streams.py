@@ -1,0 +1,269 @@
+"""Drive and Watch streams. A background thread of the C library reads and
+decodes each stream; these objects poll it (never waiting for the network)
+or wait for the next frame, and iterate over frames."""
+
+from __future__ import annotations
+
+import ctypes
+import time
+from dataclasses import dataclass, field
+from typing import Iterator, Optional, Sequence
+
+import numpy as np
+
+from . import _library
+from ._library import FrameInfo, check, lib, read_string
+from .errors import DeadlineExceeded, FiligreeError, StreamEnded
+from .session import Session, _token
+
+JOINTS_LOCAL_TRS = 0  # 10 floats per joint: translation xyz, quaternion xyzw, scale xyz
+JOINTS_MODEL_MATRIX = 1  # 16 floats per joint: 4×4 model matrix, column-major
+
+# Blocking waits go to the library in slices, so that Ctrl-C gets through.
+_WAIT_SLICE_MS = 250
+
+
+@dataclass(frozen=True)
+class Change:
+    """Who changed the session: a participant's newest pose id and how many
+    base vertices its poses (or handles) moved."""
+
+    client_name: str
+    pose_id: int
+    vertex_count: int
+
+
+@dataclass
+class Frame:
+    """A decoded frame: `positions` is the posed detailed mesh (n × 3
+    float32, session order), within `max_error` of the server's."""
+
+    version: int
+    pose_id: int
+    positions: np.ndarray
+    encoded_bytes: int
+    max_error: float
+    keyframe: bool
+    frames_received: int
+    changes: list[Change] = field(default_factory=list)
+
+
+def _wait(function, handle, timeout: Optional[float]) -> bool:
+    """Calls a C wait (handle, timeout_ms) in slices until it succeeds (True)
+    or `timeout` seconds passed (False; None: no limit); other failures raise."""
+    deadline = None if timeout is None else time.monotonic() + timeout
+    while True:
+        left = _WAIT_SLICE_MS
+        if deadline is not None:
+            left = min(left, max(0, int((deadline - time.monotonic()) * 1000)))
+        try:
+            check(function(handle, left))
+            return True
+        except DeadlineExceeded:
+            if deadline is not None and time.monotonic() >= deadline:
+                return False
+
+
+def _parse_changes(text: str) -> list[Change]:
+    out = []
+    for line in text.splitlines():
+        name, pose_id, count = line.rsplit("\t", 2)
+        out.append(Change(name, int(pose_id), int(count)))
+    return out
+
+
+class _Stream:
+    """What drivers and watchers share: polling, waiting and iterating."""
+
+    _poll = _info = _wait_frame = _changes = _close = _free = None  # the C functions, set by subclasses
+
+    def __init__(self, session: Session, handle: ctypes.c_void_p) -> None:
+        self._session = session  # its meshes size the frames; it outlives the handle's use
+        self._handle = handle
+        self._n = session.vertex_count
+        self._end_raised = False  # why the stream ended was raised already (close() need not again)
+
+    def _check_stream(self, status: int) -> None:
+        try:
+            check(status)
+        except DeadlineExceeded:
+            raise
+        except FiligreeError:
+            self._end_raised = True
+            raise
+
+    @property
+    def handle(self) -> ctypes.c_void_p:
+        if not self._handle:
+            raise ValueError("the stream was freed")
+        return self._handle
+
+    def poll(self, out: Optional[np.ndarray] = None) -> Optional[Frame]:
+        """The newest frame if it is newer than the last one polled, else
+        None (frames in between are skipped). Never waits. `out`: an n × 3
+        (or 3n) float32 C-contiguous array to decode into (no allocation).
+        Raises StreamEnded (or why it failed) once the stream ended and its
+        last frame was polled."""
+        if out is None:
+            out = np.empty((self._n, 3), dtype=np.float32)
+        elif out.dtype != np.float32 or not out.flags.c_contiguous or out.size != 3 * self._n:
+            raise ValueError(f"out must be a C-contiguous float32 array of {3 * self._n} values")
+        version, pose_id, updated = ctypes.c_uint64(), ctypes.c_uint64(), ctypes.c_int()
+        self._check_stream(type(self)._poll(self.handle, out.ctypes.data_as(_library._F), out.size, ctypes.byref(version),
+                               ctypes.byref(pose_id), ctypes.byref(updated)))
+        if not updated.value:
+            return None
+        info = FrameInfo()
+        check(type(self)._info(self.handle, ctypes.byref(info)))
+        return Frame(version.value, pose_id.value, out, info.encoded_bytes, info.max_error, bool(info.keyframe),
+                     info.frames_received, self.changes())
+
+    def changes(self) -> list[Change]:
+        """Who changed what in the frames up to the latest polled one (since the poll before)."""
+        return _parse_changes(read_string(type(self)._changes, self.handle))
+
+    def wait_frame(self, timeout: Optional[float] = None) -> bool:
+        """Waits until poll() has a new frame (True) or `timeout` seconds
+        passed (False; None: no limit). Raises StreamEnded (or why it
+        failed) when the stream ends without one."""
+        try:
+            return _wait(type(self)._wait_frame, self.handle, timeout)
+        except FiligreeError:  # the stream ended (a timeout returns False)
+            self._end_raised = True
+            raise
+
+    def next_frame(self, timeout: Optional[float] = None, out: Optional[np.ndarray] = None) -> Frame:
+        """Waits for the next frame and returns it; DeadlineExceeded after `timeout` seconds."""
+        if not self.wait_frame(timeout):
+            raise DeadlineExceeded(4, f"no new frame within {timeout} s")
+        frame = self.poll(out)
+        assert frame is not None  # wait_frame said one was waiting
+        return frame
+
+    def __iter__(self) -> Iterator[Frame]:
+        """Frames as they come (the newest when several wait), until the stream ends."""
+        while True:
+            try:
+                yield self.next_frame()
+            except StreamEnded:
+                return
+
+    def close(self) -> None:
+        """Ends the stream and waits for it; raises if it had failed. Idempotent."""
+        check(type(self)._close(self.handle))
+
+    def free(self) -> None:
+        """Cancels the stream if still open and releases the handle. Idempotent."""
+        if self._handle:
+            type(self)._free(self._handle)
+            self._handle = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        """Closes the stream; a failure is raised unless it was raised before."""
+        try:
+            if exc_type is None and self._handle:
+                try:
+                    self.close()
+                except FiligreeError:
+                    if not self._end_raised:
+                        raise
+        finally:
+            self.free()
+
+    def __del__(self) -> None:
+        self.free()
+
+
+class Driver(_Stream):
+    """A Drive stream: send poses of the base mesh, receive the frames that
+    include them (`Frame.pose_id` is the newest of yours included). Pose ids
+    increase; send() numbers them itself when not given."""
+
+    _poll = lib.filigree_driver_poll
+    _info = lib.filigree_driver_frame_info
+    _wait_frame = lib.filigree_driver_wait_frame
+    _changes = lib.filigree_driver_changes
+    _close = lib.filigree_driver_close
+    _free = lib.filigree_driver_free
+
+    def __init__(self, session: Session, client_name: str, token: Optional[str]) -> None:
+        handle = ctypes.c_void_p()
+        check(lib.filigree_driver_open(session.handle, _token(token), client_name.encode(), ctypes.byref(handle)))
+        super().__init__(session, handle)
+        self._m = session.base_vertex_count
+        self.last_pose_id = 0
+
+    def _next_id(self, pose_id: Optional[int]) -> int:
+        self.last_pose_id = self.last_pose_id + 1 if pose_id is None else int(pose_id)
+        return self.last_pose_id
+
+    def send(self, positions: np.ndarray, pose_id: Optional[int] = None) -> int:
+        """A full pose: every base vertex (m × 3). Returns its pose id."""
+        p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1)
+        pid = self._next_id(pose_id)
+        check(lib.filigree_driver_send_positions(self.handle, pid, p.ctypes.data_as(_library._F), p.size))
+        return pid
+
+    def send_partial(self, indices: Sequence[int] | np.ndarray, positions: np.ndarray,
+                     pose_id: Optional[int] = None) -> int:
+        """Base vertices indices[k] move to positions[k]; the others stay."""
+        i = np.ascontiguousarray(indices, dtype=np.uint32).reshape(-1)
+        p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1)
+        pid = self._next_id(pose_id)
+        check(lib.filigree_driver_send_partial(self.handle, pid, i.ctypes.data_as(_library._U32), i.size,
+                                               p.ctypes.data_as(_library._F), p.size))
+        return pid
+
+    def send_joints(self, values: np.ndarray, joints: Optional[Sequence[int]] = None, space: int = JOINTS_LOCAL_TRS,
+                    pose_id: Optional[int] = None) -> int:
+        """A skeletal pose: 10 (JOINTS_LOCAL_TRS) or 16 (JOINTS_MODEL_MATRIX)
+        floats per joint, for `joints` or all joints in order."""
+        v = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
+        j = None if joints is None else np.ascontiguousarray(joints, dtype=np.uint32).reshape(-1)
+        pid = self._next_id(pose_id)
+        check(lib.filigree_driver_send_joints(self.handle, pid, int(space),
+                                              None if j is None else j.ctypes.data_as(_library._U32),
+                                              0 if j is None else j.size, v.ctypes.data_as(_library._F), v.size))
+        return pid
+
+    def wait_for_pose(self, pose_id: int, timeout: Optional[float] = 30.0) -> Frame:
+        """Frames until one includes `pose_id` (or a later pose of yours)."""
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            frame = self.next_frame(left)
+            if frame.pose_id >= pose_id:
+                return frame
+
+
+class Watcher(_Stream):
+    """A Watch stream (or a clip playing): the session's frames as they are computed."""
+
+    _poll = lib.filigree_watcher_poll
+    _info = lib.filigree_watcher_frame_info
+    _wait_frame = lib.filigree_watcher_wait_frame
+    _changes = lib.filigree_watcher_changes
+    _close = lib.filigree_watcher_close
+    _free = lib.filigree_watcher_free
+
+    @classmethod
+    def open(cls, session: Session, after_version: int, token: Optional[str]) -> "Watcher":
+        handle = ctypes.c_void_p()
+        check(lib.filigree_watcher_open(session.handle, _token(token), int(after_version), _library.NULL_CALLBACK,
+                                        None, ctypes.byref(handle)))
+        return cls(session, handle)
+
+    @classmethod
+    def play(cls, session: Session, clip: str, speed: float, loop: bool, token: Optional[str]) -> "Watcher":
+        handle = ctypes.c_void_p()
+        check(lib.filigree_play_clip(session.handle, _token(token), clip.encode(), float(speed), int(bool(loop)),
+                                     _library.NULL_CALLBACK, None, ctypes.byref(handle)))
+        return cls(session, handle)
+
+    def wait(self, timeout: Optional[float] = None) -> bool:
+        """Waits for the stream to end (e.g. a clip to finish): True once it
+        ended normally, False after `timeout` seconds; raises if it failed."""
+        return _wait(lib.filigree_watcher_wait, self.handle, timeout)
