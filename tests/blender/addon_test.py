@@ -194,20 +194,30 @@ elif mode == "armature":
     check({g.name for g in base.vertex_groups} == {"Root", "Tip"}, "the base carries the skin's groups")
     check(any(m.type == "ARMATURE" and m.object == rig for m in base.modifiers), "and the armature")
     check(not bunny.modifiers["Armature"].show_viewport, "the detailed object is posed by frames, not twice")
+    joints = link.session.joints
+    check([j.name for j in joints] == ["Root", "Tip"] and [j.parent for j in joints] == [-1, 0],
+          f"the upload carried the skeleton: {joints}")
 
     # Posing the armature poses the base, which goes to the server as a pose.
     bone = rig.pose.bones["Tip"]
     bone.rotation_mode = "XYZ"
     bone.rotation_euler = (0.7, 0.0, 0.0)
-    pose_id = link.send_pose(bpy.context.evaluated_depsgraph_get(), 0.0)
-    check(pose_id == 1, "the armature's pose was sent")
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    pose_id = link.send_pose(depsgraph, 0.0)
+    check(pose_id == 1 and link.last_joints is not None, "the armature's pose was sent as joints")
     follow(link, pose_id)
+    # The server skinned the base as Blender does: the detailed mesh passes
+    # through the base object Blender's armature posed.
+    posed_base = mesh_exchange.posed_positions(base, depsgraph)
+    at_base = mesh_exchange.vertex_positions(bunny.data)[link.scatter[link.session.base_original_ids]]
+    off = float(np.abs(at_base - posed_base).max())
+    check(off < 1e-3 * diagonal, f"the server's skinning differs from Blender's by {off}")
     moved = np.linalg.norm(mesh_exchange.vertex_positions(bunny.data) - positions, axis=1)
     lowest = positions[:, axis] < low + 0.2 * (high - low)
     check(moved[upper].max() > 0.1 * diagonal, f"the tip half swung: {moved[upper].max()}")
     check(moved[lowest].max() < 0.02 * diagonal, f"the root end stayed: {moved[lowest].max()}")
     print(f"armature: tip moved up to {moved[upper].max():.3g}, root end {moved[lowest].max():.3g} "
-          f"(diagonal {diagonal:.3g})")
+          f"(diagonal {diagonal:.3g}); base vs Blender's skinning {off:.3g}")
     bpy.ops.filigree.leave()
 
 elif mode == "join":

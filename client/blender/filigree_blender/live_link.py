@@ -12,7 +12,9 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from . import mesh_exchange
+from . import mesh_exchange, skinned_glb
+
+JOINTS_MODEL_MATRIX = 1  # filigree.JOINTS_MODEL_MATRIX (this module loads before the package)
 
 EDITOR, VIEWER = "EDITOR", "VIEWER"
 
@@ -35,6 +37,11 @@ class LiveLink:
     # Blender vertex index of each session vertex (uploaded_ids), or None when
     # the detailed object is in session order (a joined session).
     scatter: Optional[np.ndarray]
+    # A skinned upload: its armature's poses go up as joints (the bones in
+    # the upload's order, from the uploaded object's point of view).
+    armature_name: Optional[str] = None
+    source_name: Optional[str] = None
+    last_joints: Optional[np.ndarray] = None
     # Frames come from a Watch stream for everyone: it sees every frame from
     # the current one on, where a Drive stream sees only those after its
     # first pose (an editor who has not edited yet must still see the others).
@@ -73,13 +80,29 @@ class LiveLink:
         if pose.shape[0] != self.session.base_vertex_count:
             raise ValueError(f"{base.name} has {pose.shape[0]} vertices; the session's base mesh has "
                              f"{self.session.base_vertex_count} (add or remove none, and no generating modifiers)")
-        if self.last_sent is not None and np.array_equal(pose, self.last_sent):
+        joints = self._joint_pose()
+        joints_changed = joints is not None and (self.last_joints is None or not np.array_equal(joints, self.last_joints))
+        if not joints_changed and self.last_sent is not None and np.array_equal(pose, self.last_sent):
             return None
         now = time.monotonic()
         if now - self.last_send_time < min_interval:
             return None
         self.last_sent, self.last_send_time = pose, now
+        if joints_changed:
+            # The armature moved: its joints (the server skins the base as
+            # Blender does), not the positions they give. An edit of the base
+            # in the same step goes with the next change.
+            self.last_joints = joints
+            return self.driver.send_joints(joints, space=JOINTS_MODEL_MATRIX)
         return self.driver.send(pose)
+
+    def _joint_pose(self) -> Optional[np.ndarray]:
+        """The armature's pose as model matrices, or None without one."""
+        armature = bpy.data.objects.get(self.armature_name) if self.armature_name else None
+        source = bpy.data.objects.get(self.source_name) if self.source_name else None
+        if armature is None or source is None:
+            return None
+        return skinned_glb.model_matrices(source, armature, skinned_glb.bones_in_order(armature), posed=True)
 
     def apply_frame(self, wait: float = 0.0):
         """Polls the newest frame (waiting up to `wait` seconds for one) and

@@ -66,6 +66,14 @@ def posed_positions(obj: "bpy.types.Object", depsgraph) -> np.ndarray:
         evaluated.to_mesh_clear()
 
 
+def armature_of(obj: "bpy.types.Object"):
+    """The armature object of `obj`'s first Armature modifier, or None."""
+    for m in obj.modifiers:
+        if m.type == "ARMATURE" and m.object is not None:
+            return m.object
+    return None
+
+
 def carry_skin(source: "bpy.types.Object", base: "bpy.types.Object", source_vertex_of_base: np.ndarray) -> bool:
     """Gives `base` the armature skin of `source`: the vertex groups (base
     vertex j takes the weights of source vertex source_vertex_of_base[j]) and

@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 from bpy.props import EnumProperty
 
-from . import client_package, live_link, mesh_exchange
+from . import client_package, live_link, mesh_exchange, skinned_glb
 
 
 def _filigree(context):
@@ -54,8 +54,12 @@ class FILIGREE_OT_upload(_Reporting, bpy.types.Operator):
         obj = context.active_object
         if obj.mode == "EDIT":
             obj.update_from_editmode()
+        # With an armature, the skin goes up too (a skinned GLB): its poses then travel as joints.
+        armature = mesh_exchange.armature_of(obj)
+        data, format = ((skinned_glb.skinned_glb(obj, armature), "glb") if armature
+                        else (mesh_exchange.obj_bytes(obj.data), "obj"))
         client = filigree.Client(wm.filigree_server)
-        session = client.create_session(mesh_exchange.obj_bytes(obj.data), format="obj",
+        session = client.create_session(data, format=format,
                                         options=filigree.SessionOptions(base_vertices=wm.filigree_base_vertices),
                                         client_name=wm.filigree_name)
         base = mesh_exchange.new_object(f"{obj.name}.base", session.base_positions, session.base_faces, obj,
@@ -66,9 +70,11 @@ class FILIGREE_OT_upload(_Reporting, bpy.types.Operator):
         obj["filigree_session"] = base["filigree_session"] = session.id
         wm.filigree_session_id = session.id
         wm.filigree_token = session.editor_token
-        _start(live_link.LiveLink(session, obj.name, base.name, live_link.EDITOR, wm.filigree_name, scatter))
+        _start(live_link.LiveLink(session, obj.name, base.name, live_link.EDITOR, wm.filigree_name, scatter,
+                                  armature_name=armature.name if armature else None,
+                                  source_name=obj.name if armature else None))
         self.report({"INFO"}, f"Filigree: session {session.id}: {session.vertex_count} vertices, "
-                              f"base {session.base_vertex_count}" + ("; the armature poses the base" if skinned else ""))
+                              f"base {session.base_vertex_count}" + (f"; {len(session.joints)} joints: the armature poses it" if skinned else ""))
         return {"FINISHED"}
 
 
