@@ -7,7 +7,9 @@ set -euo pipefail
 source_dir=$1 library=$2 venv=$3
 rm -rf "$venv"
 /usr/bin/python3 -m venv --system-site-packages "$venv"
-"$venv/bin/pip" install --no-index --no-cache-dir --quiet "$source_dir"
+# From a copy: pip's legacy build writes build/ and *.egg-info next to setup.py.
+cp -r "$source_dir" "$venv/source"
+"$venv/bin/pip" install --no-index --no-cache-dir --quiet "$venv/source"
 cd "$(dirname "$venv")"  # not the source tree: the import must find the installed copy
 FILIGREE_LIBRARY=$library "$venv/bin/python" - <<'PY'
 import filigree, pathlib, sys
