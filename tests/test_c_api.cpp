@@ -242,12 +242,7 @@ class CApiServer : public ::testing::Test {
 
   // A session string through the size query and the copy.
   std::string string_of(int (*get)(const filigree_session*, char*, size_t, size_t*)) {
-    size_t required = 0;
-    EXPECT_EQ(get(session_, nullptr, 0, &required), FILIGREE_ERROR_BUFFER_TOO_SMALL);
-    std::string s(required, '\0');
-    EXPECT_EQ(get(session_, s.data(), s.size(), nullptr), FILIGREE_OK);
-    s.resize(required - 1);
-    return s;
+    return string_from(get, static_cast<const filigree_session*>(session_));
   }
 
   // Waits for and polls `driver`'s frames until one answers `pose_id`, into `positions`.
@@ -277,9 +272,10 @@ class CApiServer : public ::testing::Test {
     return {};
   }
 
-  // A driver's or watcher's changes string, through the size query and the copy.
+  // A string of any handle (a session's id, a driver's changes, …), through
+  // the size query and the copy.
   template <class H>
-  static std::string changes_of(int (*get)(const H*, char*, size_t, size_t*), const H* handle) {
+  static std::string string_from(int (*get)(const H*, char*, size_t, size_t*), const H* handle) {
     size_t required = 0;
     EXPECT_EQ(get(handle, nullptr, 0, &required), FILIGREE_ERROR_BUFFER_TOO_SMALL);
     std::string s(required, '\0');
@@ -733,9 +729,9 @@ TEST_F(CApiServer, HandlesThresholdAndChangesOfParticipants) {
   ASSERT_EQ(filigree_driver_send_partial(driver, 7, indices.data(), indices.size(), lifted.data(), lifted.size()),
             FILIGREE_OK);
   filigree_frame_info info = poll_until(driver, 7, frame);
-  EXPECT_EQ(changes_of(filigree_driver_changes, driver), "alice\t7\t" + std::to_string(moved) + "\n");
+  EXPECT_EQ(string_from(filigree_driver_changes, driver), "alice\t7\t" + std::to_string(moved) + "\n");
   watch_until(info.version);
-  EXPECT_EQ(changes_of(filigree_watcher_changes, watcher), "alice\t7\t" + std::to_string(moved) + "\n");
+  EXPECT_EQ(string_from(filigree_watcher_changes, watcher), "alice\t7\t" + std::to_string(moved) + "\n");
   EXPECT_EQ(filigree_watcher_wait_frame(watcher, 0), FILIGREE_DEADLINE_EXCEEDED);  // nothing newer yet
 
   // Bob's handle: a vertex far from alice's pull goes a tenth of the diagonal
@@ -751,7 +747,7 @@ TEST_F(CApiServer, HandlesThresholdAndChangesOfParticipants) {
   const float before = watched[3 * far];
   watch_until(version + 1);
   EXPECT_GT(watched[3 * far] - before, 0.05f * float(diagonal_)) << "the handle's vertex moved toward its target";
-  EXPECT_NE(changes_of(filigree_watcher_changes, watcher).find("bob\t"), std::string::npos);
+  EXPECT_NE(string_from(filigree_watcher_changes, watcher).find("bob\t"), std::string::npos);
 
   // Wrong sizes and indices are refused here, with what is wrong.
   EXPECT_EQ(filigree_set_handles(session_, nullptr, "bob", &far, 1, target, 2, nullptr), FILIGREE_INVALID_ARGUMENT);
