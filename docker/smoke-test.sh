@@ -124,7 +124,8 @@ viewer=$(field viewer_token)
 [ -n "$session" ] && [ -n "$editor" ] && [ -n "$viewer" ] || fail "upload printed no session_id/editor_token/viewer_token"
 
 step "drive --motion bend --frames 30 --rate 60"
-drive=$(exec_in filigree drive --server "$addr" --session "$session" --token "$editor" \
+# The token through the environment (`-e NAME` copies it from here), never an argument.
+drive=$(FILIGREE_TOKEN="$editor" podman exec -e FILIGREE_TOKEN "$ctr" filigree drive --server "$addr" --session "$session" \
   --motion bend --frames 30 --rate 60 --name smoke-test 2>"$tmp/drive.err") ||
   fail "filigree drive failed: $(tail -n 3 "$tmp/drive.err")"
 echo "$drive" | sed 's/^/  /'

@@ -43,7 +43,7 @@ VIEWER=$(sed -n 's/^viewer_token: //p' "$OUT/session.txt")
 echo "viewer (while the server runs): http://$HTTP/?session=$SESSION&token=$VIEWER"
 echo "editor view (handles, threshold): http://$HTTP/?session=$SESSION&token=$EDITOR"
 echo "  (in the page: Overlays → Regions and set T = 1000000 to see the regions; press on the mesh and drag to pull it)"
-"$FILIGREE" drive --server "$ADDRESS" --session "$SESSION" --token "$EDITOR" --motion bend --frames 120 --rate 60 \
+FILIGREE_TOKEN="$EDITOR" "$FILIGREE" drive --server "$ADDRESS" --session "$SESSION" --motion bend --frames 120 --rate 60 \
   -o "$OUT/armadillo_driven.glb"
 
 echo
@@ -55,7 +55,7 @@ echo "== skeletal: rig the Armadillo (a chain of joints, bend and twist clips), 
 grep -E '^(session_id|joints|clips)' "$OUT/rig_session.txt"
 RIG_SESSION=$(sed -n 's/^session_id: //p' "$OUT/rig_session.txt")
 RIG_EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/rig_session.txt")
-"$FILIGREE" play --server "$ADDRESS" --session "$RIG_SESSION" --token "$RIG_EDITOR" --clip bend --fps 30 \
+FILIGREE_TOKEN="$RIG_EDITOR" "$FILIGREE" play --server "$ADDRESS" --session "$RIG_SESSION" --clip bend --fps 30 \
   -o "$OUT/armadillo_clip_bend.glb" | tail -n 2
 kill -TERM $SERVER_PID
 wait $SERVER_PID

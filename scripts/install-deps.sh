@@ -10,7 +10,7 @@ PACKAGES=(
   libeigen3-dev libopenmesh-dev libtinygltf-dev libdraco-dev libsuitesparse-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libxxhash-dev libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev libspdlog-dev
-  libboost-dev libhiredis-dev
+  libboost-dev libhiredis-dev libssl-dev
   redis-server nginx
   chromium fonts-liberation
   python3-numpy python3-pytest python3-venv python3-setuptools python3-pip

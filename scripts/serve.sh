@@ -22,6 +22,6 @@ EDITOR=$(sed -n 's/^editor_token: //p' "$OUT/session.txt")
 VIEWER=$(sed -n 's/^viewer_token: //p' "$OUT/session.txt")
 echo "viewer:      http://127.0.0.1:8080/?session=$SESSION&token=$VIEWER"
 echo "editor view: http://127.0.0.1:8080/?session=$SESSION&token=$EDITOR   (drag handles, change T)"
-echo "drive it:    $BUILD/client/filigree drive --session $SESSION --token $EDITOR --motion bend --rate 30 --frames 600"
+echo "drive it:    FILIGREE_TOKEN=$EDITOR $BUILD/client/filigree drive --session $SESSION --motion bend --rate 30 --frames 600"
 echo "Ctrl-C stops the server."
 wait $SERVER_PID

@@ -1,8 +1,8 @@
 #include "server/session_registry.h"
 
-#include <random>
-
 #include <spdlog/spdlog.h>
+
+#include "server/secret.h"
 
 namespace filigree::server {
 namespace {
@@ -12,17 +12,6 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
 
 }  // namespace
-
-std::string random_token() {
-  static thread_local std::random_device device;
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out;
-  for (int i = 0; i < 4; ++i) {
-    std::uint32_t bits = device();
-    for (int k = 0; k < 8; ++k, bits >>= 4) out += kHex[bits & 15];
-  }
-  return out;
-}
 
 SessionRegistry::SessionRegistry(HierarchyCache& cache, SessionStore& store, RegistryLimits limits)
     : cache_(cache), store_(store), limits_(limits), scheduler_(limits.frame_threads) {}

@@ -113,7 +113,4 @@ class SessionRegistry {
   std::map<std::string, std::shared_ptr<std::mutex>> loading_;
 };
 
-// 128 random bits as 32 hex digits.
-std::string random_token();
-
 }  // namespace filigree::server

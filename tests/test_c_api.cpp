@@ -290,8 +290,9 @@ class CApiServer : public ::testing::Test {
   std::vector<float> reference_frame(bool current_is_keyframe, uint64_t expected_version) {
     const std::filesystem::path out = data_dir_ / "reference.ply";
     std::filesystem::remove(out);
+    ::setenv("FILIGREE_TOKEN", editor_token_.c_str(), 1);  // the child's environment, never its command line
     const std::string command = std::string("timeout 60 '") + FILIGREE_CLI_BINARY + "' watch --server " +
-                                server_->address() + " --session " + session_id_ + " --token " + editor_token_ +
+                                server_->address() + " --session " + session_id_ +
                                 " --frames " + (current_is_keyframe ? "1" : "2") + " -o '" + out.string() + "' 2>&1";
     FILE* pipe = ::popen(command.c_str(), "r");
     if (!pipe) return {};
@@ -299,6 +300,7 @@ class CApiServer : public ::testing::Test {
     char line[512];
     while (std::fgets(line, sizeof line, pipe)) output += line;
     EXPECT_EQ(::pclose(pipe), 0) << output;
+    ::unsetenv("FILIGREE_TOKEN");
     // Its last frame must be the one the driver polled.
     const std::size_t at = output.rfind("version ");
     EXPECT_NE(at, std::string::npos) << output;

@@ -10,6 +10,7 @@
 #include "preprocess/preprocess.h"
 #include "runtime/deformer_model.h"
 #include "server/hierarchy_cache.h"
+#include "server/secret.h"
 #include "server/session_registry.h"
 #include "server/state/file_session_store.h"
 #include "support/test_meshes.h"

@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <condition_variable>
 #include <cstdio>
 #include <filesystem>
@@ -41,7 +43,7 @@ struct UploadArgs {
 };
 
 struct SessionArgs {
-  std::string session, token, server = kDefaultServer, output;
+  std::string session, token_file, server = kDefaultServer, output;
   int frames = 0;
 };
 
@@ -65,6 +67,22 @@ std::string read_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot read " + path);
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The session token: from --token-file, else $FILIGREE_TOKEN. Never an
+// argument: a command line is visible to every user of the machine (ps).
+std::string session_token(const SessionArgs& a) {
+  std::string token;
+  if (!a.token_file.empty()) {
+    std::ifstream in(a.token_file);
+    if (!in || !std::getline(in, token)) throw std::runtime_error("cannot read a token from " + a.token_file);
+  } else if (const char* env = std::getenv("FILIGREE_TOKEN")) {
+    token = env;
+  }
+  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
+  if (token.empty())
+    throw std::runtime_error("no session token: set FILIGREE_TOKEN or give --token-file FILE (never on the command line)");
+  return token;
 }
 
 std::string format_of(const std::string& path) {
@@ -181,10 +199,11 @@ std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh
 
 void drive(const DriveArgs& a) {
   Client client(a.server);
-  const SessionMesh session = client.join(a.session, a.token);
+  const std::string token = session_token(a);
+  const SessionMesh session = client.join(a.session, token);
   const std::vector<std::vector<float>> poses = make_poses(a, session);
   FrameDecoder decoder(session.rest_positions);
-  auto driver = client.drive(a.session, a.token, a.name);
+  auto driver = client.drive(a.session, token, a.name);
 
   std::vector<Clock::time_point> sent_at(poses.size() + 1);  // by pose_id
   std::mutex mutex;
@@ -259,7 +278,8 @@ void drive(const DriveArgs& a) {
 
 void watch(const WatchArgs& a) {
   Client client(a.server);
-  const SessionMesh session = client.join(a.session, a.token);
+  const std::string token = session_token(a);
+  const SessionMesh session = client.join(a.session, token);
   FrameDecoder decoder(session.rest_positions);
   std::vector<std::vector<Vec3>> frames;
   int count = 0;
@@ -269,7 +289,7 @@ void watch(const WatchArgs& a) {
   auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   std::chrono::milliseconds backoff(250);
   while (true) {
-    auto watcher = client.watch(a.session, a.token, last_version);
+    auto watcher = client.watch(a.session, token, last_version);
     bool enough = false;
     while (auto frame = watcher->read()) {
       const DecodedFrame d = decoder.decode(*frame);
@@ -313,14 +333,15 @@ void watch(const WatchArgs& a) {
 
 void play(const PlayArgs& a) {
   Client client(a.server);
-  const SessionMesh session = client.join(a.session, a.token);
+  const std::string token = session_token(a);
+  const SessionMesh session = client.join(a.session, token);
   if (session.skeleton.joints().empty())
     throw std::runtime_error("session " + a.session + " has no skeleton (its upload was not a skinned glTF)");
   FrameDecoder decoder(session.rest_positions);
   ClipPlayback playback;
   playback.speed = a.speed;
   playback.max_rate = a.fps;
-  auto stream = client.play_clip(a.session, a.token, a.clip, playback, a.name);
+  auto stream = client.play_clip(a.session, token, a.clip, playback, a.name);
   std::vector<std::vector<Vec3>> frames;
   std::size_t bytes = 0;
   while (auto frame = stream->read()) {
@@ -363,7 +384,9 @@ void sessions(const std::string& server) {
 
 void add_session_options(CLI::App* cmd, SessionArgs& a, const char* output_help) {
   cmd->add_option("--session", a.session, "Session id")->required();
-  cmd->add_option("--token", a.token, "Session token (drive: the editor token)")->required();
+  cmd->add_option("--token-file", a.token_file,
+                  "File whose first line is the session token (drive, play: the editor's); default: $FILIGREE_TOKEN")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--server", a.server, "Server address HOST:PORT");
   cmd->add_option("-o,--output", a.output, output_help);
 }

@@ -1,7 +1,7 @@
 // engine_loop: what a game engine does with Filigree, in one file.
 //
 //   engine_loop --server 127.0.0.1:50051 --mesh armadillo.obj [--seconds 5] [--rate 60]
-//   engine_loop --server 127.0.0.1:50051 --session ID --token EDITOR_TOKEN [--seconds 5]
+//   FILIGREE_TOKEN=EDITOR_TOKEN engine_loop --server 127.0.0.1:50051 --session ID [--seconds 5]
 //
 // It uploads a mesh (or joins a session), then for --seconds drives a
 // procedural bend of the base mesh at --rate Hz from a writer thread (the
@@ -40,7 +40,7 @@ struct Args {
 };
 
 constexpr const char* kUsage =
-    "usage: engine_loop [--server HOST:PORT] (--mesh FILE | --session ID --token EDITOR_TOKEN)\n"
+    "usage: engine_loop [--server HOST:PORT] (--mesh FILE | --session ID, with $FILIGREE_TOKEN the editor token)\n"
     "                   [--seconds S] [--rate HZ]\n";
 
 Args parse_args(int argc, char** argv) {
@@ -56,12 +56,14 @@ Args parse_args(int argc, char** argv) {
     if (flag == "--server") a.server = value;
     else if (flag == "--mesh") a.mesh = value;
     else if (flag == "--session") a.session = value;
-    else if (flag == "--token") a.token = value;
     else if (flag == "--seconds") a.seconds = std::stod(value);
     else if (flag == "--rate") a.rate = std::stod(value);
     else throw std::invalid_argument("unknown option " + flag);
   }
-  if (a.mesh.empty() == a.session.empty()) throw std::invalid_argument("give --mesh FILE or --session ID --token T");
+  if (a.mesh.empty() == a.session.empty()) throw std::invalid_argument("give --mesh FILE or --session ID");
+  // The token from the environment: a command line is visible to every user (ps).
+  if (const char* token = std::getenv("FILIGREE_TOKEN")) a.token = token;
+  if (!a.session.empty() && a.token.empty()) throw std::invalid_argument("joining a session: set FILIGREE_TOKEN");
   if (!(a.rate > 0.0 && a.seconds > 0.0)) throw std::invalid_argument("--rate and --seconds must be positive");
   return a;
 }

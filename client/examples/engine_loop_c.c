@@ -3,7 +3,7 @@
  * in C99: what a Unity, Unreal or Godot binding does.
  *
  *   engine_loop_c [--server HOST:PORT] --mesh FILE [--frames N] [--rate HZ]
- *   engine_loop_c [--server HOST:PORT] --session ID --token EDITOR_TOKEN [--frames N] [--rate HZ]
+ *   FILIGREE_TOKEN=EDITOR_TOKEN engine_loop_c [--server HOST:PORT] --session ID [--frames N] [--rate HZ]
  *
  * It uploads a mesh (or joins a session), then for N ticks at HZ sends a
  * procedural bend of the base mesh and polls the newest decoded frame into
@@ -26,7 +26,7 @@
 #include <filigree/filigree.h>
 
 static const char* const kUsage =
-    "usage: engine_loop_c [--server HOST:PORT] (--mesh FILE | --session ID --token EDITOR_TOKEN)\n"
+    "usage: engine_loop_c [--server HOST:PORT] (--mesh FILE | --session ID, with $FILIGREE_TOKEN the editor token)\n"
     "                     [--frames N] [--rate HZ]\n";
 
 struct args {
@@ -60,7 +60,6 @@ static int parse_args(int argc, char** argv, struct args* a) {
     if (strcmp(flag, "--server") == 0) a->server = value;
     else if (strcmp(flag, "--mesh") == 0) a->mesh = value;
     else if (strcmp(flag, "--session") == 0) a->session = value;
-    else if (strcmp(flag, "--token") == 0) a->token = value;
     else if (strcmp(flag, "--frames") == 0) a->frames = strtol(value, NULL, 10);
     else if (strcmp(flag, "--rate") == 0) a->rate = strtod(value, NULL);
     else {
@@ -68,8 +67,9 @@ static int parse_args(int argc, char** argv, struct args* a) {
       return 1;
     }
   }
+  a->token = getenv("FILIGREE_TOKEN"); /* never an argument: command lines are visible to every user */
   if ((a->mesh == NULL) == (a->session == NULL) || (a->session != NULL && a->token == NULL)) {
-    fprintf(stderr, "engine_loop_c: give --mesh FILE or --session ID --token T\n%s", kUsage);
+    fprintf(stderr, "engine_loop_c: give --mesh FILE, or --session ID with FILIGREE_TOKEN set\n%s", kUsage);
     return 1;
   }
   if (a->frames <= 0 || !(a->rate > 0.0)) {

@@ -153,7 +153,8 @@ def test_frames_decode_as_the_cpp_client_decodes_them(server, session, diagonal)
         out = Path(tmp) / "frame.ply"
         frames = "1" if frame.keyframe else "2"  # a new watcher gets the keyframe first
         run = subprocess.run([os.environ["FILIGREE_CLI"], "watch", "--server", server.address, "--session", session.id,
-                              "--token", session.viewer_token, "--frames", frames, "-o", str(out)],
+                              "--frames", frames, "-o", str(out)],
+                             env={**os.environ, "FILIGREE_TOKEN": session.viewer_token},  # never an argument
                              capture_output=True, text=True, timeout=60)
         assert run.returncode == 0, run.stdout + run.stderr
         assert f"version {frame.version}" in run.stdout + run.stderr

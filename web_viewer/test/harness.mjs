@@ -8,7 +8,8 @@
 //   CHROMIUM         the browser (default /usr/bin/chromium)
 
 import { execFile, spawn } from 'node:child_process';
-import { existsSync, readFileSync } from 'node:fs';
+import { existsSync, readFileSync, writeFileSync } from 'node:fs';
+import { tmpdir } from 'node:os';
 import { dirname, join, resolve } from 'node:path';
 import { createInterface } from 'node:readline';
 import { fileURLToPath } from 'node:url';
@@ -89,9 +90,16 @@ export async function upload(grpcAddress, mesh, name) {
   return session;
 }
 
+// The editor token in a file only this user can read: tokens never go on a command line.
+function tokenFile(session) {
+  const file = join(tmpdir(), `filigree-token-${session.session_id}`);
+  writeFileSync(file, `${session.editor_token}\n`, { mode: 0o600 });
+  return file;
+}
+
 // The CLI's arguments to drive a procedural motion.
 export const driveArgs = (grpcAddress, session, motion, frames, rate, name) => ['drive', '--server', grpcAddress,
-  '--session', session.session_id, '--token', session.editor_token, '--motion', motion, '--frames', String(frames),
+  '--session', session.session_id, '--token-file', tokenFile(session), '--motion', motion, '--frames', String(frames),
   '--rate', String(rate), '--name', name];
 
 // `key: value` lines.
