@@ -360,11 +360,26 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
   DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
       : service_(service), context_(context), driver_(service.next_driver_id()),
         stream_(std::make_shared<FrameStream<DriveReactor>>(this, driver_)) {
+    // A driver that half-closes still gets the frame of its last pose: the
+    // stream finishes once a frame includes it. The observer lives in the
+    // stream (so `stream` is alive whenever it runs) and may outlive this.
+    stream_->on_event([state = ending_, stream = stream_.get(), driver = driver_](const PublishedFrame* frame) {
+      std::lock_guard lock(state->mutex);
+      if (!frame) return;  // the session closed: the stream is finished already
+      if (const auto it = frame->pose_of_driver.find(driver); it != frame->pose_of_driver.end())
+        state->answered = std::max(state->answered, it->second);
+      if (state->half_closed && state->answered >= state->submitted) stream->writer().finish(grpc::Status::OK, /*flush=*/true);
+    });
     StartRead(&request_);
   }
 
   void OnReadDone(bool ok) override {
-    if (!ok) return stream_->writer().finish(grpc::Status::OK);  // the client is done driving
+    if (!ok) {  // the client is done driving: finish after the frame of its last pose
+      std::lock_guard lock(ending_->mutex);
+      ending_->half_closed = true;
+      if (!session_ || ending_->answered >= ending_->submitted) stream_->writer().finish(grpc::Status::OK, /*flush=*/true);
+      return;
+    }
     if (!session_) {
       const grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
       if (!status.ok()) {
@@ -382,6 +397,8 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
     }
     try {
       submit_pose(*session_, driver_, request_);
+      std::lock_guard lock(ending_->mutex);
+      ending_->submitted = std::max(ending_->submitted, request_.pose_id());
     } catch (const PoseError& e) {
       return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
     } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
@@ -397,9 +414,17 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
   }
 
  private:
+  // The newest pose id submitted and the newest a frame has answered.
+  struct Ending {
+    std::mutex mutex;
+    std::uint64_t submitted = 0, answered = 0;
+    bool half_closed = false;
+  };
+
   FiligreeService& service_;
   grpc::CallbackServerContext* context_;
   const std::uint64_t driver_;
+  std::shared_ptr<Ending> ending_ = std::make_shared<Ending>();
   std::shared_ptr<FrameStream<DriveReactor>> stream_;
   std::shared_ptr<Session> session_;
   v1::DriveRequest request_;

@@ -185,3 +185,15 @@ def test_skeletal_poses_and_clips_of_a_rigged_upload(client, diagonal):
             assert max(np.abs(f.positions - s.rest_positions).max() for f in frames) > 0.01 * diagonal
             with pytest.raises(filigree.NotFound):
                 s.play_clip("no-such-clip").next_frame(TIMEOUT)
+
+
+def test_a_half_closed_drive_still_gets_the_frame_of_its_last_pose(session, diagonal):
+    driver = session.drive("closer")
+    for k in range(1, 6):
+        last = driver.send(session.base_positions + np.float32(0.01 * k * diagonal))
+    driver.close()  # no more poses: the server ends the stream once a frame includes the last one
+    frame = driver.poll()
+    assert frame is not None and frame.pose_id == last, frame
+    offset = np.float32(0.05 * diagonal)
+    assert np.abs(frame.positions - (session.rest_positions + offset)).max() <= frame.max_error + 1e-4 * diagonal
+    driver.free()
