@@ -137,6 +137,16 @@ if mode == "upload":
         live_link.tick()
     check(link.version > before, "the timer applied the new frame")
 
+    # A shape key of the base: what it shows (the evaluated mesh) goes out.
+    base.shape_key_add(name="Basis")
+    bulge = base.shape_key_add(name="Bulge", from_mix=False)
+    bulge.data[30].co.z += 0.05 * diagonal
+    bulge.value = 1.0
+    pose_id = link.send_pose(bpy.context.evaluated_depsgraph_get(), 0.0)
+    check(pose_id is not None and abs(link.last_sent[30, 2] - (lifted[30, 2] + 0.05 * diagonal)) < 1e-5 * diagonal,
+          "the shape key's pose is sent")
+    follow(link, pose_id)
+
     # The detailed object is the server's frame, vertex for vertex (an
     # independent watcher decodes it; session vertex i is Blender vertex uploaded_ids[i]).
     session = link.session
@@ -149,7 +159,7 @@ if mode == "upload":
     expected[session.uploaded_ids] = served.positions
     worst = float(np.abs(shown - expected).max())
     check(worst <= 2 * served.max_error + 1e-6 * diagonal, f"detailed object off the frame by {worst}")
-    moved = session.uploaded_ids[session.base_original_ids[:21]]
+    moved = session.uploaded_ids[session.base_original_ids[[*range(21), 30]]]
     rise = float((shown[moved, 2] - positions[moved, 2]).min())
     check(rise > 0.03 * diagonal, f"the lifted vertices rose by {rise}")
     check("alice" in link.participants, f"participants: {list(link.participants)}")
