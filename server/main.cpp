@@ -2,7 +2,9 @@
 
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <optional>
 #include <thread>
 
@@ -47,6 +49,23 @@ std::string host_name() {
   return name;
 }
 
+// The Redis password: the first line of `file` (trailing whitespace trimmed),
+// or without a file $FILIGREE_REDIS_PASSWORD; empty: none. Never an option's
+// value: a command line is readable by every user of the machine (ps).
+std::string redis_password(const std::string& file) {
+  if (file.empty()) {
+    const char* env = std::getenv("FILIGREE_REDIS_PASSWORD");
+    return env ? env : "";
+  }
+  std::ifstream in(file);
+  std::string line;
+  // An empty file only sets eof; a directory or a read error fails without it.
+  if (!in || (!std::getline(in, line) && !in.eof())) throw std::runtime_error("cannot read --redis-password-file " + file);
+  line.erase(line.find_last_not_of(" \t\r\n\v\f") + 1);  // all blank: npos + 1 == 0 erases everything
+  if (line.empty()) throw std::runtime_error("--redis-password-file " + file + " has no password on its first line");
+  return line;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -72,11 +91,20 @@ int main(int argc, char** argv) {
   app.add_option("--web-root", web_root_flag,
                  "Directory of the built web viewer served over --http (default: <executable dir>/../../web_viewer/dist "
                  "if it exists)");
-  std::string redis_address, replica_id, advertise, redis_prefix = "filigree:";
+  std::string redis_address, replica_id, advertise, redis_prefix = "filigree:", redis_password_file;
+  RedisCredentials redis_credentials;
   int lease_ms = 3000;
-  app.add_option("--redis", redis_address,
-                 "HOST:PORT of a Redis shared by replicas: hierarchies, session records and ownership leases live "
-                 "there, so any replica can take a session over (default: none; this process is the only replica)");
+  auto* redis_option = app.add_option(
+      "--redis", redis_address,
+      "HOST:PORT of a Redis shared by replicas: hierarchies, session records and ownership leases live "
+      "there, so any replica can take a session over (default: none; this process is the only replica)");
+  app.add_option("--redis-password-file", redis_password_file,
+                 "File whose first line is the Redis password, sent with AUTH on every connection (default: "
+                 "$FILIGREE_REDIS_PASSWORD if set, else no AUTH)")
+      ->needs(redis_option);
+  app.add_option("--redis-user", redis_credentials.user,
+                 "Redis 6 ACL user to authenticate as, with the password (default: the password alone)")
+      ->needs(redis_option);
   app.add_option("--replica-id", replica_id, "This replica's unique name (default: <hostname>-<pid>)");
   app.add_option("--advertise", advertise,
                  "HOST:PORT at which clients reach this replica directly, told by LocateSession (default: the "
@@ -107,7 +135,11 @@ int main(int argc, char** argv) {
     RedisSessionStore* redis_store = nullptr;
     std::unique_ptr<HierarchyStore> shared_hierarchies;
     if (!redis_address.empty()) {
-      redis = std::make_shared<RedisClient>(redis_address, std::chrono::milliseconds(std::max(200, lease_ms / 3)));
+      redis_credentials.password = redis_password(redis_password_file);
+      if (!redis_credentials.user.empty() && redis_credentials.password.empty())
+        throw std::runtime_error("--redis-user needs a password: --redis-password-file or FILIGREE_REDIS_PASSWORD");
+      redis = std::make_shared<RedisClient>(redis_address, std::chrono::milliseconds(std::max(200, lease_ms / 3)),
+                                            redis_credentials);
       if (replica_id.empty()) replica_id = host_name() + "-" + std::to_string(getpid());
       auto made = std::make_unique<RedisSessionStore>(redis, RedisSessionStoreOptions{redis_prefix, replica_id, "",
                                                                                       std::chrono::milliseconds(lease_ms)});
@@ -160,8 +192,11 @@ int main(int argc, char** argv) {
       if (advertise.empty()) advertise = (host == "0.0.0.0" || host == "[::]" ? host_name() : host) + ":" + std::to_string(port);
       // The port is known only now (--listen HOST:0).
       redis_store->set_advertise(advertise);
-      spdlog::info("event=replica replica_id={} advertise={} redis={} lease_ms={}", replica_id, advertise, redis_address,
-                   lease_ms);
+      const std::string auth = redis_credentials.password.empty() ? "none"
+                               : redis_credentials.user.empty()     ? "password"
+                                                                    : "user:" + redis_credentials.user;
+      spdlog::info("event=replica replica_id={} advertise={} redis={} redis_auth={} lease_ms={}", replica_id, advertise,
+                   redis_address, auth, lease_ms);
     }
     spdlog::info("event=listening address={}:{} data_dir=\"{}\" restored_sessions={}", host, port, data_dir, restored);
     // Tests and scripts read the port from this line on stdout.

@@ -38,12 +38,24 @@ RedisReply convert(const redisReply& r) {
   return out;
 }
 
+using ReplyPtr = std::unique_ptr<redisReply, void (*)(void*)>;
+
+// Sends one command, arguments binary-safe; the reply, or null if the
+// connection broke or timed out (c->errstr says why).
+ReplyPtr send_command(redisContext* c, const std::vector<std::string_view>& args) {
+  std::vector<const char*> argv;
+  std::vector<std::size_t> lengths;
+  for (const auto& a : args) argv.push_back(a.data()), lengths.push_back(a.size());
+  return ReplyPtr(static_cast<redisReply*>(redisCommandArgv(c, static_cast<int>(args.size()), argv.data(), lengths.data())),
+                  freeReplyObject);
+}
+
 }  // namespace
 
 void RedisClient::Free::operator()(redisContext* c) const { redisFree(c); }
 
-RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds timeout)
-    : address_(address), host_(address), timeout_(timeout) {
+RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials)
+    : address_(address), host_(address), timeout_(timeout), credentials_(std::move(credentials)) {
   const auto colon = address.rfind(':');
   if (colon != std::string::npos) {
     host_ = address.substr(0, colon);
@@ -65,6 +77,19 @@ RedisClient::Connection RedisClient::connect() {
   if (c->err) throw StoreUnavailable("cannot connect to Redis at " + address_ + ": " + c->errstr);
   redisSetTimeout(c.get(), to_timeval(timeout_));
   redisEnableKeepAlive(c.get());
+  // AUTH first, on every new connection: Redis refuses anything else until then.
+  if (!credentials_.password.empty()) {
+    std::vector<std::string_view> args{"AUTH"};
+    if (!credentials_.user.empty()) args.push_back(credentials_.user);
+    args.push_back(credentials_.password);
+    const ReplyPtr reply = send_command(c.get(), args);
+    if (!reply) throw StoreUnavailable("Redis at " + address_ + " did not answer AUTH: " + (c->err ? c->errstr : "no reply"));
+    // Redis' reply (WRONGPASS …) never repeats the password, so it can be quoted.
+    if (reply->type == REDIS_REPLY_ERROR)
+      throw StoreUnavailable("Redis at " + address_ + " refused authentication" +
+                             (credentials_.user.empty() ? std::string() : " as user '" + credentials_.user + "'") +
+                             ": " + std::string(reply->str, reply->len));
+  }
   return c;
 }
 
@@ -78,19 +103,18 @@ RedisReply RedisClient::command(const std::vector<std::string_view>& args) {
     }
   }
   if (!c) c = connect();
-  std::vector<const char*> argv;
-  std::vector<std::size_t> lengths;
-  for (const auto& a : args) argv.push_back(a.data()), lengths.push_back(a.size());
-  auto* raw = static_cast<redisReply*>(
-      redisCommandArgv(c.get(), static_cast<int>(args.size()), argv.data(), lengths.data()));
-  if (!raw) {  // the connection is broken (or timed out): drop it
+  const ReplyPtr reply = send_command(c.get(), args);
+  if (!reply) {  // the connection is broken (or timed out): drop it
     throw StoreUnavailable("Redis at " + address_ + " did not answer: " + (c->err ? c->errstr : "no reply"));
   }
-  std::unique_ptr<redisReply, void (*)(void*)> reply(raw, freeReplyObject);
   if (reply->type == REDIS_REPLY_ERROR) {
     std::string message(reply->str, reply->len);
     std::lock_guard lock(mutex_);
     idle_.push_back(std::move(c));
+    // Redis needs a password this client was not given: say so, not just "NOAUTH".
+    if (message.rfind("NOAUTH", 0) == 0)
+      throw StoreUnavailable("Redis at " + address_ + " needs authentication" +
+                             (credentials_.password.empty() ? " and no password was given" : "") + ": " + message);
     throw StoreUnavailable("Redis at " + address_ + " answered an error: " + message);
   }
   RedisReply out = convert(*reply);

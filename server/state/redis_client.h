@@ -2,7 +2,8 @@
 // A small, thread-safe Redis client over hiredis: a pool of blocking
 // connections on loopback or a LAN, each command on one connection.
 // Connection errors and timeouts throw StoreUnavailable; the broken
-// connection is dropped and the next command opens a new one.
+// connection is dropped and the next command opens a new one. With
+// credentials, every new connection sends AUTH before anything else.
 
 #include <chrono>
 #include <cstdint>
@@ -26,11 +27,21 @@ struct RedisReply {
   bool nil() const { return type == Type::kNil; }
 };
 
+// How to authenticate to Redis. No password: no AUTH. A password alone:
+// AUTH password (requirepass, or the "default" ACL user). A user too: AUTH
+// user password (Redis 6 ACL). Error messages name the user, never the password.
+struct RedisCredentials {
+  std::string user;
+  std::string password;
+};
+
 class RedisClient {
  public:
-  // `address`: "HOST:PORT" or "HOST" (port 6379). Connects at once, so a wrong
-  // address fails at start (StoreUnavailable), not at the first request.
-  RedisClient(const std::string& address, std::chrono::milliseconds timeout);
+  // `address`: "HOST:PORT" or "HOST" (port 6379). Connects (and authenticates)
+  // at once, so a wrong address or password fails at start, not at the first
+  // request. A refused AUTH, or a Redis that needs a password when none was
+  // given (NOAUTH), throws StoreUnavailable saying so.
+  RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials = {});
   ~RedisClient();
   RedisClient(const RedisClient&) = delete;
   RedisClient& operator=(const RedisClient&) = delete;
@@ -54,6 +65,7 @@ class RedisClient {
   std::string address_, host_;
   int port_ = 6379;
   std::chrono::milliseconds timeout_;
+  RedisCredentials credentials_;
   std::mutex mutex_;
   std::vector<Connection> idle_;
 };
