@@ -4,7 +4,7 @@
 BUILD ?= build
 JOBS  ?= $(shell nproc)
 
-.PHONY: all deps configure build test test-cluster demo bench clean viewer serve image test-container install
+.PHONY: all deps configure build test test-cluster demo bench clean viewer serve image test-container install fuzz-build fuzz
 
 all: build viewer
 
@@ -23,8 +23,21 @@ build: configure
 viewer: deps
 	bash web_viewer/build.sh
 
-test: build viewer
+test: build viewer fuzz-build
 	ctest --test-dir $(BUILD) --output-on-failure -j $(JOBS)
+
+# The libFuzzer targets (tests/fuzz) with clang, ASan and UBSan, in their own
+# build; `make test` replays their corpora (ctest fuzz_corpus_replay).
+FUZZ_BUILD ?= build-fuzz
+$(FUZZ_BUILD)/build.ninja:
+	cmake -S . -B $(FUZZ_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ -DFILIGREE_FUZZ=ON
+
+fuzz-build: deps $(FUZZ_BUILD)/build.ninja
+	cmake --build $(FUZZ_BUILD) -j $(JOBS) --target fuzz_all
+
+# Each target for FUZZ_SECONDS (default 600), two at a time; findings in out/fuzz/crashes.
+fuzz: fuzz-build
+	bash tests/fuzz/run.sh fuzz $(FUZZ_BUILD)
 
 # Only the replicas test (Redis, three replicas, nginx on loopback); `make test` runs it too.
 test-cluster: build
@@ -61,4 +74,4 @@ bench: build
 	$(BUILD)/bench/filigree_bench_upstream
 
 clean:
-	rm -rf $(BUILD) out
+	rm -rf $(BUILD) $(FUZZ_BUILD) out

@@ -60,7 +60,7 @@ const char* mode_name(int mode) {
 class GltfReader {
  public:
   GltfReader(const tinygltf::Model& model, const std::string& name)
-      : model_(model), name_(name), accessors_(model, name) {}
+      : model_(model), accessors_(model, name) {}
 
   RiggedMesh read() {
     std::vector<int> roots;
@@ -265,7 +265,6 @@ class GltfReader {
   }
 
   const tinygltf::Model& model_;
-  const std::string& name_;
   GltfAccessors accessors_;
   TriMesh mesh_;
   std::vector<SkinnedPrimitive> skinned_;

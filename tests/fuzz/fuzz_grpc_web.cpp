@@ -1,0 +1,21 @@
+// The HTTP port's gRPC-Web framing: request bodies and grpc-timeout headers.
+
+#include <exception>
+#include <string_view>
+
+#include "fuzz_input.h"
+#include "server/http/grpc_web_bridge.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string_view bytes(reinterpret_cast<const char*>(data), size);
+  try {
+    std::string_view message;
+    (void)filigree::server::http::parse_request_body(bytes, &message);
+    if (!message.empty() && (message.data() < bytes.data() || message.data() + message.size() > bytes.data() + size))
+      __builtin_trap();  // the message must lie inside the body
+    (void)filigree::server::http::parse_grpc_timeout(bytes.substr(0, 16));
+    (void)filigree::server::http::is_grpc_web_binary(bytes);
+  } catch (const std::exception&) {
+  }
+  return 0;
+}
