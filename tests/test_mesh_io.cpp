@@ -174,6 +174,19 @@ TEST_F(MeshIoTest, PlyAsciiWithExtraElementsAndProperties) {
   EXPECT_EQ(mesh.faces, expected);
 }
 
+// Found by fuzzing: an element without properties takes no bytes, however
+// many entries it claims (10^11 of them used to be looped over one by one).
+TEST_F(MeshIoTest, PlyElementWithoutPropertiesTakesNothing) {
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement note 77777777777\n"
+      "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  const TriMesh mesh = read_mesh_from_memory(ply, "ply");
+  EXPECT_EQ(mesh.vertex_count(), 3u);
+  EXPECT_EQ(mesh.face_count(), 1u);
+}
+
 TEST_F(MeshIoTest, PlyBinaryBigEndianFloat) {
   std::string ply =
       "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
