@@ -22,6 +22,7 @@
 #include "server/replica_router.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
+#include "server/tls_files.h"
 #include "server/state/redis_hierarchy_store.h"
 #include "server/state/redis_session_store.h"
 
@@ -85,6 +86,10 @@ int main(int argc, char** argv) {
   app.add_option("--max-message-mib", max_message_mib, "Largest gRPC message in MiB, each way")->check(CLI::Range(1, 2047));
   app.add_option("--idle-timeout", registry_limits.idle_seconds, "Seconds after which an idle session leaves memory (its record stays)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
+  TlsFiles tls;
+  app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
+  app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
+  app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
   app.add_option("--http", http_listen,
                  "Also serve browsers over HTTP/1.1 on HOST:PORT: the web viewer's files and gRPC-Web (port 0 picks a "
                  "free one; default: off)");
@@ -159,7 +164,7 @@ int main(int argc, char** argv) {
     grpc::reflection::InitProtoReflectionServerBuilderPlugin();
     grpc::ServerBuilder builder;
     int port = 0;
-    builder.AddListeningPort(listen, grpc::InsecureServerCredentials(), &port);
+    builder.AddListeningPort(listen, server_credentials(tls), &port);
     builder.SetMaxReceiveMessageSize(max_message_mib << 20);
     builder.SetMaxSendMessageSize(max_message_mib << 20);
     // gRPC allows SO_REUSEPORT by default: a second server started on the same
@@ -198,7 +203,8 @@ int main(int argc, char** argv) {
       spdlog::info("event=replica replica_id={} advertise={} redis={} redis_auth={} lease_ms={}", replica_id, advertise,
                    redis_address, auth, lease_ms);
     }
-    spdlog::info("event=listening address={}:{} data_dir=\"{}\" restored_sessions={}", host, port, data_dir, restored);
+    spdlog::info("event=listening address={}:{} data_dir=\"{}\" restored_sessions={} transport={}", host, port, data_dir,
+                 restored, !tls.enabled() ? "plaintext" : tls.client_ca.empty() ? "tls" : "mutual-tls");
     // Tests and scripts read the port from this line on stdout.
     std::printf("listening on %s:%d\n", host.c_str(), port);
     if (http_server) std::printf("http on %s\n", http_server->address().c_str());

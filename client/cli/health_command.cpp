@@ -10,6 +10,7 @@
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 
+#include "cli/channel_security.h"
 #include "cli/commands.h"
 
 namespace filigree::cli {
@@ -19,7 +20,7 @@ namespace {
 constexpr char kServing[] = {0x08, 0x01};
 
 int check(const std::string& server, double timeout_seconds) {
-  grpc::GenericStub stub(grpc::CreateChannel(server, grpc::InsecureChannelCredentials()));
+  grpc::GenericStub stub(grpc::CreateChannel(server, channel_credentials()));
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() +
                        std::chrono::milliseconds(static_cast<long>(timeout_seconds * 1000)));

@@ -6,11 +6,13 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli/channel_security.h"
 #include "cli/commands.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"Filigree: detail-preserving deformation from a small base mesh"};
   app.require_subcommand(1);
+  filigree::cli::add_channel_security_options(app);
   filigree::cli::add_preprocess_command(app);
   filigree::cli::add_inspect_command(app);
   filigree::cli::add_export_commands(app);

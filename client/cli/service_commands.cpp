@@ -21,6 +21,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli/channel_security.h"
 #include "cli/progress_bar.h"
 #include "filigree/client.h"
 #include "mesh/gltf_io.h"
@@ -150,7 +151,7 @@ void upload(const UploadArgs& a) {
   options.set_quantization_bits(a.bits);
   const std::string bytes = read_file(a.mesh);
 
-  Client client(a.server);
+  Client client(a.server, channel_credentials());
   std::string stage;
   std::unique_ptr<ProgressBar> bar;  // one bar per stage
   const SessionHandle s = client.create_session(bytes, format_of(a.mesh), options, a.name,
@@ -198,7 +199,7 @@ std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh
 }
 
 void drive(const DriveArgs& a) {
-  Client client(a.server);
+  Client client(a.server, channel_credentials());
   const std::string token = session_token(a);
   const SessionMesh session = client.join(a.session, token);
   const std::vector<std::vector<float>> poses = make_poses(a, session);
@@ -277,7 +278,7 @@ void drive(const DriveArgs& a) {
 // ---------------------------------------------------------------- watch
 
 void watch(const WatchArgs& a) {
-  Client client(a.server);
+  Client client(a.server, channel_credentials());
   const std::string token = session_token(a);
   const SessionMesh session = client.join(a.session, token);
   FrameDecoder decoder(session.rest_positions);
@@ -332,7 +333,7 @@ void watch(const WatchArgs& a) {
 // ---------------------------------------------------------------- play
 
 void play(const PlayArgs& a) {
-  Client client(a.server);
+  Client client(a.server, channel_credentials());
   const std::string token = session_token(a);
   const SessionMesh session = client.join(a.session, token);
   if (session.skeleton.joints().empty())
@@ -358,7 +359,7 @@ void play(const PlayArgs& a) {
 }
 
 void locate(const std::string& server, const std::string& session) {
-  Client client(server);
+  Client client(server, channel_credentials());
   const v1::SessionLocation where = client.locate(session);
   std::printf("session_id: %s\nreplica_id: %s\naddress: %s\nhere: %s\n", where.session_id().c_str(),
               where.replica_id().empty() ? "-" : where.replica_id().c_str(),
@@ -368,7 +369,7 @@ void locate(const std::string& server, const std::string& session) {
 // ---------------------------------------------------------------- sessions
 
 void sessions(const std::string& server) {
-  Client client(server);
+  Client client(server, channel_credentials());
   const auto entries = client.list();
   if (entries.empty()) {
     std::printf("no sessions\n");
