@@ -22,6 +22,7 @@
 #include "server/replica_router.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
+#include "server/listen_address.h"
 #include "server/tls_files.h"
 #include "server/state/redis_hierarchy_store.h"
 #include "server/state/redis_session_store.h"
@@ -89,6 +90,10 @@ int main(int argc, char** argv) {
   TlsFiles tls;
   app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
   app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
+  bool insecure = false;
+  app.add_flag("--insecure", insecure,
+               "Allow plaintext on a --listen or --http address other machines can reach (TLS ends before this "
+               "server: a proxy or a service mesh)");
   app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
   app.add_option("--http", http_listen,
                  "Also serve browsers over HTTP/1.1 on HOST:PORT: the web viewer's files and gRPC-Web (port 0 picks a "
@@ -132,6 +137,14 @@ int main(int argc, char** argv) {
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   try {
+    // Secure by default: plaintext stays on this machine unless the operator says otherwise.
+    if (!insecure && !is_loopback_only(listen) && !tls.enabled())
+      throw std::runtime_error("--listen " + listen + " is reachable from other machines without TLS: tokens and meshes "
+                               "would cross the network in clear. Give --tls-cert and --tls-key, or --insecure if TLS "
+                               "ends before this server");
+    if (!insecure && !http_listen.empty() && !is_loopback_only(http_listen))
+      throw std::runtime_error("--http " + http_listen + " is plaintext (HTTPS is not built yet) and reachable from other "
+                               "machines; give --insecure if TLS ends before this server");
     const std::filesystem::path data = data_dir;
     // One machine: records as files. Replicas: records, leases and hierarchies in Redis
     // (hierarchy files stay in --data-dir as a local cache).

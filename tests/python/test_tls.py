@@ -142,3 +142,14 @@ def test_bad_tls_files_stop_the_server_saying_which(pki):
                               str(pki / "server.ext"), "--tls-key", str(pki / "server.key")],
                              capture_output=True, text=True, timeout=60)
     assert not_pem.returncode == 1 and "PEM" in not_pem.stderr
+
+
+def test_plaintext_beyond_loopback_needs_insecure():
+    """Secure by default: the refusal comes before anything listens."""
+    server = os.environ["FILIGREE_SERVER"]
+    for args, flag in ((["--listen", "0.0.0.0:0"], "--listen"), (["--listen", "[::]:0"], "--listen"),
+                       (["--listen", "127.0.0.1:0", "--http", "0.0.0.0:0"], "--http")):
+        refused = subprocess.run([server, *args], capture_output=True, text=True, timeout=60)
+        assert refused.returncode == 1, (args, refused.stdout)
+        assert flag in refused.stderr and "--insecure" in refused.stderr, refused.stderr
+        assert "listening on" not in refused.stdout
