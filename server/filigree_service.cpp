@@ -84,6 +84,68 @@ FiligreeService::FiligreeService(SessionRegistry& registry, HierarchyCache& cach
 
 FiligreeService::~FiligreeService() { drain(); }
 
+void FiligreeService::set_api_keys(std::shared_ptr<const ApiKeys> keys) {
+  std::lock_guard lock(keys_mutex_);
+  keys_ = std::move(keys);
+}
+
+std::shared_ptr<const ApiKeys> FiligreeService::api_keys() const {
+  std::lock_guard lock(keys_mutex_);
+  return keys_;
+}
+
+grpc::Status FiligreeService::check_api_key(const grpc::CallbackServerContext& context,
+                                            std::shared_ptr<const ApiKeys>* keys, const ApiKey** key) const {
+  *keys = api_keys();
+  *key = nullptr;
+  if (!*keys) return grpc::Status::OK;
+  const std::string presented = metadata(context, "x-filigree-api-key");
+  if (presented.empty())
+    return {grpc::StatusCode::UNAUTHENTICATED, "this server needs an API key (x-filigree-api-key metadata) to create or list sessions"};
+  *key = (*keys)->find(presented);
+  if (!*key) return {grpc::StatusCode::PERMISSION_DENIED, "the API key is not one this server knows"};
+  return grpc::Status::OK;
+}
+
+grpc::Status FiligreeService::admit_upload(const ApiKey& key) {
+  if (key.quota.sessions != 0) {
+    std::uint64_t held = 0;
+    for (const auto& s : registry_.loaded()) held += s->owner() == key.name;
+    if (held >= key.quota.sessions)
+      return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' holds its quota of " +
+                                                        std::to_string(key.quota.sessions) + " sessions"};
+  }
+  if (!ledger_.admit_upload(key.name, key.quota.uploads_per_minute))
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' made its quota of " +
+                                                      std::to_string(key.quota.uploads_per_minute) + " uploads in the last minute"};
+  return grpc::Status::OK;
+}
+
+grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t vertices) {
+  if (key.quota.vertices == 0) return grpc::Status::OK;
+  std::uint64_t held = 0;
+  for (const auto& s : registry_.loaded())
+    if (s->owner() == key.name) held += s->vertex_count();
+  if (held + vertices > key.quota.vertices)
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' may hold " + std::to_string(key.quota.vertices) +
+                                                      " vertices; its sessions hold " + std::to_string(held) + " and this mesh has " +
+                                                      std::to_string(vertices)};
+  return grpc::Status::OK;
+}
+
+grpc::Status FiligreeService::open_stream(const Session& session, std::shared_ptr<void>* slot) {
+  slot->reset();
+  const std::shared_ptr<const ApiKeys> keys = api_keys();
+  if (!keys || session.owner().empty()) return grpc::Status::OK;
+  const ApiKey* key = keys->by_name(session.owner());
+  const std::uint64_t limit = key ? key->quota.streams : 0;  // a key removed since: no quota left to apply
+  *slot = ledger_.open_stream(session.owner(), limit);
+  if (!*slot)
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "the sessions of API key '" + session.owner() + "' have their quota of " +
+                                                      std::to_string(limit) + " streams open"};
+  return grpc::Status::OK;
+}
+
 bool FiligreeService::begin_job() {
   std::lock_guard lock(jobs_mutex_);
   if (draining_) return false;
@@ -108,7 +170,18 @@ namespace {
 
 class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse> {
  public:
-  CreateReactor(FiligreeService& service) : service_(service), writer_(this) { StartRead(&request_); }
+  CreateReactor(FiligreeService& service, grpc::CallbackServerContext* context) : service_(service), writer_(this) {
+    // Who may create, and how much, is settled before any byte is read.
+    const ApiKey* key = nullptr;
+    grpc::Status status = service_.check_api_key(*context, &keys_, &key);
+    if (status.ok() && key) status = service_.admit_upload(*key);
+    if (!status.ok()) {
+      writer_.finish(status);
+      return;
+    }
+    key_ = key;
+    StartRead(&request_);
+  }
 
   void OnReadDone(bool ok) override {
     if (!ok) {  // the client half-closed: the upload is complete
@@ -196,6 +269,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       // Sessions order vertices along a space-filling curve: frames then
       // compress to about half the size, and recovery reads memory in order.
       // SessionInfo.rest.uploaded_ids states the mapping to the upload.
+      if (key_) {
+        if (const grpc::Status quota = service_.admit_vertices(*key_, repaired.vertex_count()); !quota.ok()) return quota;
+      }
       const std::vector<Index> order = locality_order(repaired.positions);
       const TriMesh mesh = permute_vertices(repaired, order);
       std::vector<Index> uploaded_ids(order.size());
@@ -226,7 +302,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
         for (std::size_t k = 0; k < base_uploaded.size(); ++k) base_uploaded[k] = uploaded_ids[h->base_vertices[k]];
         rig = serialize_rig(upload.rig->restricted_to(base_uploaded));
       }
-      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig));
+      auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig),
+                                                key_ ? key_->name : std::string());
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
       *created->mutable_info() = session->info();
@@ -257,6 +334,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   }
 
   FiligreeService& service_;
+  std::shared_ptr<const ApiKeys> keys_;  // keeps key_ alive across a reload
+  const ApiKey* key_ = nullptr;          // null: no keys configured
   StreamWriter<CreateReactor, v1::CreateSessionResponse> writer_;
   v1::CreateSessionRequest request_;
   v1::CreateSessionRequest::Begin begin_;
@@ -375,13 +454,15 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
 
   void OnReadDone(bool ok) override {
     if (!ok) {  // the client is done driving: finish after the frame of its last pose
+      stream_slot_.reset();  // a half-closed stream no longer counts (before the client can see the end)
       std::lock_guard lock(ending_->mutex);
       ending_->half_closed = true;
       if (!session_ || ending_->answered >= ending_->submitted) stream_->writer().finish(grpc::Status::OK, /*flush=*/true);
       return;
     }
     if (!session_) {
-      const grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
+      grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
+      if (status.ok()) status = service_.open_stream(*session_, &stream_slot_);
       if (!status.ok()) {
         session_.reset();
         return stream_->writer().finish(status);
@@ -425,6 +506,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
   grpc::CallbackServerContext* context_;
   const std::uint64_t driver_;
   std::shared_ptr<Ending> ending_ = std::make_shared<Ending>();
+  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<DriveReactor>> stream_;
   std::shared_ptr<Session> session_;
   v1::DriveRequest request_;
@@ -434,7 +516,8 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
  public:
   WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const v1::WatchRequest& request)
       : stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
-    const grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
+    grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
+    if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
     if (!status.ok()) {
       session_.reset();
       stream_->writer().finish(status);
@@ -454,6 +537,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
   }
 
  private:
+  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<WatchReactor>> stream_;
   std::shared_ptr<Session> session_;
 };
@@ -468,6 +552,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
       : service_(service), request_(request), driver_(service.next_driver_id()),
         stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
     grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kEditor, &session_);
+    if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
     if (status.ok()) status = check();
     if (!status.ok()) {
       session_.reset();
@@ -510,6 +595,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
   }
 
  private:
+  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   static constexpr double kMostSamplesPerSecond = 60.0;
 
   grpc::Status check() {
@@ -584,8 +670,8 @@ grpc::ServerWriteReactor<v1::Frame>* FiligreeService::PlayClip(grpc::CallbackSer
 }
 
 grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* FiligreeService::CreateSession(
-    grpc::CallbackServerContext*) {
-  return new CreateReactor(*this);
+    grpc::CallbackServerContext* context) {
+  return new CreateReactor(*this, context);
 }
 
 grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* FiligreeService::Drive(grpc::CallbackServerContext* context) {
@@ -716,7 +802,11 @@ grpc::ServerUnaryReactor* FiligreeService::LocateSession(grpc::CallbackServerCon
 
 grpc::ServerUnaryReactor* FiligreeService::ListSessions(grpc::CallbackServerContext* context,
                                                         const v1::ListSessionsRequest*, v1::ListSessionsResponse* response) {
+  std::shared_ptr<const ApiKeys> keys;
+  const ApiKey* key = nullptr;
+  if (const grpc::Status status = check_api_key(*context, &keys, &key); !status.ok()) return finish_unary(context, status);
   for (const auto& s : registry_.loaded()) {
+    if (key && s->owner() != key->name) continue;  // a key lists its own sessions only
     auto* e = response->add_sessions();
     const v1::SessionInfo info = s->info();
     e->set_session_id(info.session_id());

@@ -8,6 +8,8 @@
 #include <mutex>
 
 #include "filigree/v1/filigree.grpc.pb.h"
+#include "server/api_key_ledger.h"
+#include "server/api_keys.h"
 #include "server/hierarchy_cache.h"
 #include "server/session_registry.h"
 
@@ -60,11 +62,32 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   void end_job();
   std::uint64_t next_driver_id() { return ++driver_ids_; }
 
+  // API keys (--api-keys): null means none are required. Replaced whole on
+  // a reload (SIGHUP); calls in flight keep the set they started with.
+  void set_api_keys(std::shared_ptr<const ApiKeys> keys);
+  std::shared_ptr<const ApiKeys> api_keys() const;
+  // The key a CreateSession or ListSessions call presents (x-filigree-api-key).
+  // OK with *key null when no keys are configured; else UNAUTHENTICATED
+  // (none presented) or PERMISSION_DENIED (not a known key).
+  grpc::Status check_api_key(const grpc::CallbackServerContext& context, std::shared_ptr<const ApiKeys>* keys,
+                             const ApiKey** key) const;
+  // Quotas of `key` at the start of an upload: uploads in the last minute
+  // (recorded when admitted) and sessions held. RESOURCE_EXHAUSTED says which.
+  grpc::Status admit_upload(const ApiKey& key);
+  // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not).
+  grpc::Status admit_vertices(const ApiKey& key, std::uint64_t vertices);
+  // A stream on `session`: a slot of its owner's stream quota, held by
+  // *slot until released. OK (slot null) when the session has no owner.
+  grpc::Status open_stream(const Session& session, std::shared_ptr<void>* slot);
+
  private:
   SessionRegistry& registry_;
   HierarchyCache& cache_;
   const ServiceLimits limits_;
   std::atomic<std::uint64_t> driver_ids_{0};
+  mutable std::mutex keys_mutex_;
+  std::shared_ptr<const ApiKeys> keys_;
+  ApiKeyLedger ledger_;
   std::mutex jobs_mutex_;
   std::condition_variable jobs_done_;
   int jobs_ = 0;

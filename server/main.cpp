@@ -22,6 +22,7 @@
 #include "server/replica_router.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
+#include "server/api_keys.h"
 #include "server/listen_address.h"
 #include "server/tls_files.h"
 #include "server/state/redis_hierarchy_store.h"
@@ -90,6 +91,11 @@ int main(int argc, char** argv) {
   TlsFiles tls;
   app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
   app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
+  std::string api_keys_path;
+  app.add_option("--api-keys", api_keys_path,
+                 "File of API keys (NAME SHA256 [quotas]; `filigree api-key` makes one): CreateSession and "
+                 "ListSessions then need x-filigree-api-key; re-read on SIGHUP")
+      ->check(CLI::ExistingFile);
   bool insecure = false;
   app.add_flag("--insecure", insecure,
                "Allow plaintext on a --listen or --http address other machines can reach (TLS ends before this "
@@ -134,6 +140,7 @@ int main(int argc, char** argv) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGTERM);
   sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGHUP);  // reload the API keys
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
   try {
@@ -172,6 +179,11 @@ int main(int argc, char** argv) {
     SessionRegistry registry(cache, *store, registry_limits);
     const std::size_t restored = registry.restore();
     FiligreeService service(registry, cache, service_limits);
+    if (!api_keys_path.empty()) {
+      auto keys = std::make_shared<const ApiKeys>(ApiKeys::load(api_keys_path));
+      spdlog::info("event=api_keys file=\"{}\" keys={}", api_keys_path, keys->size());
+      service.set_api_keys(std::move(keys));
+    }
 
     grpc::EnableDefaultHealthCheckService(true);
     grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -234,7 +246,17 @@ int main(int argc, char** argv) {
     });
 
     int signal = 0;
-    sigwait(&signals, &signal);
+    while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) {
+      if (api_keys_path.empty()) continue;
+      try {  // a broken file keeps the keys in force
+        auto keys = std::make_shared<const ApiKeys>(ApiKeys::load(api_keys_path));
+        const std::size_t count = keys->size();
+        service.set_api_keys(std::move(keys));  // in force before the log says so
+        spdlog::info("event=api_keys_reloaded keys={}", count);
+      } catch (const std::exception& e) {
+        spdlog::error("event=api_keys_reload_failed error=\"{}\"", e.what());
+      }
+    }
     spdlog::info("event=shutdown signal={}", signal);
     if (http_server) http_server->stop_accepting();
     // Drain: uploads finish (leases are still renewed meanwhile), then streams

@@ -151,6 +151,8 @@ Role Session::authorize(const std::string& token) const {
 
 void Session::touch() { last_activity_ = Clock::now(); }
 
+std::size_t Session::vertex_count() const { return assets_->hierarchy().vertex_count(); }
+
 void Session::submit(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions) {
   const std::size_t m = assets_->hierarchy().base_vertices.size();
   const std::size_t count = indices.empty() ? m : indices.size();

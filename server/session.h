@@ -97,6 +97,10 @@ class Session {
   Session& operator=(const Session&) = delete;
 
   const std::string& id() const { return record_.id; }
+  // The API key that created the session (fixed at creation); empty without keys.
+  const std::string& owner() const { return record_.owner; }
+  // Vertices of the detailed mesh.
+  std::size_t vertex_count() const;
   Role authorize(const std::string& token) const;
 
   // Merges a full (indices empty) or partial pose from `driver` (0: a unary

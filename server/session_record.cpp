@@ -22,6 +22,7 @@ std::string encode_session_record(const SessionRecord& r) {
   p.set_version(r.version);
   p.mutable_uploaded_ids()->Add(r.uploaded_ids.begin(), r.uploaded_ids.end());
   p.set_rig(r.rig);
+  p.set_owner(r.owner);
   return p.SerializeAsString();
 }
 
@@ -41,6 +42,7 @@ SessionRecord decode_session_record(const std::string& bytes) {
   r.version = p.version();
   r.uploaded_ids.assign(p.uploaded_ids().begin(), p.uploaded_ids().end());
   r.rig = p.rig();
+  r.owner = p.owner();
   return r;
 }
 

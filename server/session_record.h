@@ -23,6 +23,7 @@ struct SessionRecord {
   std::uint64_t version = 0;
   std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
   std::string rig;  // serialize_rig() of the base mesh's rig; empty: no skeleton
+  std::string owner;  // the API key that created it (its name); empty without --api-keys
 };
 
 // Session ids are 20 lowercase hex digits (80 random bits): safe as file

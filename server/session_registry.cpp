@@ -43,7 +43,7 @@ std::shared_ptr<Session> SessionRegistry::insert(std::shared_ptr<Session> s) {
 
 std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
                                                  const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
-                                                 const std::string& proposed_id, std::string rig) {
+                                                 const std::string& proposed_id, std::string rig, std::string owner) {
   {
     std::lock_guard lock(mutex_);
     if (sessions_.size() >= limits_.max_sessions)
@@ -61,6 +61,7 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.viewer_token = random_token();
   r.uploaded_ids = std::move(uploaded_ids);
   r.rig = std::move(rig);
+  r.owner = std::move(owner);
   if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
   Journal journal = journal_for(r.id);
   auto made = std::make_shared<Session>(std::move(r), assets_.get(h), scheduler_, std::move(journal));

@@ -60,7 +60,7 @@ class SessionRegistry {
   // will live), or under a fresh id when it is empty.
   std::shared_ptr<Session> create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
                                   const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
-                                  const std::string& proposed_id = {}, std::string rig = {});
+                                  const std::string& proposed_id = {}, std::string rig = {}, std::string owner = {});
   // nullptr for an unknown (or closed) session; evicted sessions and, with a
   // shared store, sessions of other replicas whose lease is free are loaded.
   // Throws SessionElsewhere while another replica holds the lease (asking it

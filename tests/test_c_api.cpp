@@ -49,7 +49,7 @@ std::string last_error() { return filigree_last_error(); }
 // Every function filigree.h declares.
 const std::set<std::string> kApi = {
     "filigree_status_name", "filigree_version_string", "filigree_last_error", "filigree_connect",
-    "filigree_client_set_decode_threads", "filigree_client_last_error", "filigree_client_free",
+    "filigree_client_set_decode_threads", "filigree_client_set_api_key", "filigree_client_last_error", "filigree_client_free",
     "filigree_create_session", "filigree_join", "filigree_session_id", "filigree_session_editor_token",
     "filigree_session_viewer_token", "filigree_session_vertex_count", "filigree_session_base_vertex_count",
     "filigree_session_rest_positions", "filigree_session_rest_faces", "filigree_session_uploaded_ids",

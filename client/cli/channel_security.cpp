@@ -1,5 +1,7 @@
 #include "cli/channel_security.h"
 
+#include <cctype>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -13,7 +15,7 @@ namespace {
 
 struct Options {
   bool tls = false;
-  std::string ca, cert, key;
+  std::string ca, cert, key, api_key_file;
 };
 Options options;  // one tool invocation, one connection policy
 
@@ -32,7 +34,21 @@ void add_channel_security_options(CLI::App& app) {
   app.add_option("--tls-ca", options.ca, "CA bundle (PEM) that signed the server's certificate (implies --tls)");
   app.add_option("--tls-cert", options.cert, "Client certificate (PEM) for a server that wants mutual TLS");
   app.add_option("--tls-key", options.key, "Its private key (PEM)");
+  app.add_option("--api-key-file", options.api_key_file,
+                 "File whose first line is the API key upload and sessions present (default: $FILIGREE_API_KEY)");
   app.fallthrough();  // subcommands pass these up: `filigree watch --tls-ca ca.pem …` works
+}
+
+std::string api_key() {
+  std::string key;
+  if (!options.api_key_file.empty()) {
+    std::istringstream first(read_pem(options.api_key_file, "--api-key-file"));
+    std::getline(first, key);
+  } else if (const char* env = std::getenv("FILIGREE_API_KEY")) {
+    key = env;
+  }
+  while (!key.empty() && std::isspace(static_cast<unsigned char>(key.back()))) key.pop_back();
+  return key;
 }
 
 std::shared_ptr<grpc::ChannelCredentials> channel_credentials() {

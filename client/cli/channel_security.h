@@ -5,6 +5,7 @@
 // may stand before or after the subcommand.
 
 #include <memory>
+#include <string>
 
 namespace CLI {
 class App;
@@ -16,6 +17,10 @@ class ChannelCredentials;
 namespace filigree::cli {
 
 void add_channel_security_options(CLI::App& app);
+
+// The API key for a server started with --api-keys: --api-key-file's first
+// line, else $FILIGREE_API_KEY, else empty (never an argument).
+std::string api_key();
 
 // The credentials the options ask for. Throws std::runtime_error naming a
 // file that cannot be read, or --tls-cert without --tls-key.

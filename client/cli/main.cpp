@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   filigree::cli::add_service_commands(app);
   filigree::cli::add_rig_command(app);
   filigree::cli::add_health_command(app);
+  filigree::cli::add_api_key_command(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -152,6 +152,7 @@ void upload(const UploadArgs& a) {
   const std::string bytes = read_file(a.mesh);
 
   Client client(a.server, channel_credentials());
+  client.set_api_key(api_key());
   std::string stage;
   std::unique_ptr<ProgressBar> bar;  // one bar per stage
   const SessionHandle s = client.create_session(bytes, format_of(a.mesh), options, a.name,
@@ -370,6 +371,7 @@ void locate(const std::string& server, const std::string& session) {
 
 void sessions(const std::string& server) {
   Client client(server, channel_credentials());
+  client.set_api_key(api_key());
   const auto entries = client.list();
   if (entries.empty()) {
     std::printf("no sessions\n");

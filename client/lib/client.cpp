@@ -71,6 +71,7 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
   grpc::ClientContext context;
   const std::string session_id = new_session_id();
   set_session_metadata(context, session_id, {});
+  if (!api_key_.empty()) context.AddMetadata("x-filigree-api-key", api_key_);
   auto stream = stub_->CreateSession(&context);
   // If a progress callback throws, the call is cancelled and drained first:
   // gRPC wants Finish() before the stream goes away.
@@ -167,6 +168,7 @@ void Client::close(const std::string& session_id, const std::string& token) {
 
 std::vector<v1::ListSessionsResponse::Entry> Client::list() {
   grpc::ClientContext context;
+  if (!api_key_.empty()) context.AddMetadata("x-filigree-api-key", api_key_);
   v1::ListSessionsResponse response;
   throw_if_error(stub_->ListSessions(&context, v1::ListSessionsRequest(), &response));
   return {response.sessions().begin(), response.sessions().end()};

@@ -43,6 +43,13 @@ int filigree_client_set_decode_threads(filigree_client* client, uint32_t threads
   });
 }
 
+int filigree_client_set_api_key(filigree_client* client, const char* api_key) {
+  return with_handle(client, "filigree_client_set_api_key", [&](filigree_client& c) -> int {
+    c.connection->client.set_api_key(api_key ? api_key : "");
+    return FILIGREE_OK;
+  });
+}
+
 const char* filigree_client_last_error(const filigree_client* client) {
   return is_handle(client, filigree_client::kKind) ? client->error.get() : invalid_handle_message();
 }

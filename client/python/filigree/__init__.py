@@ -16,7 +16,7 @@ the C++ client's. Set FILIGREE_LIBRARY to its path when it is not installed.
 from ._library import library_path
 from .client import DUAL_QUATERNION, LINEAR_BLEND, Client, SessionOptions
 from .errors import (DeadlineExceeded, FailedPrecondition, FiligreeError, InvalidArgument, NotFound,
-                     PermissionDenied, Status, StreamEnded, Unauthenticated, Unavailable)
+                     PermissionDenied, ResourceExhausted, Status, StreamEnded, Unauthenticated, Unavailable)
 from .session import Clip, Joint, Session
 from .streams import JOINTS_LOCAL_TRS, JOINTS_MODEL_MATRIX, Change, Driver, Frame, Watcher
 
@@ -33,6 +33,6 @@ def library_version() -> str:
 __all__ = [
     "Client", "SessionOptions", "Session", "Joint", "Clip", "Driver", "Watcher", "Frame", "Change",
     "FiligreeError", "Status", "InvalidArgument", "NotFound", "PermissionDenied", "Unauthenticated",
-    "Unavailable", "DeadlineExceeded", "FailedPrecondition", "StreamEnded", "LINEAR_BLEND", "DUAL_QUATERNION",
+    "Unavailable", "ResourceExhausted", "DeadlineExceeded", "FailedPrecondition", "StreamEnded", "LINEAR_BLEND", "DUAL_QUATERNION",
     "JOINTS_LOCAL_TRS", "JOINTS_MODEL_MATRIX", "library_path", "library_version",
 ]

@@ -52,6 +52,7 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_last_error": ([], c_char_p),
     "filigree_connect": ([c_char_p, POINTER(ConnectOptions), POINTER(_P)], c_int),
     "filigree_client_set_decode_threads": ([_P, c_uint32], c_int),
+    "filigree_client_set_api_key": ([_P, c_char_p], c_int),
     "filigree_client_last_error": ([_P], c_char_p),
     "filigree_client_free": ([_P], c_int),
     "filigree_create_session": ([_P, c_void_p, c_size_t, c_char_p, POINTER(CSessionOptions), c_char_p, POINTER(_P)], c_int),

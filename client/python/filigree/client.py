@@ -42,7 +42,7 @@ class Client:
 
     def __init__(self, target: str, *, root_certificates: Optional[bytes] = None,
                  certificate_chain: Optional[bytes] = None, private_key: Optional[bytes] = None,
-                 tls: bool = False, decode_threads: int = 0) -> None:
+                 tls: bool = False, decode_threads: int = 0, api_key: Optional[str] = None) -> None:
         handle = ctypes.c_void_p()
         options = None
         if tls or root_certificates or certificate_chain or private_key:
@@ -52,6 +52,8 @@ class Client:
         self.target = target
         if decode_threads:
             check(lib.filigree_client_set_decode_threads(handle, decode_threads))
+        if api_key:  # for a server started with --api-keys: needed to create sessions
+            check(lib.filigree_client_set_api_key(handle, api_key.encode()))
 
     @property
     def handle(self) -> ctypes.c_void_p:

@@ -93,6 +93,10 @@ class FailedPrecondition(FiligreeError):
     """E.g. joints for a session without a skeleton."""
 
 
+class ResourceExhausted(FiligreeError):
+    """Over a limit or quota (the message says which)."""
+
+
 class StreamEnded(FiligreeError):
     """The stream ended normally: nothing more to send or receive."""
 
@@ -106,6 +110,7 @@ _BY_STATUS: dict[int, type[FiligreeError]] = {
     Status.DEADLINE_EXCEEDED: DeadlineExceeded,
     Status.FAILED_PRECONDITION: FailedPrecondition,
     Status.STREAM_ENDED: StreamEnded,
+    Status.RESOURCE_EXHAUSTED: ResourceExhausted,
 }
 
 

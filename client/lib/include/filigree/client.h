@@ -113,6 +113,9 @@ class Client {
   // Routing::kDirect for an engine that calls the replica locate() named
   // instead of a load balancer (default: kLoadBalanced).
   void set_routing(Routing routing) { routing_ = routing; }
+  // The API key CreateSession and ListSessions present (x-filigree-api-key)
+  // to a server started with --api-keys; empty (the default): none.
+  void set_api_key(std::string key) { api_key_ = std::move(key); }
 
   v1::Filigree::Stub& stub() { return *stub_; }
 
@@ -120,6 +123,7 @@ class Client {
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::Filigree::Stub> stub_;
   Routing routing_ = Routing::kLoadBalanced;
+  std::string api_key_;
 };
 
 }  // namespace filigree

@@ -176,6 +176,11 @@ FILIGREE_API int filigree_connect(const char* target, const filigree_connect_opt
  * Engines that keep their cores busy may want 1 or 2. */
 FILIGREE_API int filigree_client_set_decode_threads(filigree_client* client, uint32_t threads);
 
+/* The API key filigree_create_session presents to a server started with
+ * --api-keys (NULL or "": none). Set it before creating sessions from this
+ * client; the key is kept in memory only. */
+FILIGREE_API int filigree_client_set_api_key(filigree_client* client, const char* api_key);
+
 FILIGREE_API const char* filigree_client_last_error(const filigree_client* client);
 
 /* Releases the handle; the connection closes once no session, driver or
