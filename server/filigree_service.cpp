@@ -135,6 +135,11 @@ grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t ve
 
 grpc::Status FiligreeService::open_stream(const Session& session, std::shared_ptr<void>* slot) {
   slot->reset();
+  // Every stream subscribes to its session: the subscribers are its streams.
+  if (limits_.max_streams_per_session != 0 && session.subscriber_count() >= limits_.max_streams_per_session)
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "session " + session.id() + " serves its maximum of " +
+                                                      std::to_string(limits_.max_streams_per_session) +
+                                                      " streams (--max-streams-per-session)"};
   const std::shared_ptr<const ApiKeys> keys = api_keys();
   if (!keys || session.owner().empty()) return grpc::Status::OK;
   const ApiKey* key = keys->by_name(session.owner());

@@ -18,6 +18,7 @@ namespace filigree::server {
 struct ServiceLimits {
   std::uint64_t max_mesh_bytes = 256ull << 20;
   std::uint64_t max_vertices = 5'000'000;
+  std::uint64_t max_streams_per_session = 256;  // Drive, Watch and PlayClip streams of one session (0: no limit)
 };
 
 class FiligreeService final : public v1::Filigree::CallbackService {
@@ -76,8 +77,9 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   grpc::Status admit_upload(const ApiKey& key);
   // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not).
   grpc::Status admit_vertices(const ApiKey& key, std::uint64_t vertices);
-  // A stream on `session`: a slot of its owner's stream quota, held by
-  // *slot until released. OK (slot null) when the session has no owner.
+  // A stream on `session`: refused (RESOURCE_EXHAUSTED) when the session
+  // serves limits().max_streams_per_session already; else a slot of its
+  // owner's stream quota, held by *slot until released (null: no owner).
   grpc::Status open_stream(const Session& session, std::shared_ptr<void>* slot);
 
  private:

@@ -84,6 +84,8 @@ int main(int argc, char** argv) {
   app.add_option("--data-dir", data_dir, "Where hierarchies and sessions are kept across restarts (empty: memory only)");
   app.add_option("--max-mesh-bytes", service_limits.max_mesh_bytes, "Largest accepted upload in bytes");
   app.add_option("--max-vertices", service_limits.max_vertices, "Largest accepted mesh in vertices");
+  app.add_option("--max-streams-per-session", service_limits.max_streams_per_session,
+                 "Most streams (drivers, watchers, clips) one session serves at once; 0: no limit");
   app.add_option("--max-sessions", registry_limits.max_sessions, "Most sessions held at once");
   app.add_option("--max-message-mib", max_message_mib, "Largest gRPC message in MiB, each way")->check(CLI::Range(1, 2047));
   app.add_option("--idle-timeout", registry_limits.idle_seconds, "Seconds after which an idle session leaves memory (its record stays)");
