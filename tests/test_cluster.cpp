@@ -245,7 +245,10 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
   const std::uint64_t version = f->version();
   const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
   const int other = (owner + 1) % kReplicas;
-  auto watcher = lb.watch(s.session_id, s.viewer_token, version);
+  // No reconnection: this test looks at how the old owner's stream ends.
+  Reconnect no_reconnect;
+  no_reconnect.enabled = false;
+  auto watcher = lb.watch(s.session_id, s.viewer_token, version, no_reconnect);
 
   v1::SessionState state;
   const grpc::Status first = get_state(cluster.address(other), s, &state);

@@ -186,8 +186,8 @@ std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::
 }
 
 std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
-                                       std::uint64_t after_version) {
-  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version, routing_));
+                                       std::uint64_t after_version, Reconnect reconnect) {
+  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version, routing_, std::move(reconnect)));
 }
 
 std::unique_ptr<Watcher> Client::play_clip(const std::string& session_id, const std::string& token,

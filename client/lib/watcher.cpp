@@ -1,47 +1,107 @@
 #include "filigree/watcher.h"
 
+#include <algorithm>
+
 #include "filigree/call_metadata.h"
 
 namespace filigree {
 
 Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-                 std::uint64_t after_version, Routing routing) {
-  set_session_metadata(context_, session_id, token, routing);
-  v1::WatchRequest request;
-  request.set_session_id(session_id);
-  request.set_after_version(after_version);
-  request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-  stream_ = stub.Watch(&context_, request);
+                 std::uint64_t after_version, Routing routing, Reconnect reconnect)
+    : stub_(stub), token_(token), routing_(routing), session_id_(session_id), last_version_(after_version),
+      reconnect_(std::move(reconnect)) {
+  open();
 }
 
 Watcher::Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token,
-                 Routing routing) {
-  set_session_metadata(context_, request.session_id(), token, routing);
-  stream_ = stub.PlayClip(&context_, request);
+                 Routing routing)
+    : stub_(stub), token_(token), routing_(routing), clip_(request), session_id_(request.session_id()) {
+  reconnect_.enabled = false;  // a clip that started over would play twice
+  open();
+}
+
+void Watcher::open() {
+  auto context = std::make_unique<grpc::ClientContext>();
+  set_session_metadata(*context, session_id_, token_, routing_);
+  std::unique_ptr<grpc::ClientReader<v1::Frame>> stream;
+  if (clip_) {
+    stream = stub_.PlayClip(context.get(), *clip_);
+  } else {
+    v1::WatchRequest request;
+    request.set_session_id(session_id_);
+    request.set_after_version(last_version_);
+    request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+    stream = stub_.Watch(context.get(), request);
+  }
+  std::lock_guard lock(mutex_);
+  stream_.reset();  // the old stream goes before its context
+  context_ = std::move(context);
+  stream_ = std::move(stream);
+  if (cancelled_) context_->TryCancel();  // cancel() came while this opened
 }
 
 Watcher::~Watcher() {
   if (status_) return;
-  context_.TryCancel();  // so the drain in finish() cannot wait for the session
+  cancel();  // so the drain in finish() cannot wait for the session
   finish();
 }
 
 std::optional<v1::Frame> Watcher::read() {
-  if (reads_ended_) return std::nullopt;
-  v1::Frame frame;
-  if (stream_->Read(&frame)) return frame;
-  reads_ended_ = true;
+  while (!reads_ended_) {
+    v1::Frame frame;
+    if (stream_->Read(&frame)) {
+      last_version_ = std::max(last_version_, frame.version());
+      attempt_ = 0;
+      return frame;
+    }
+    const grpc::Status status = stream_->Finish();  // gRPC's rule: Finish once Read failed
+    if (!reconnect_after(status)) {
+      reads_ended_ = true;
+      status_ = status;
+    }
+  }
   return std::nullopt;
 }
 
-void Watcher::cancel() { context_.TryCancel(); }
+bool Watcher::reconnect_after(const grpc::Status& status) {
+  // UNAVAILABLE, or CANCELLED that this client did not ask for (a server
+  // shutting down cancels its calls): the server went away, not the session.
+  bool by_us;
+  {
+    std::lock_guard lock(mutex_);
+    by_us = cancelled_;
+  }
+  const bool gone = status.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                    (status.error_code() == grpc::StatusCode::CANCELLED && !by_us);
+  if (!reconnect_.enabled || !gone) return false;
+  const auto now = std::chrono::steady_clock::now();
+  if (attempt_ == 0) {
+    backoff_ = reconnect_.first_backoff;
+    give_up_at_ = now + reconnect_.give_up_after;
+  }
+  if (now >= give_up_at_) return false;
+  ++attempt_;
+  if (reconnect_.on_reconnect) reconnect_.on_reconnect(status, attempt_);
+  {
+    // The backoff is a wait a cancel() ends at once.
+    std::unique_lock lock(mutex_);
+    if (cancelled_cv_.wait_for(lock, backoff_, [this] { return cancelled_; })) return false;
+  }
+  backoff_ = std::min(backoff_ * 2, reconnect_.max_backoff);
+  open();
+  return true;
+}
+
+void Watcher::cancel() {
+  std::lock_guard lock(mutex_);
+  cancelled_ = true;
+  if (context_) context_->TryCancel();
+  cancelled_cv_.notify_all();
+}
 
 grpc::Status Watcher::finish() {
-  if (status_) return *status_;
-  // gRPC's rule: read until Read() fails, then Finish().
-  while (read()) {
+  while (read()) {  // read until the stream has ended
   }
-  status_ = stream_->Finish();
   return *status_;
 }
 

@@ -116,7 +116,9 @@ class Session:
         return Driver(self, client_name, token)
 
     def watch(self, after_version: int = 0, token: Optional[str] = None) -> "Watcher":
-        """Opens a Watch stream (either token): frames newer than `after_version`."""
+        """Opens a Watch stream (either token): frames newer than `after_version`.
+        It reconnects by itself when the server restarts or fails over (for up
+        to 60 s), from the last frame it decoded."""
         from .streams import Watcher
 
         return Watcher.open(self, after_version, token)

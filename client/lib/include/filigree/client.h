@@ -102,8 +102,10 @@ class Client {
   std::unique_ptr<Driver> drive(const std::string& session_id, const std::string& token,
                                 const std::string& client_name);
   // Opens a Watch stream (either token): frames newer than after_version.
+  // It reconnects by itself after UNAVAILABLE (a restart, a failover) as
+  // `reconnect` says; with reconnect.enabled false it ends there instead.
   std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token,
-                                 std::uint64_t after_version = 0);
+                                 std::uint64_t after_version = 0, Reconnect reconnect = {});
 
   // Plays the session's clip `clip` (SessionMesh::skeleton.clips) on the
   // server (editor token): the returned stream carries the frames, as a

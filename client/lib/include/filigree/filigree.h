@@ -377,7 +377,9 @@ FILIGREE_API int filigree_driver_free(filigree_driver* driver);
 /* ------------------------------------------------------------ watching */
 
 /* Opens a Watch stream (either token; NULL: the session's): the session's
- * frames newer than `after_version`, as they are computed. With a callback,
+ * frames newer than `after_version`, as they are computed. The stream
+ * reconnects by itself when the server goes away (a restart, a failover),
+ * from the last frame it decoded, for up to 60 s; then it ends with why. With a callback,
  * frames go to it (on the background thread) and cannot be polled; without,
  * filigree_watcher_poll gets them. `callback` and `user` may be NULL. */
 FILIGREE_API int filigree_watcher_open(filigree_session* session, const char* token, uint64_t after_version,

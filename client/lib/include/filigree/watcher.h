@@ -1,8 +1,12 @@
 #pragma once
 // One Watch stream: the session's frames as they are computed.
 
+#include <chrono>
+#include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 
@@ -12,6 +16,21 @@
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
+
+// How a Watch stream outlives a server restart, a replica going away or a
+// session moving: after UNAVAILABLE (or a CANCELLED it did not ask for: a
+// server shutting down) it reopens itself from the last version
+// it delivered (the server then sends the keyframe the next frame needs
+// first, so a FrameDecoder goes on decoding).
+struct Reconnect {
+  bool enabled = true;
+  std::chrono::milliseconds first_backoff{100};  // doubles after each failed attempt…
+  std::chrono::milliseconds max_backoff{2000};   // …up to this
+  std::chrono::milliseconds give_up_after{60000};  // then the stream ends with the last status
+  // Called on the reading thread before each attempt: why the stream ended
+  // and the attempt's number (1, 2, …; back to 1 after a frame arrived).
+  std::function<void(const grpc::Status& why, int attempt)> on_reconnect;
+};
 
 // Made by Client::watch() (or Client::play_clip(), whose stream carries the
 // frames of the clip it plays and ends after the clip's last one). A slow reader skips frames (it always gets the
@@ -26,10 +45,12 @@ class Watcher {
   ~Watcher();
 
   // Blocks for the next frame; nullopt once the stream has ended (session
-  // closed, cancelled, error: finish() says which).
+  // closed, cancelled, error: finish() says which). With Reconnect, an
+  // UNAVAILABLE end is not the end: read() reconnects (waiting the backoff)
+  // and goes on, until give_up_after passes without success.
   std::optional<v1::Frame> read();
 
-  // Ends the stream at once (thread-safe, any time).
+  // Ends the stream at once, a reconnection wait too (thread-safe, any time).
   void cancel();
 
   // Discards unread frames until the stream ends and returns the call's
@@ -41,10 +62,29 @@ class Watcher {
  private:
   friend class Client;
   Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::uint64_t after_version,
-          Routing routing);
+          Routing routing, Reconnect reconnect);
   Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token, Routing routing);
+  // Opens the stream (again) from last_version_ (a Watch) or the request (a clip).
+  void open();
+  // After `status` ended the stream: waits the backoff and reopens it, or
+  // returns false (no reconnection for this status, cancelled, given up).
+  bool reconnect_after(const grpc::Status& status);
 
-  grpc::ClientContext context_;  // declared before stream_: must outlive it
+  v1::Filigree::Stub& stub_;
+  const std::string token_;
+  const Routing routing_;
+  std::optional<v1::PlayClipRequest> clip_;  // set for a clip: not reconnected
+  std::string session_id_;
+  std::uint64_t last_version_ = 0;
+  Reconnect reconnect_;
+  int attempt_ = 0;
+  std::chrono::milliseconds backoff_{0};
+  std::chrono::steady_clock::time_point give_up_at_{};
+
+  std::mutex mutex_;  // guards context_ (cancel() from other threads) and cancelled_
+  std::condition_variable cancelled_cv_;
+  bool cancelled_ = false;
+  std::unique_ptr<grpc::ClientContext> context_;  // one per stream; outlives it
   std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;
   bool reads_ended_ = false;
   std::optional<grpc::Status> status_;
