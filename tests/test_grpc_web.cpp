@@ -521,6 +521,12 @@ TEST_F(GrpcWebTest, MalformedBodiesAreInvalidArgumentAndTheServerKeepsAnswering)
   const Reply ok = to_reply(client.exchange(grpc_web_request("ListSessions", frame_bytes(0, ""), {{"grpc-timeout", "10S"}})));
   EXPECT_EQ(ok.grpc_status(), 0) << ok.grpc_message();
   EXPECT_EQ(ok.messages.size(), 1u);
+  // The longest timeout the format allows (8 digits of hours) overflows
+  // int64 nanoseconds: it must mean "no hurry", not a deadline in the past
+  // (found by fuzz_grpc_web).
+  const Reply longest =
+      to_reply(client.exchange(grpc_web_request("ListSessions", frame_bytes(0, ""), {{"grpc-timeout", "99999999H"}})));
+  EXPECT_EQ(longest.grpc_status(), 0) << longest.grpc_message();
 
   // Bytes that are not HTTP at all: the connection is dropped, the server lives on.
   {

@@ -118,13 +118,14 @@ void KeyedDeltas::apply(std::uint64_t version, std::uint64_t keyframe_version, s
     current_from_keyframe_ = true;
   } else {
     for (const auto& [first, count] : dirty_)
-      std::copy_n(&keyframe_[3 * std::size_t{first}], 3 * std::size_t{count}, &current_[3 * std::size_t{first}]);
+      std::copy_n(keyframe_.data() + 3 * std::size_t{first}, 3 * std::size_t{count}, current_.data() + 3 * std::size_t{first});
   }
   dirty_.clear();
   for (std::size_t c = 0; c < chunks.size(); ++c) {
     const DeltaChunkView& k = chunks[c];
-    const float* values = &scratch_[offset[c]];
-    float* out = &current_[3 * std::size_t{k.first}];
+    // data() + offset, not &v[i]: v may be empty (a frame of no vertices; found by fuzz_frame).
+    const float* values = scratch_.data() + offset[c];
+    float* out = current_.data() + 3 * std::size_t{k.first};
     if (k.runs.empty()) {
       std::copy_n(values, 3 * std::size_t{k.count}, out);
     } else {

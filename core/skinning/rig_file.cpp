@@ -100,7 +100,8 @@ class Reader {
       fail("truncated: " + what + " needs " + std::to_string(n) + " x " + std::to_string(sizeof(T)) + " bytes at offset " + std::to_string(pos_) +
            ", only " + std::to_string(left()) + " left");
     v.resize(static_cast<std::size_t>(n));
-    std::memcpy(v.data(), b_.data() + pos_, static_cast<std::size_t>(n) * sizeof(T));
+    // memcpy from or to an empty vector's null data() is undefined even for 0 bytes (found by fuzz_rig_file).
+    if (n > 0) std::memcpy(v.data(), b_.data() + pos_, static_cast<std::size_t>(n) * sizeof(T));
     pos_ += static_cast<std::size_t>(n) * sizeof(T);
   }
   std::string get_string(const std::string& what) {

@@ -130,12 +130,19 @@ std::optional<std::chrono::nanoseconds> parse_grpc_timeout(std::string_view valu
     n = n * 10 + (c - '0');
   }
   using namespace std::chrono;
+  // Eight digits of hours overflow int64 nanoseconds (found by fuzz_grpc_web):
+  // a timeout that long is as good as none.
+  const auto saturated = [n](auto unit) -> nanoseconds {
+    using Unit = decltype(unit);
+    if (n > duration_cast<Unit>(nanoseconds::max()).count()) return nanoseconds::max();
+    return duration_cast<nanoseconds>(Unit(n));
+  };
   switch (value.back()) {
-    case 'H': return duration_cast<nanoseconds>(hours(n));
-    case 'M': return duration_cast<nanoseconds>(minutes(n));
-    case 'S': return duration_cast<nanoseconds>(seconds(n));
-    case 'm': return duration_cast<nanoseconds>(milliseconds(n));
-    case 'u': return duration_cast<nanoseconds>(microseconds(n));
+    case 'H': return saturated(hours{});
+    case 'M': return saturated(minutes{});
+    case 'S': return saturated(seconds{});
+    case 'm': return saturated(milliseconds{});
+    case 'u': return saturated(microseconds{});
     case 'n': return nanoseconds(n);
     default: return std::nullopt;
   }
