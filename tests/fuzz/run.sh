@@ -2,7 +2,7 @@
 # The libFuzzer targets of tests/fuzz (ASan + UBSan), built in FUZZ_BUILD.
 #   run.sh replay FUZZ_BUILD   every input of tests/fuzz/corpus once (make test)
 #   run.sh fuzz FUZZ_BUILD     each target for FUZZ_SECONDS (default 600), two at
-#                              a time; new inputs go to out/fuzz/TARGET, crashes to
+#                              a time (FUZZ_TARGETS: a subset); new inputs go to out/fuzz/TARGET, crashes to
 #                              out/fuzz/crashes/ (make fuzz); prints execs and crashes
 set -euo pipefail
 mode=$1
@@ -10,6 +10,8 @@ build=$(cd "$2" && pwd)
 root=$(cd "$(dirname "$0")/../.." && pwd)
 corpus=$root/tests/fuzz/corpus
 targets=(obj ply off gltf glb hierarchy_file rig_file pose_file frame grpc_web session_record)
+# FUZZ_TARGETS="ply frame": only those (e.g. again after a fix).
+if [ -n "${FUZZ_TARGETS:-}" ]; then read -r -a targets <<<"$FUZZ_TARGETS"; fi
 # Limits that turn a runaway allocation or a hang into a finding, not a stall.
 limits=(-rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=20)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}
