@@ -17,16 +17,16 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
+#include "server/api_keys.h"
 #include "server/filigree_service.h"
 #include "server/http/http_server.h"
+#include "server/listen_address.h"
 #include "server/replica_router.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
-#include "server/api_keys.h"
-#include "server/listen_address.h"
-#include "server/tls_files.h"
 #include "server/state/redis_hierarchy_store.h"
 #include "server/state/redis_session_store.h"
+#include "server/tls_files.h"
 
 namespace {
 
@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
   TlsFiles tls;
   app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
   app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
+  app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
   std::string api_keys_path;
   app.add_option("--api-keys", api_keys_path,
                  "File of API keys (NAME SHA256 [quotas]; `filigree api-key` makes one): CreateSession and "
@@ -102,7 +103,6 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure", insecure,
                "Allow plaintext on a --listen or --http address other machines can reach (TLS ends before this "
                "server: a proxy or a service mesh)");
-  app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
   app.add_option("--http", http_listen,
                  "Also serve browsers over HTTP/1.1 on HOST:PORT: the web viewer's files and gRPC-Web (port 0 picks a "
                  "free one; default: off)");
