@@ -32,10 +32,4 @@ std::shared_ptr<void> ApiKeyLedger::open_stream(const std::string& key, std::uin
   return std::shared_ptr<Slot>(new Slot{this, key});
 }
 
-std::uint64_t ApiKeyLedger::streams(const std::string& key) const {
-  std::lock_guard lock(mutex_);
-  const auto it = streams_.find(key);
-  return it == streams_.end() ? 0 : it->second;
-}
-
 }  // namespace filigree::server

@@ -21,10 +21,9 @@ class ApiKeyLedger {
   // handle is released; null when `limit` (0: none) streams are open.
   // The ledger must outlive the handles.
   std::shared_ptr<void> open_stream(const std::string& key, std::uint64_t limit);
-  std::uint64_t streams(const std::string& key) const;
 
  private:
-  mutable std::mutex mutex_;
+  std::mutex mutex_;
   std::map<std::string, std::deque<std::chrono::steady_clock::time_point>> uploads_;
   std::map<std::string, std::uint64_t> streams_;
 };

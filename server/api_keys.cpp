@@ -25,16 +25,6 @@ int hex_digit(char c) {
 
 }  // namespace
 
-std::string sha256_hex(std::string_view bytes) {
-  static constexpr char kHex[] = "0123456789abcdef";
-  std::string out;
-  for (std::uint8_t b : sha256(bytes)) {
-    out += kHex[b >> 4];
-    out += kHex[b & 15];
-  }
-  return out;
-}
-
 ApiKeys ApiKeys::parse(std::string_view text, const std::string& file) {
   ApiKeys keys;
   std::istringstream lines{std::string(text)};

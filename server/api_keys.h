@@ -48,7 +48,4 @@ class ApiKeys {
   std::vector<ApiKey> keys_;
 };
 
-// SHA-256 as 64 lowercase hex digits (what a keys file stores).
-std::string sha256_hex(std::string_view bytes);
-
 }  // namespace filigree::server

@@ -275,7 +275,8 @@ void Session::submit_clip_sample(const PoseOrigin& origin, const AnimationClip& 
 
 void Session::submit_skinned_locked(const PoseOrigin& origin) {
   const std::size_t m = rig_->vertex_count();
-  std::vector<Vec3> skinned(m);
+  std::vector<Vec3>& skinned = skinned_positions_;  // reused pose to pose (skeleton_mutex_ held)
+  skinned.resize(m);
   try {
     const std::vector<Mat4> model = model_transforms(*rig_, *joint_pose_);
     skin(*rig_, model,

@@ -230,6 +230,7 @@ class Session {
   v1::Skeleton skeleton_info_;
   std::mutex skeleton_mutex_;
   std::unique_ptr<SkeletonPose> joint_pose_;
+  std::vector<Vec3> skinned_positions_;  // the skinned base, then as floats for merge()
   std::vector<float> skinned_;
   std::unique_ptr<Deformer> deformer_;
   std::unique_ptr<HandleSolver> handle_solver_;

@@ -223,36 +223,16 @@ class GltfReader {
       for (std::size_t i = 0; i < vertex_count; ++i) indices[i] = static_cast<Index>(i);
       return indices;
     }
-    const tinygltf::Accessor& index_accessor = accessor(primitive.indices, what + " indices");
-    std::size_t size = 0;
-    switch (index_accessor.componentType) {
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: size = 1; break;
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: size = 2; break;
-      case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: size = 4; break;
-      default: fail(what + ": indices must be unsigned byte, short or int");
-    }
-    if (index_accessor.type != TINYGLTF_TYPE_SCALAR) fail(what + ": indices must be SCALAR");
-    const Elements data = elements(index_accessor, size, what + " indices");
-    indices.resize(data.count);
-    for (std::size_t i = 0; i < data.count; ++i) {
-      const unsigned char* at = data.data + i * data.stride;
-      Index value = 0;
-      if (size == 1) {
-        value = at[0];
-      } else if (size == 2) {
-        std::uint16_t v16;
-        std::memcpy(&v16, at, 2);
-        value = v16;
-      } else {
-        std::memcpy(&value, at, 4);
-      }
+    // Unsigned byte, short or int scalars, as GltfAccessors::uints reads them.
+    const std::vector<std::uint32_t> values = accessors_.uints(primitive.indices, 1, what + " indices");
+    indices.assign(values.begin(), values.end());
+    for (const Index value : indices) {
       // Primitives are merged with vertex offsets, so an index past this
       // primitive's vertices would silently point into the next one.
       if (value >= vertex_count) {
         fail(what + ": index " + std::to_string(value) + " is out of range (" + std::to_string(vertex_count) +
              " vertices)");
       }
-      indices[i] = value;
     }
     return indices;
   }
