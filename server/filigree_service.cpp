@@ -32,6 +32,8 @@ std::string metadata(const grpc::CallbackServerContext& context, const char* key
 // A DriveRequest's pose: positions (full or partial) or joints, not both.
 // request_keyframe goes with the pose: the frame that includes it is a keyframe.
 void submit_pose(Session& session, std::uint64_t driver, const v1::DriveRequest& r) {
+  if (r.request_keyframe() && r.positions().empty() && r.indices().empty() && !r.has_joints())
+    return session.request_keyframe();  // only the keyframe request: no pose to merge
   const PoseOrigin origin{driver, r.client_name(), r.pose_id(), r.request_keyframe()};
   if (r.has_joints()) {
     if (!r.positions().empty() || !r.indices().empty())
@@ -475,16 +477,11 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
       stream_->set_format(request_.frame_format());
       session_->subscribe(stream_, session_->version());
     }
-    if (request_.request_keyframe() && request_.positions().empty() && request_.indices().empty() &&
-        !request_.has_joints()) {
-      session_->request_keyframe();  // only the keyframe request: no pose to merge
-      StartRead(&request_);
-      return;
-    }
     try {
       submit_pose(*session_, driver_, request_);
+      const bool pose = !request_.positions().empty() || request_.has_joints();  // not a keyframe request alone
       std::lock_guard lock(ending_->mutex);
-      ending_->submitted = std::max(ending_->submitted, request_.pose_id());
+      if (pose) ending_->submitted = std::max(ending_->submitted, request_.pose_id());
     } catch (const PoseError& e) {
       return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
     } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
