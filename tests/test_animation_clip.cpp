@@ -117,7 +117,7 @@ TEST_P(KeyTimes, RotationEqualsTheKeyValue) {
 TEST_P(KeyTimes, ClampsBeforeTheFirstAndAfterTheLastKey) {
   const AnimationClip translation = clip_of({channel(0, Path::kTranslation, GetParam(), kTimes, vector_values(GetParam()))});
   const AnimationClip rotation = clip_of({channel(0, Path::kRotation, GetParam(), kTimes, rotation_values(GetParam()))});
-  for (double t : {-3.0, 0.0, 0.4999}) {
+  for (double t : {-std::numeric_limits<double>::infinity(), -3.0, 0.0, 0.4999}) {
     expect_vec(sample(translation, t)[0].translation, Vec3(-1, 2, 3), 1e-12);
     expect_rotation(sample(rotation, t)[0].rotation, key_rotation(0));
   }
@@ -125,7 +125,6 @@ TEST_P(KeyTimes, ClampsBeforeTheFirstAndAfterTheLastKey) {
     expect_vec(sample(translation, t)[0].translation, Vec3(3.5, -7, 3.75), 1e-12);
     expect_rotation(sample(rotation, t)[0].rotation, key_rotation(3));
   }
-  EXPECT_NO_THROW(sample(translation, -std::numeric_limits<double>::infinity()));
 }
 
 TEST_P(KeyTimes, OneKeyHoldsEverywhere) {

@@ -159,6 +159,13 @@ TEST_F(SkeletalTest, SessionInfoTellsTheSkeletonAndItsClips) {
 
 TEST_F(SkeletalTest, RestJointsGiveTheRestMesh) {
   const SessionHandle s = upload(glb_);
+  // Bent first, so that rest joints must bring the mesh back (not just leave it).
+  std::vector<JointTransform> bent = rest_locals();
+  bent[1].rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.6, Vec3::UnitZ()));
+  const std::vector<float> bent_values = trs_values(bent);
+  const DecodedFrame b =
+      drive_one(s, [&](Driver& d) { return d.send_joints(1, v1::JointPose::SPACE_LOCAL_TRS, {}, bent_values); });
+  EXPECT_GT(max_distance(b.positions, s.mesh.rest_positions), 100.0 * (double{b.max_error} + 1e-6));
   const std::vector<float> values = trs_values(rest_locals());
   const DecodedFrame f = drive_one(s, [&](Driver& d) { return d.send_joints(1, v1::JointPose::SPACE_LOCAL_TRS, {}, values); });
   ASSERT_EQ(f.positions.size(), s.mesh.rest_positions.size());

@@ -89,21 +89,22 @@ void sample_clip(const AnimationClip& clip, double t, std::vector<JointTransform
   if (std::isnan(t)) throw RigError("sample_clip: clip '" + clip.name + "' sampled at a NaN time");
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
     const ClipChannel& ch = clip.channels[c];
-    const std::string where = "sample_clip: clip '" + clip.name + "' channel " + std::to_string(c);
+    // The message is built only on failure: this runs for every channel of every sample.
+    const auto where = [&] { return "sample_clip: clip '" + clip.name + "' channel " + std::to_string(c); };
     if (ch.joint >= local.size())
-      throw RigError(where + ": joint " + std::to_string(ch.joint) + ", but there are " + std::to_string(local.size()) + " local transforms");
+      throw RigError(where() + ": joint " + std::to_string(ch.joint) + ", but there are " + std::to_string(local.size()) + " local transforms");
     std::size_t width = 0;
     switch (ch.path) {
       case ClipChannel::Path::kTranslation:
       case ClipChannel::Path::kScale: width = 3; break;
       case ClipChannel::Path::kRotation: width = 4; break;
-      default: throw RigError(where + ": unknown path " + std::to_string(static_cast<int>(ch.path)));
+      default: throw RigError(where() + ": unknown path " + std::to_string(static_cast<int>(ch.path)));
     }
     // Checked here, not left to validate_rig: a wrong count would read past
     // the values.
     const std::size_t per_key = ch.interpolation == ClipChannel::Interpolation::kCubicSpline ? 3 * width : width;
     if (ch.times.empty() || ch.values.size() != ch.times.size() * per_key)
-      throw RigError(where + ": " + std::to_string(ch.values.size()) + " values for " + std::to_string(ch.times.size()) + " keys");
+      throw RigError(where() + ": " + std::to_string(ch.values.size()) + " values for " + std::to_string(ch.times.size()) + " keys");
 
     const Vec4 v = sample_channel(ch, width, t);
     JointTransform& target = local[ch.joint];
