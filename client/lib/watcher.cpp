@@ -47,7 +47,7 @@ Watcher::~Watcher() {
 }
 
 std::optional<v1::Frame> Watcher::read() {
-  while (!reads_ended_) {
+  while (!status_) {  // set once the stream has ended for good
     v1::Frame frame;
     if (stream_->Read(&frame)) {
       last_version_ = std::max(last_version_, frame.version());
@@ -55,10 +55,7 @@ std::optional<v1::Frame> Watcher::read() {
       return frame;
     }
     const grpc::Status status = stream_->Finish();  // gRPC's rule: Finish once Read failed
-    if (!reconnect_after(status)) {
-      reads_ended_ = true;
-      status_ = status;
-    }
+    if (!reconnect_after(status)) status_ = status;
   }
   return std::nullopt;
 }

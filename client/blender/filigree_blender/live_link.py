@@ -73,6 +73,10 @@ class LiveLink:
         and `min_interval` seconds passed; returns its pose id."""
         if self.driver is None or not self.base_name:
             return None
+        # The throttle first: evaluating the mesh and the armature costs more than it.
+        now = time.monotonic()
+        if now - self.last_send_time < min_interval:
+            return None
         base = bpy.data.objects.get(self.base_name)
         if base is None:
             return None
@@ -83,9 +87,6 @@ class LiveLink:
         joints = self._joint_pose()
         joints_changed = joints is not None and (self.last_joints is None or not np.array_equal(joints, self.last_joints))
         if not joints_changed and self.last_sent is not None and np.array_equal(pose, self.last_sent):
-            return None
-        now = time.monotonic()
-        if now - self.last_send_time < min_interval:
             return None
         self.last_sent, self.last_send_time = pose, now
         if joints_changed:

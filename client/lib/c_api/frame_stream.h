@@ -50,9 +50,6 @@ class FrameStream {
   FrameStream(const FrameStream&) = delete;
   FrameStream& operator=(const FrameStream&) = delete;
 
-  std::size_t float_count() const { return float_count_; }
-  bool has_callback() const { return callback_ != nullptr; }
-
   // filigree_driver_poll / filigree_watcher_poll, after the handle check.
   int poll(ErrorSlot& slot, const char* function, float* positions, std::size_t capacity, std::uint64_t* version,
            std::uint64_t* pose_id, int* updated);

@@ -86,7 +86,6 @@ class Watcher {
   bool cancelled_ = false;
   std::unique_ptr<grpc::ClientContext> context_;  // one per stream; outlives it
   std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;
-  bool reads_ended_ = false;
   std::optional<grpc::Status> status_;
 };
 
