@@ -59,9 +59,9 @@ const std::set<std::string> kApi = {
     "filigree_session_clip_duration", "filigree_set_handles", "filigree_set_threshold", "filigree_close_session", "filigree_session_last_error",
     "filigree_session_free", "filigree_driver_open", "filigree_driver_send_positions",
     "filigree_driver_send_partial", "filigree_driver_send_joints", "filigree_driver_poll",
-    "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
+    "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
     "filigree_watcher_open", "filigree_play_clip", "filigree_watcher_poll", "filigree_watcher_frame_info",
-    "filigree_watcher_wait_frame", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
+    "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
 
 // The names of the symbols the ELF file defines in its dynamic symbol table
 // (what dlsym can find), read with <elf.h>.

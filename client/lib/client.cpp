@@ -181,8 +181,8 @@ v1::SessionLocation Client::locate(const std::string& session_id) {
 }
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,
-                                      const std::string& client_name) {
-  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name, routing_));
+                                      const std::string& client_name, Reconnect reconnect) {
+  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name, routing_, std::move(reconnect)));
 }
 
 std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,

@@ -7,17 +7,43 @@
 namespace filigree {
 
 Driver::Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-               std::string client_name, Routing routing)
-    : session_id_(session_id), client_name_(std::move(client_name)) {
-  set_session_metadata(context_, session_id, token, routing);
-  stream_ = stub.Drive(&context_);
+               std::string client_name, Routing routing, Reconnect reconnect)
+    : stub_(stub), session_id_(session_id), token_(token), client_name_(std::move(client_name)), routing_(routing),
+      reconnect_(std::move(reconnect)) {
+  std::unique_lock lock(mutex_);
+  open(lock);
 }
 
 Driver::~Driver() {
-  if (status_) return;
+  {
+    std::lock_guard lock(mutex_);
+    if (status_) return;
+  }
   // Unfinished: cancel so the drain below cannot wait on the server.
-  context_.TryCancel();
+  cancel();
   finish();
+}
+
+void Driver::open(std::unique_lock<std::mutex>&) {
+  auto context = std::make_unique<grpc::ClientContext>();
+  set_session_metadata(*context, session_id_, token_, routing_);
+  auto stream = stub_.Drive(context.get());
+  {
+    std::lock_guard lock(cancel_mutex_);
+    stream_.reset();  // the old stream goes before its context
+    context_ = std::move(context);
+    if (cancelled_) context_->TryCancel();  // cancel() came while this opened
+  }
+  stream_ = std::move(stream);
+  broken_ = false;
+  // In order: the server merges them as they would have been.
+  for (const v1::DriveRequest& pose : unacknowledged_) {
+    if (!stream_->Write(pose)) {
+      broken_ = true;
+      return;
+    }
+  }
+  if (writes_done_ && !stream_->WritesDone()) broken_ = true;
 }
 
 bool Driver::write() {
@@ -26,7 +52,16 @@ bool Driver::write() {
   request_.set_session_id(session_id_);
   request_.set_client_name(client_name_);
   request_.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-  return !writes_done_ && stream_->Write(request_);
+  std::lock_guard lock(mutex_);
+  if (ended_ || writes_done_) return false;
+  // A full pose replaces every position before it, so the position poses it
+  // follows need no re-sending (joint poses stay: they are merged apart).
+  const bool full_positions = !request_.has_joints() && request_.indices_size() == 0;
+  if (full_positions) std::erase_if(unacknowledged_, [](const v1::DriveRequest& r) { return !r.has_joints(); });
+  unacknowledged_.push_back(request_);
+  if (!broken_ && !stream_->Write(request_)) broken_ = true;
+  // With reconnection, a pose sent into a broken stream waits for the next one.
+  return !broken_ || reconnect_.enabled();
 }
 
 bool Driver::send(std::uint64_t pose_id, std::span<const float> positions) {
@@ -70,28 +105,83 @@ bool Driver::send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std:
 }
 
 std::optional<v1::Frame> Driver::read() {
-  if (reads_ended_) return std::nullopt;
-  v1::Frame frame;
-  if (stream_->Read(&frame)) return frame;
-  reads_ended_ = true;
-  return std::nullopt;
+  while (true) {
+    grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>* stream;
+    {
+      std::lock_guard lock(mutex_);
+      if (status_) return std::nullopt;
+      stream = stream_.get();  // replaced only by this thread (reconnect_after)
+    }
+    v1::Frame frame;
+    if (stream->Read(&frame)) {
+      reconnect_.reset();
+      std::lock_guard lock(mutex_);
+      while (!unacknowledged_.empty() && unacknowledged_.front().pose_id() <= frame.pose_id())
+        unacknowledged_.pop_front();
+      return frame;
+    }
+    grpc::Status status;
+    {
+      // No write is in flight while the lock is held: gRPC's Finish may follow.
+      std::lock_guard lock(mutex_);
+      broken_ = true;
+      status = stream_->Finish();
+    }
+    if (!reconnect_after(status)) {
+      std::lock_guard lock(mutex_);
+      status_ = status;
+      ended_ = true;
+      return std::nullopt;
+    }
+  }
+}
+
+bool Driver::reconnect_after(const grpc::Status& status) {
+  bool by_us;
+  {
+    std::lock_guard lock(cancel_mutex_);
+    by_us = cancelled_;
+  }
+  const std::chrono::milliseconds wait = reconnect_.next(status, by_us);
+  if (wait.count() < 0) return false;
+  {
+    // The backoff is a wait a cancel() ends at once.
+    std::unique_lock lock(cancel_mutex_);
+    if (cancelled_cv_.wait_for(lock, wait, [this] { return cancelled_; })) return false;
+  }
+  std::unique_lock lock(mutex_);
+  open(lock);
+  return true;
 }
 
 bool Driver::writes_done() {
-  if (writes_done_) return true;
+  std::lock_guard lock(mutex_);
+  if (writes_done_) return !ended_;
   writes_done_ = true;
-  return stream_->WritesDone();
+  if (ended_) return false;
+  // A broken stream's successor sends it (open()).
+  if (!broken_ && !stream_->WritesDone()) broken_ = true;
+  return !broken_ || reconnect_.enabled();
 }
 
-void Driver::cancel() { context_.TryCancel(); }
+void Driver::cancel() {
+  std::lock_guard lock(cancel_mutex_);
+  cancelled_ = true;
+  if (context_) context_->TryCancel();
+  cancelled_cv_.notify_all();
+}
+
+std::size_t Driver::unacknowledged() const {
+  std::lock_guard lock(mutex_);
+  return unacknowledged_.size();
+}
 
 grpc::Status Driver::finish() {
-  if (status_) return *status_;
   writes_done();
-  // gRPC's rule: read until Read() fails, then Finish().
+  // gRPC's rule: read until Read() fails, then Finish() (read() does both).
   while (read()) {
   }
-  status_ = stream_->Finish();
+  std::lock_guard lock(mutex_);
   return *status_;
 }
 

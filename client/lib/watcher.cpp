@@ -1,6 +1,7 @@
 #include "filigree/watcher.h"
 
 #include <algorithm>
+#include <chrono>
 
 #include "filigree/call_metadata.h"
 
@@ -16,7 +17,7 @@ Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const 
 Watcher::Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token,
                  Routing routing)
     : stub_(stub), token_(token), routing_(routing), clip_(request), session_id_(request.session_id()) {
-  reconnect_.enabled = false;  // a clip that started over would play twice
+  reconnect_.disable();  // a clip that started over would play twice
   open();
 }
 
@@ -51,7 +52,7 @@ std::optional<v1::Frame> Watcher::read() {
     v1::Frame frame;
     if (stream_->Read(&frame)) {
       last_version_ = std::max(last_version_, frame.version());
-      attempt_ = 0;
+      reconnect_.reset();
       return frame;
     }
     const grpc::Status status = stream_->Finish();  // gRPC's rule: Finish once Read failed
@@ -61,30 +62,18 @@ std::optional<v1::Frame> Watcher::read() {
 }
 
 bool Watcher::reconnect_after(const grpc::Status& status) {
-  // UNAVAILABLE, or CANCELLED that this client did not ask for (a server
-  // shutting down cancels its calls): the server went away, not the session.
   bool by_us;
   {
     std::lock_guard lock(mutex_);
     by_us = cancelled_;
   }
-  const bool gone = status.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                    (status.error_code() == grpc::StatusCode::CANCELLED && !by_us);
-  if (!reconnect_.enabled || !gone) return false;
-  const auto now = std::chrono::steady_clock::now();
-  if (attempt_ == 0) {
-    backoff_ = reconnect_.first_backoff;
-    give_up_at_ = now + reconnect_.give_up_after;
-  }
-  if (now >= give_up_at_) return false;
-  ++attempt_;
-  if (reconnect_.on_reconnect) reconnect_.on_reconnect(status, attempt_);
+  const std::chrono::milliseconds wait = reconnect_.next(status, by_us);
+  if (wait.count() < 0) return false;
   {
     // The backoff is a wait a cancel() ends at once.
     std::unique_lock lock(mutex_);
-    if (cancelled_cv_.wait_for(lock, backoff_, [this] { return cancelled_; })) return false;
+    if (cancelled_cv_.wait_for(lock, wait, [this] { return cancelled_; })) return false;
   }
-  backoff_ = std::min(backoff_ * 2, reconnect_.max_backoff);
   open();
   return true;
 }

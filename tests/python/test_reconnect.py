@@ -1,6 +1,7 @@
-"""A watcher survives a server restart on its own: the C++ client library's
+"""Streams survive a server restart on their own: the C++ client library's
 Watch stream (under the C API and this package) reconnects after
-UNAVAILABLE, from the last version it saw, and decodes on."""
+UNAVAILABLE, from the last version it saw, and decodes on; its Drive stream
+reconnects and re-sends the poses no frame acknowledged."""
 
 from __future__ import annotations
 
@@ -50,6 +51,39 @@ def test_a_watcher_survives_a_server_restart():
         assert frame.version == answer.version > before.version
         assert np.abs(frame.positions - answer.positions).max() <= 2 * answer.max_error + 1e-6 * diagonal
         watcher.free()
+        session.free()
+        client.close()
+    finally:
+        server.terminate()
+        server.wait(timeout=60)
+        shutil.rmtree(data_dir, ignore_errors=True)
+
+
+def test_a_driver_survives_a_server_restart_and_resends_what_was_not_acknowledged():
+    data_dir = tempfile.mkdtemp(prefix="filigree_restart_")
+    server, address = start("127.0.0.1:0", data_dir)
+    try:
+        client = filigree.Client(address)
+        session = client.create_session(DATA / "bunny_small.obj", options=filigree.SessionOptions(base_vertices=150))
+        diagonal = float(np.linalg.norm(np.ptp(session.rest_positions, axis=0)))
+        driver = session.drive("engine")
+        first = driver.wait_for_pose(driver.send(session.base_positions + np.float32(0.05 * diagonal)), 30)
+        assert driver.reconnects == 0
+        server.terminate()
+        assert server.wait(timeout=60) == 0
+        # Sent while no server runs: accepted, kept until a frame acknowledges it.
+        moved = session.base_positions + np.float32(0.1 * diagonal)
+        pose_id = driver.send(moved)
+        server, again = start(address, data_dir)
+        assert again == address
+        answer = driver.wait_for_pose(pose_id, 60)
+        assert answer.pose_id == pose_id and answer.version > first.version
+        assert driver.reconnects >= 1
+        # The frame is that pose's: the same translation on every vertex.
+        shift = answer.positions - session.rest_positions
+        assert np.abs(shift - np.float32(0.1 * diagonal)).max() <= answer.max_error + 1e-6 * diagonal
+        driver.close()
+        driver.free()
         session.free()
         client.close()
     finally:

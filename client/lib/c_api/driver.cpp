@@ -50,8 +50,10 @@ int filigree_driver_open(filigree_session* session, const char* token, const cha
     handle->connection = s.connection;
     handle->base_vertex_count = s.mesh.base_vertex_count();
     handle->joint_count = static_cast<std::size_t>(s.mesh.skeleton.joints_size());
+    filigree::Reconnect reconnect;
+    reconnect.on_reconnect = [d = handle.get()](const grpc::Status&, int) { ++d->reconnects; };
     handle->driver = s.connection->client.drive(s.mesh.session_id, token ? token : s.token,
-                                                client_name ? client_name : "filigree-c");
+                                                client_name ? client_name : "filigree-c", std::move(reconnect));
     filigree_driver* d = handle.get();
     FrameStream::Hooks hooks{
         [d] { return d->driver->read(); },
@@ -160,6 +162,15 @@ int filigree_driver_wait_frame(filigree_driver* driver, int64_t timeout_ms) {
   constexpr const char* kFunction = "filigree_driver_wait_frame";
   return with_handle(driver, kFunction, [&](filigree_driver& d) -> int {
     return d.stream->wait_frame(d.error, kFunction, timeout_of(timeout_ms));
+  });
+}
+
+int filigree_driver_reconnects(const filigree_driver* driver, uint64_t* count) {
+  constexpr const char* kFunction = "filigree_driver_reconnects";
+  return with_handle(driver, kFunction, [&](const filigree_driver& d) -> int {
+    if (!count) return null_argument(&d.error, kFunction, "count");
+    *count = d.reconnects.load();
+    return FILIGREE_OK;
   });
 }
 

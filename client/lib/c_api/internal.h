@@ -123,6 +123,7 @@ struct filigree_driver {
   // Serialises the writes of several sending threads and the reader
   // thread's finish() (gRPC allows one writer at a time).
   std::mutex send_mutex;
+  std::atomic<std::uint64_t> reconnects{0};  // attempts to reopen the stream (Reconnect)
   std::unique_ptr<filigree::Driver> driver;
   std::unique_ptr<filigree::c_api::FrameStream> stream;  // declared after driver: stopped first
   mutable filigree::c_api::ErrorSlot error;  // mutable: accessors on const handles record failures too
@@ -132,6 +133,7 @@ struct filigree_watcher {
   static constexpr filigree::c_api::Kind kKind = filigree::c_api::Kind::kWatcher;
   static constexpr const char* kName = "filigree_watcher";
   std::shared_ptr<filigree::c_api::Connection> connection;
+  std::atomic<std::uint64_t> reconnects{0};  // attempts to reopen the stream (Reconnect)
   std::unique_ptr<filigree::Watcher> watcher;
   std::unique_ptr<filigree::c_api::FrameStream> stream;  // declared after watcher: stopped first
   mutable filigree::c_api::ErrorSlot error;  // mutable: accessors on const handles record failures too

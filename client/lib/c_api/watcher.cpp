@@ -16,7 +16,9 @@ int open_watcher(filigree_session& s, const char* function, filigree_frame_callb
   *out = nullptr;
   auto handle = std::make_unique<filigree_watcher>();
   handle->connection = s.connection;
-  handle->watcher = open();
+  filigree::Reconnect reconnect;
+  reconnect.on_reconnect = [w = handle.get()](const grpc::Status&, int) { ++w->reconnects; };
+  handle->watcher = open(std::move(reconnect));
   filigree::Watcher* w = handle->watcher.get();
   FrameStream::Hooks hooks{[w] { return w->read(); }, [w] { return w->finish(); }, [w] { w->cancel(); }};
   handle->stream = std::make_unique<FrameStream>(std::move(hooks), s.mesh.rest_positions,
@@ -46,8 +48,9 @@ int filigree_watcher_open(filigree_session* session, const char* token, uint64_t
                           filigree_frame_callback callback, void* user, filigree_watcher** out) {
   constexpr const char* kFunction = "filigree_watcher_open";
   return with_handle(session, kFunction, [&](filigree_session& s) -> int {
-    return open_watcher(s, kFunction, callback, user, out, [&] {
-      return s.connection->client.watch(s.mesh.session_id, token ? token : s.token, after_version);
+    return open_watcher(s, kFunction, callback, user, out, [&](filigree::Reconnect reconnect) {
+      return s.connection->client.watch(s.mesh.session_id, token ? token : s.token, after_version,
+                                        std::move(reconnect));
     });
   });
 }
@@ -60,7 +63,7 @@ int filigree_play_clip(filigree_session* session, const char* token, const char*
     filigree::ClipPlayback playback;
     playback.speed = speed;
     playback.loop = loop != 0;
-    return open_watcher(s, kFunction, callback, user, out, [&] {
+    return open_watcher(s, kFunction, callback, user, out, [&](filigree::Reconnect) {
       return s.connection->client.play_clip(s.mesh.session_id, token ? token : s.token, clip, playback, "filigree-c");
     });
   });
@@ -97,6 +100,15 @@ int filigree_watcher_wait_frame(filigree_watcher* watcher, int64_t timeout_ms) {
   constexpr const char* kFunction = "filigree_watcher_wait_frame";
   return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
     return w.stream->wait_frame(w.error, kFunction, timeout_of(timeout_ms));
+  });
+}
+
+int filigree_watcher_reconnects(const filigree_watcher* watcher, uint64_t* count) {
+  constexpr const char* kFunction = "filigree_watcher_reconnects";
+  return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
+    if (!count) return null_argument(&w.error, kFunction, "count");
+    *count = w.reconnects.load();
+    return FILIGREE_OK;
   });
 }
 

@@ -75,7 +75,7 @@ def _parse_changes(text: str) -> list[Change]:
 class _Stream:
     """What drivers and watchers share: polling, waiting and iterating."""
 
-    _poll = _info = _wait_frame = _changes = _close = _free = None  # the C functions, set by subclasses
+    _poll = _info = _wait_frame = _reconnects = _changes = _close = _free = None  # the C functions, set by subclasses
 
     def __init__(self, session: Session, handle: ctypes.c_void_p) -> None:
         self._session = session  # its meshes size the frames; it outlives the handle's use
@@ -117,6 +117,15 @@ class _Stream:
         check(type(self)._info(self.handle, ctypes.byref(info)))
         return Frame(version.value, pose_id.value, out, info.encoded_bytes, info.max_error, bool(info.keyframe),
                      info.frames_received, self.changes())
+
+    @property
+    def reconnects(self) -> int:
+        """How many times the stream has begun to reconnect by itself after
+        its server went away (a restart, a failover). A driver re-sends the
+        poses no frame acknowledged; a watcher resumes after its last frame."""
+        count = ctypes.c_uint64()
+        check(type(self)._reconnects(self.handle, ctypes.byref(count)))
+        return count.value
 
     def changes(self) -> list[Change]:
         """Who changed what in the frames up to the latest polled one (since the poll before)."""
@@ -185,6 +194,7 @@ class Driver(_Stream):
     _poll = lib.filigree_driver_poll
     _info = lib.filigree_driver_frame_info
     _wait_frame = lib.filigree_driver_wait_frame
+    _reconnects = lib.filigree_driver_reconnects
     _changes = lib.filigree_driver_changes
     _close = lib.filigree_driver_close
     _free = lib.filigree_driver_free
@@ -245,6 +255,7 @@ class Watcher(_Stream):
     _poll = lib.filigree_watcher_poll
     _info = lib.filigree_watcher_frame_info
     _wait_frame = lib.filigree_watcher_wait_frame
+    _reconnects = lib.filigree_watcher_reconnects
     _changes = lib.filigree_watcher_changes
     _close = lib.filigree_watcher_close
     _free = lib.filigree_watcher_free

@@ -99,8 +99,10 @@ class Client {
 
   // Opens a Drive stream (editor token). `client_name` is shown to others in
   // Frame.changes. The stream's failures show in send()/read()/finish().
+  // It reconnects by itself after UNAVAILABLE, re-sending the poses no frame
+  // acknowledged, as `reconnect` says (Driver).
   std::unique_ptr<Driver> drive(const std::string& session_id, const std::string& token,
-                                const std::string& client_name);
+                                const std::string& client_name, Reconnect reconnect = {});
   // Opens a Watch stream (either token): frames newer than after_version.
   // It reconnects by itself after UNAVAILABLE (a restart, a failover) as
   // `reconnect` says; with reconnect.enabled false it ends there instead.

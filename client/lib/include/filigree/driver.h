@@ -1,8 +1,11 @@
 #pragma once
 // One Drive stream: numbered poses out, frames in.
 
+#include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -10,6 +13,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include "filigree/call_metadata.h"
+#include "filigree/reconnect.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
@@ -17,6 +21,14 @@ namespace filigree {
 // Made by Client::drive(). Threading: one thread may send() while another
 // read()s (the usual engine split); cancel() may be called from any thread;
 // finish() once no other thread is inside read() or send().
+//
+// Reconnection (Reconnect, on by default): when the server goes away
+// (UNAVAILABLE: a restart, a failover to another replica), read() opens a
+// new Drive stream after a backoff and re-sends, in order, every pose no
+// frame has acknowledged yet (a frame acknowledges the poses up to its
+// pose_id), then a pending writes_done(). Meanwhile send() keeps accepting
+// poses (they wait for the new stream) and read() blocks. So reconnection
+// needs a thread in read() (or finish()), as every Drive does to get frames.
 class Driver {
  public:
   Driver(const Driver&) = delete;
@@ -25,10 +37,10 @@ class Driver {
   ~Driver();
 
   // Sends a full pose: 3·m floats (x y z per base vertex, base order).
-  // `pose_id` must increase within the stream; frames echo it. Blocks only
+  // `pose_id` must increase within the Driver; frames echo it. Blocks only
   // while the transport is flow-controlled. Returns false when the stream
-  // has ended (the server refused a pose, the session closed, the call was
-  // cancelled): finish() then says why.
+  // has ended for good (the server refused a pose, the session closed, the
+  // call was cancelled, reconnection gave up): finish() then says why.
   bool send(std::uint64_t pose_id, std::span<const float> positions);
 
   // Sends a partial pose: the base vertices `indices` move to `positions`
@@ -42,14 +54,20 @@ class Driver {
   bool send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std::span<const std::uint32_t> joints,
                    std::span<const float> values);
 
-  // Blocks for the next frame; nullopt once the stream has ended.
+  // Blocks for the next frame; nullopt once the stream has ended for good
+  // (with Reconnect, UNAVAILABLE is not the end: read() reconnects).
   std::optional<v1::Frame> read();
 
   // Tells the server no more poses come (it then ends the stream). Idempotent.
   bool writes_done();
 
-  // Ends the stream at once (thread-safe, any time); reads then return nullopt.
+  // Ends the stream at once, a reconnection wait too (thread-safe, any
+  // time); reads then return nullopt.
   void cancel();
+
+  // Poses sent that no frame has acknowledged yet (they would be re-sent
+  // after a reconnection). A full pose makes the poses before it moot.
+  std::size_t unacknowledged() const;
 
   // writes_done() if needed, discards unread frames, and returns the call's
   // status (OK when the stream ended normally). Later calls return the same.
@@ -58,15 +76,33 @@ class Driver {
  private:
   friend class Client;
   Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::string client_name,
-         Routing routing);
+         Routing routing, Reconnect reconnect);
+  // Opens a stream (again) and re-sends the unacknowledged poses; mutex_ held.
+  void open(std::unique_lock<std::mutex>& lock);
+  // Remembers request_ as unacknowledged and writes it.
   bool write();
+  // After `status` ended the stream: waits the backoff and reopens it, or
+  // returns false (no reconnection for this status, cancelled, given up).
+  bool reconnect_after(const grpc::Status& status);
 
-  grpc::ClientContext context_;  // declared before stream_: must outlive it
-  std::unique_ptr<grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>> stream_;
-  std::string session_id_, client_name_;
+  v1::Filigree::Stub& stub_;
+  const std::string session_id_, token_, client_name_;
+  const Routing routing_;
+  ReconnectSchedule reconnect_;  // the reading thread's
   v1::DriveRequest request_;  // reused by send(): no allocation per pose once warm
-  bool writes_done_ = false;
-  bool reads_ended_ = false;
+
+  // Held while writing, which may block on flow control, so cancel() has
+  // its own mutex. Order: mutex_, then cancel_mutex_.
+  mutable std::mutex mutex_;  // guards the stream's use and the state below it
+  std::mutex cancel_mutex_;   // guards context_ and cancelled_
+  std::condition_variable cancelled_cv_;
+  std::unique_ptr<grpc::ClientContext> context_;  // one per stream; outlives it
+  bool cancelled_ = false;
+  std::unique_ptr<grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>> stream_;
+  std::deque<v1::DriveRequest> unacknowledged_;  // in pose_id order
+  bool broken_ = false;       // the current stream failed; poses wait for the next one
+  bool writes_done_ = false;  // asked by the caller; repeated on every new stream
+  bool ended_ = false;        // for good: send() returns false
   std::optional<grpc::Status> status_;
 };
 

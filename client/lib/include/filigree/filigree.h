@@ -364,6 +364,13 @@ FILIGREE_API int filigree_driver_wait_frame(filigree_driver* driver, int64_t tim
 FILIGREE_API int filigree_driver_changes(const filigree_driver* driver, char* buffer, size_t capacity,
                                          size_t* required);
 
+/* How many times the stream has begun to reconnect: a driver whose server
+ * went away (a restart, a failover) reopens its stream by itself, re-sending
+ * the poses no frame acknowledged, for up to 60 s; then it ends with why.
+ * Sends meanwhile are accepted and wait for the new stream. A count that
+ * grew since the last tick tells an engine its link is recovering. */
+FILIGREE_API int filigree_driver_reconnects(const filigree_driver* driver, uint64_t* count);
+
 /* Ends the stream: tells the server no more poses come, waits for the
  * server to end the stream and the background thread to stop, and returns
  * the stream's status (FILIGREE_OK for a normal end; else why it failed).
@@ -400,6 +407,9 @@ FILIGREE_API int filigree_watcher_poll(filigree_watcher* watcher, float* positio
 
 /* The latest frame polled, or handed to the callback. */
 FILIGREE_API int filigree_watcher_frame_info(const filigree_watcher* watcher, filigree_frame_info* info);
+
+/* How many times the stream has begun to reconnect (as filigree_driver_reconnects). */
+FILIGREE_API int filigree_watcher_reconnects(const filigree_watcher* watcher, uint64_t* count);
 
 /* As filigree_driver_wait_frame and filigree_driver_changes (with a
  * callback, the changes are the handed frame's, and wait_frame gives

@@ -1,10 +1,8 @@
 #pragma once
 // One Watch stream: the session's frames as they are computed.
 
-#include <chrono>
 #include <condition_variable>
 #include <cstdint>
-#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -13,24 +11,10 @@
 #include <grpcpp/grpcpp.h>
 
 #include "filigree/call_metadata.h"
+#include "filigree/reconnect.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
-
-// How a Watch stream outlives a server restart, a replica going away or a
-// session moving: after UNAVAILABLE (or a CANCELLED it did not ask for: a
-// server shutting down) it reopens itself from the last version
-// it delivered (the server then sends the keyframe the next frame needs
-// first, so a FrameDecoder goes on decoding).
-struct Reconnect {
-  bool enabled = true;
-  std::chrono::milliseconds first_backoff{100};  // doubles after each failed attempt…
-  std::chrono::milliseconds max_backoff{2000};   // …up to this
-  std::chrono::milliseconds give_up_after{60000};  // then the stream ends with the last status
-  // Called on the reading thread before each attempt: why the stream ended
-  // and the attempt's number (1, 2, …; back to 1 after a frame arrived).
-  std::function<void(const grpc::Status& why, int attempt)> on_reconnect;
-};
 
 // Made by Client::watch() (or Client::play_clip(), whose stream carries the
 // frames of the clip it plays and ends after the clip's last one). A slow reader skips frames (it always gets the
@@ -76,10 +60,7 @@ class Watcher {
   std::optional<v1::PlayClipRequest> clip_;  // set for a clip: not reconnected
   std::string session_id_;
   std::uint64_t last_version_ = 0;
-  Reconnect reconnect_;
-  int attempt_ = 0;
-  std::chrono::milliseconds backoff_{0};
-  std::chrono::steady_clock::time_point give_up_at_{};
+  ReconnectSchedule reconnect_;
 
   std::mutex mutex_;  // guards context_ (cancel() from other threads) and cancelled_
   std::condition_variable cancelled_cv_;

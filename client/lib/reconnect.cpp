@@ -1,0 +1,30 @@
+#include "filigree/reconnect.h"
+
+#include <algorithm>
+
+namespace filigree {
+
+std::chrono::milliseconds ReconnectSchedule::next(const grpc::Status& status, bool cancelled_by_us) {
+  constexpr std::chrono::milliseconds kEnd{-1};
+  // The server went away, not the session: UNAVAILABLE; CANCELLED that this
+  // client did not ask for (a server shutting down); INTERNAL, which is how a
+  // proxy's reset shows when the replica behind it dies ("Received RST_STREAM
+  // with error code 2") and which the service never ends a stream with.
+  const grpc::StatusCode code = status.error_code();
+  const bool gone = code == grpc::StatusCode::UNAVAILABLE || code == grpc::StatusCode::INTERNAL ||
+                    (code == grpc::StatusCode::CANCELLED && !cancelled_by_us);
+  if (!policy_.enabled || !gone) return kEnd;
+  const auto now = std::chrono::steady_clock::now();
+  if (attempt_ == 0) {
+    backoff_ = policy_.first_backoff;
+    give_up_at_ = now + policy_.give_up_after;
+  }
+  if (now >= give_up_at_) return kEnd;
+  ++attempt_;
+  if (policy_.on_reconnect) policy_.on_reconnect(status, attempt_);
+  const std::chrono::milliseconds wait = backoff_;
+  backoff_ = std::min(backoff_ * 2, policy_.max_backoff);
+  return wait;
+}
+
+}  // namespace filigree
