@@ -4,10 +4,14 @@
 #include <cmath>
 #include <condition_variable>
 #include <limits>
+#include <mutex>
 #include <optional>
+#include <sstream>
 #include <thread>
 
 #include <malloc.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <spdlog/spdlog.h>
 
@@ -16,6 +20,7 @@
 #include "mesh/vertex_order.h"
 #include "preprocess/preprocess.h"
 #include "runtime/pose.h"
+#include "server/resident_memory.h"
 #include "server/stream_writer.h"
 #include "skinning/animation_clip.h"
 #include "skinning/rig_file.h"
@@ -165,6 +170,65 @@ void FiligreeService::end_job() {
   if (--jobs_ == 0) jobs_done_.notify_all();
 }
 
+void FiligreeService::acquire_preprocessing() {
+  std::unique_lock lock(jobs_mutex_);
+  preprocessing_free_.wait(lock, [&] { return preprocessing_ < std::max(1u, limits_.preprocessing_slots); });
+  ++preprocessing_;
+}
+
+void FiligreeService::release_preprocessing() {
+  std::lock_guard lock(jobs_mutex_);
+  --preprocessing_;
+  preprocessing_free_.notify_one();
+}
+
+grpc::Status FiligreeService::admit_memory() {
+  if (limits_.max_memory_bytes == 0) return grpc::Status::OK;
+  const auto under = [&] { return resident_bytes() < limits_.max_memory_bytes; };
+  if (under()) return grpc::Status::OK;
+  const std::size_t evicted = registry_.evict_idle_until([&] {
+    release_free_memory();
+    return under();
+  });
+  if (under()) {
+    spdlog::info("event=memory_reclaimed evicted_sessions={}", evicted);
+    return grpc::Status::OK;
+  }
+  constexpr std::uint64_t kMiB = 1 << 20;
+  return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+          "the server is at its memory limit: " + std::to_string(resident_bytes() / kMiB) + " MiB resident of " +
+              std::to_string(limits_.max_memory_bytes / kMiB) + " MiB (--max-memory) after evicting " +
+              std::to_string(evicted) + " idle sessions; sessions in use stay. Try later or another server"};
+}
+
+void FiligreeService::track_upload(const void* upload, std::function<void()> expire) {
+  if (limits_.upload_seconds <= 0) return;
+  const auto deadline = std::chrono::steady_clock::now() +
+                        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                            std::chrono::duration<double>(limits_.upload_seconds));
+  std::lock_guard lock(uploads_mutex_);
+  uploads_[upload] = Upload{deadline, std::move(expire)};
+}
+
+void FiligreeService::untrack_upload(const void* upload) {
+  std::lock_guard lock(uploads_mutex_);
+  uploads_.erase(upload);
+}
+
+void FiligreeService::expire_uploads() {
+  const auto now = std::chrono::steady_clock::now();
+  // Under the lock: an upload untracks itself (under it) before it is deleted.
+  std::lock_guard lock(uploads_mutex_);
+  for (auto it = uploads_.begin(); it != uploads_.end();) {
+    if (it->second.deadline > now) {
+      ++it;
+      continue;
+    }
+    it->second.expire();
+    it = uploads_.erase(it);
+  }
+}
+
 void FiligreeService::drain() {
   std::unique_lock lock(jobs_mutex_);
   draining_ = true;
@@ -175,6 +239,15 @@ void FiligreeService::drain() {
 
 namespace {
 
+// Nice value of preprocessing threads (sessions' frames run at 0).
+constexpr int kPreprocessingNice = 10;
+
+std::string seconds(double s) {
+  std::ostringstream out;
+  out << s;
+  return out.str();
+}
+
 class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse> {
  public:
   CreateReactor(FiligreeService& service, grpc::CallbackServerContext* context) : service_(service), writer_(this) {
@@ -182,17 +255,29 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     const ApiKey* key = nullptr;
     grpc::Status status = service_.check_api_key(*context, &keys_, &key);
     if (status.ok() && key) status = service_.admit_upload(*key);
+    if (status.ok()) status = service_.admit_memory();
     if (!status.ok()) {
       writer_.finish(status);
       return;
     }
     key_ = key;
+    service_.track_upload(this, [this] {
+      // Not while OnReadDone handles a message: no read may start after Finish.
+      std::lock_guard lock(read_mutex_);
+      expired_ = true;  // before finish: the read it ends must not start processing
+      writer_.finish({grpc::StatusCode::DEADLINE_EXCEEDED,
+                      "the upload did not arrive within the server's " + seconds(service_.limits().upload_seconds) +
+                          " s (--upload-timeout); " + std::to_string(bytes_.size()) + " bytes came"});
+    });
     StartRead(&request_);
   }
 
   void OnReadDone(bool ok) override {
+    std::unique_lock lock(read_mutex_);
+    if (expired_) return;
     if (!ok) {  // the client half-closed: the upload is complete
       if (!begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the upload sent no 'begin' message"});
+      lock.unlock();  // start_processing takes the uploads' lock, which expiry holds before this one
       return start_processing();
     }
     if (request_.has_begin()) {
@@ -217,6 +302,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   void OnWriteDone(bool ok) override { writer_.on_write_done(ok); }
   void OnCancel() override { writer_.finish(grpc::Status::CANCELLED); }
   void OnDone() override {
+    service_.untrack_upload(this);
     // gRPC may run OnDone on the job's own thread (Finish called from it).
     if (job_.joinable()) job_.get_id() == std::this_thread::get_id() ? job_.detach() : job_.join();
     delete this;
@@ -250,9 +336,16 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 
   // Parsing and preprocessing can take seconds: never on a gRPC thread.
   void start_processing() {
+    service_.untrack_upload(this);  // its bytes are in: preprocessing is not limited by --upload-timeout
+    if (expired_) return;           // expired while untracking
     if (!service_.begin_job()) return writer_.finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
     job_ = std::thread([this] {
+      // Live sessions' frames come first: preprocessing runs at a lower
+      // priority (threads it starts inherit it), a bounded number at once.
+      ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kPreprocessingNice);
+      service_.acquire_preprocessing();
       const grpc::Status status = process();
+      service_.release_preprocessing();
       // Parsing, repair and preprocessing free tens to hundreds of MB that
       // glibc would otherwise keep in this thread's arena: give them back, so
       // the server's resident memory is what its sessions hold.
@@ -349,6 +442,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   bool begun_ = false;
   std::string bytes_;
   std::thread job_;
+  std::mutex read_mutex_;  // OnReadDone against expiry (--upload-timeout)
+  bool expired_ = false;   // under read_mutex_, except once reads are over
 };
 
 // ------------------------------------------------------------ Drive, Watch

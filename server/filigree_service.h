@@ -3,8 +3,11 @@
 // reactor; nothing blocks a gRPC thread (preprocessing runs on its own thread).
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
+#include <map>
 #include <mutex>
 
 #include "filigree/v1/filigree.grpc.pb.h"
@@ -19,6 +22,14 @@ struct ServiceLimits {
   std::uint64_t max_mesh_bytes = 256ull << 20;
   std::uint64_t max_vertices = 5'000'000;
   std::uint64_t max_streams_per_session = 256;  // Drive, Watch and PlayClip streams of one session (0: no limit)
+  // Resident memory beyond which uploads are refused once idle sessions are evicted (0: no limit).
+  std::uint64_t max_memory_bytes = 0;
+  // Uploads preprocessed at once (more wait their turn), at a lower CPU
+  // priority than the sessions' frames.
+  unsigned preprocessing_slots = 1;
+  // Longest an upload may take to send its bytes (slow or stalled clients
+  // hold memory and a stream); 0: no limit.
+  double upload_seconds = 300.0;
 };
 
 class FiligreeService final : public v1::Filigree::CallbackService {
@@ -61,6 +72,20 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   // Background uploads: counted so drain() can wait for them.
   bool begin_job();
   void end_job();
+  // Preprocessing turns (limits().preprocessing_slots at once): held while
+  // an upload is parsed and preprocessed.
+  void acquire_preprocessing();
+  void release_preprocessing();
+  // Whether a new upload fits under limits().max_memory_bytes: if the
+  // server's resident memory is over it, idle sessions are evicted first;
+  // RESOURCE_EXHAUSTED saying the figures if that is not enough.
+  grpc::Status admit_memory();
+  // Uploads still receiving bytes, tracked so that expire_uploads() can end
+  // those past limits().upload_seconds with DEADLINE_EXCEEDED (`expire` does).
+  void track_upload(const void* upload, std::function<void()> expire);
+  void untrack_upload(const void* upload);
+  // Called every second or so (the maintenance loop).
+  void expire_uploads();
   std::uint64_t next_driver_id() { return ++driver_ids_; }
 
   // API keys (--api-keys): null means none are required. Replaced whole on
@@ -91,9 +116,16 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   std::shared_ptr<const ApiKeys> keys_;
   ApiKeyLedger ledger_;
   std::mutex jobs_mutex_;
-  std::condition_variable jobs_done_;
+  std::condition_variable jobs_done_, preprocessing_free_;
   int jobs_ = 0;
+  unsigned preprocessing_ = 0;  // uploads preprocessing now
   bool draining_ = false;
+  struct Upload {
+    std::chrono::steady_clock::time_point deadline;
+    std::function<void()> expire;
+  };
+  std::mutex uploads_mutex_;
+  std::map<const void*, Upload> uploads_;
 };
 
 // Looks up the session and checks the token in the call's metadata

@@ -87,6 +87,16 @@ int main(int argc, char** argv) {
   app.add_option("--max-streams-per-session", service_limits.max_streams_per_session,
                  "Most streams (drivers, watchers, clips) one session serves at once; 0: no limit");
   app.add_option("--max-sessions", registry_limits.max_sessions, "Most sessions held at once");
+  std::uint64_t max_memory_mib = 0;
+  app.add_option("--max-memory", max_memory_mib,
+                 "Resident memory in MiB beyond which uploads are refused (RESOURCE_EXHAUSTED) once idle sessions "
+                 "are evicted from memory (their records stay); 0: no limit");
+  app.add_option("--preprocessing-slots", service_limits.preprocessing_slots,
+                 "Uploads preprocessed at once, at a lower CPU priority than live sessions; more wait their turn")
+      ->check(CLI::Range(1u, 64u));
+  app.add_option("--upload-timeout", service_limits.upload_seconds,
+                 "Seconds an upload may take to send its bytes (DEADLINE_EXCEEDED after); 0: no limit")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--max-message-mib", max_message_mib, "Largest gRPC message in MiB, each way")->check(CLI::Range(1, 2047));
   app.add_option("--idle-timeout", registry_limits.idle_seconds, "Seconds after which an idle session leaves memory (its record stays)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
@@ -123,6 +133,23 @@ int main(int argc, char** argv) {
   app.add_option("--redis-user", redis_credentials.user,
                  "Redis 6 ACL user to authenticate as, with the password (default: the password alone)")
       ->needs(redis_option);
+  // TLS to Redis always verifies the server: there is no option to skip it.
+  RedisTlsOptions redis_tls;
+  auto* redis_tls_flag =
+      app.add_flag("--redis-tls", redis_tls.enabled,
+                   "Reach Redis over TLS (Redis' --tls-port), verifying its certificate and name")
+          ->needs(redis_option);
+  app.add_option("--redis-tls-ca", redis_tls.ca_file,
+                 "CA bundle (PEM) Redis' certificate must chain to (default: the system CA store)")
+      ->needs(redis_tls_flag);
+  app.add_option("--redis-tls-cert", redis_tls.cert_file,
+                 "Client certificate chain (PEM) for a Redis with tls-auth-clients; with --redis-tls-key")
+      ->needs(redis_tls_flag);
+  app.add_option("--redis-tls-key", redis_tls.key_file, "The client certificate's private key (PEM, unencrypted)")
+      ->needs(redis_tls_flag);
+  app.add_option("--redis-tls-server-name", redis_tls.server_name,
+                 "Name sent as SNI and verified in Redis' certificate (default: the host of --redis)")
+      ->needs(redis_tls_flag);
   app.add_option("--replica-id", replica_id, "This replica's unique name (default: <hostname>-<pid>)");
   app.add_option("--advertise", advertise,
                  "HOST:PORT at which clients reach this replica directly, told by LocateSession (default: the "
@@ -132,6 +159,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(300, 600000));
   app.add_option("--redis-prefix", redis_prefix, "Prefix of every Redis key (several deployments on one Redis)");
   CLI11_PARSE(app, argc, argv);
+  service_limits.max_memory_bytes = max_memory_mib << 20;
   // Logs go to stderr; stdout carries only the "listening on" (and "http on") lines for scripts.
   spdlog::set_default_logger(spdlog::stderr_color_mt("filigree-server"));
   spdlog::set_level(spdlog::level::from_str(log_level));
@@ -151,9 +179,11 @@ int main(int argc, char** argv) {
       throw std::runtime_error("--listen " + listen + " is reachable from other machines without TLS: tokens and meshes "
                                "would cross the network in clear. Give --tls-cert and --tls-key, or --insecure if TLS "
                                "ends before this server");
-    if (!insecure && !http_listen.empty() && !is_loopback_only(http_listen))
-      throw std::runtime_error("--http " + http_listen + " is plaintext (HTTPS is not built yet) and reachable from other "
-                               "machines; give --insecure if TLS ends before this server");
+    // With --tls-cert, --http serves HTTPS with the same certificate.
+    if (!insecure && !http_listen.empty() && !is_loopback_only(http_listen) && !tls.enabled())
+      throw std::runtime_error("--http " + http_listen + " is reachable from other machines without TLS: give --tls-cert "
+                               "and --tls-key (HTTPS there too, same certificate), or --insecure if TLS ends before "
+                               "this server");
     const std::filesystem::path data = data_dir;
     // One machine: records as files. Replicas: records, leases and hierarchies in Redis
     // (hierarchy files stay in --data-dir as a local cache).
@@ -165,8 +195,10 @@ int main(int argc, char** argv) {
       redis_credentials.password = redis_password(redis_password_file);
       if (!redis_credentials.user.empty() && redis_credentials.password.empty())
         throw std::runtime_error("--redis-user needs a password: --redis-password-file or FILIGREE_REDIS_PASSWORD");
+      if (redis_tls.cert_file.empty() != redis_tls.key_file.empty())
+        throw std::runtime_error("--redis-tls-cert and --redis-tls-key go together");
       redis = std::make_shared<RedisClient>(redis_address, std::chrono::milliseconds(std::max(200, lease_ms / 3)),
-                                            redis_credentials);
+                                            redis_credentials, redis_tls);
       if (replica_id.empty()) replica_id = host_name() + "-" + std::to_string(getpid());
       auto made = std::make_unique<RedisSessionStore>(redis, RedisSessionStoreOptions{redis_prefix, replica_id, "",
                                                                                       std::chrono::milliseconds(lease_ms)});
@@ -210,6 +242,9 @@ int main(int argc, char** argv) {
       http_options.listen = http_listen;
       http_options.web_root = web_root(web_root_flag);
       http_options.grpc_web_services = {filigree::v1::Filigree::service_full_name()};
+      // HTTPS with the gRPC port's files, mutual TLS included: otherwise --http
+      // would reach the same service around --tls-client-ca.
+      http_options.tls = {tls.cert, tls.key, tls.client_ca, std::chrono::seconds(tls.refresh_seconds)};
       // Replicas: a browser's calls go to the replica that serves the session.
       if (redis) http_options.route = [router = std::make_shared<ReplicaRouter>(registry)](const std::string& id) {
         return router->channel_for(id);
@@ -227,8 +262,9 @@ int main(int argc, char** argv) {
       const std::string auth = redis_credentials.password.empty() ? "none"
                                : redis_credentials.user.empty()     ? "password"
                                                                     : "user:" + redis_credentials.user;
-      spdlog::info("event=replica replica_id={} advertise={} redis={} redis_auth={} lease_ms={}", replica_id, advertise,
-                   redis_address, auth, lease_ms);
+      const char* transport = !redis_tls.enabled ? "plaintext" : redis_tls.cert_file.empty() ? "tls" : "mutual-tls";
+      spdlog::info("event=replica replica_id={} advertise={} redis={} redis_auth={} redis_transport={} lease_ms={}",
+                   replica_id, advertise, redis_address, auth, transport, lease_ms);
     }
     spdlog::info("event=listening address={}:{} data_dir=\"{}\" restored_sessions={} transport={}", host, port, data_dir,
                  restored, !tls.enabled() ? "plaintext" : tls.client_ca.empty() ? "tls" : "mutual-tls");
@@ -244,19 +280,32 @@ int main(int argc, char** argv) {
       while (!stopping) {
         for (int t = 0; t < tick_ms && !stopping; t += 50) std::this_thread::sleep_for(std::chrono::milliseconds(50));
         registry.maintain();
+        service.expire_uploads();
       }
     });
 
     int signal = 0;
+    // SIGHUP: re-read the API keys and the HTTPS certificate now. A broken
+    // file keeps what is in force. (The gRPC port re-reads its certificate
+    // files by itself within TlsFiles::refresh_seconds.)
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) {
-      if (api_keys_path.empty()) continue;
-      try {  // a broken file keeps the keys in force
-        auto keys = std::make_shared<const ApiKeys>(ApiKeys::load(api_keys_path));
-        const std::size_t count = keys->size();
-        service.set_api_keys(std::move(keys));  // in force before the log says so
-        spdlog::info("event=api_keys_reloaded keys={}", count);
-      } catch (const std::exception& e) {
-        spdlog::error("event=api_keys_reload_failed error=\"{}\"", e.what());
+      if (!api_keys_path.empty()) {
+        try {
+          auto keys = std::make_shared<const ApiKeys>(ApiKeys::load(api_keys_path));
+          const std::size_t count = keys->size();
+          service.set_api_keys(std::move(keys));  // in force before the log says so
+          spdlog::info("event=api_keys_reloaded keys={}", count);
+        } catch (const std::exception& e) {
+          spdlog::error("event=api_keys_reload_failed error=\"{}\"", e.what());
+        }
+      }
+      if (http_server && http_server->https()) {
+        try {
+          http_server->reload_certificates();
+          spdlog::info("event=https_certificate_reloaded");
+        } catch (const std::exception& e) {
+          spdlog::error("event=https_certificate_reload_failed error=\"{}\"", e.what());
+        }
       }
     }
     spdlog::info("event=shutdown signal={}", signal);

@@ -1,5 +1,7 @@
 #include "server/session_registry.h"
 
+#include <algorithm>
+
 #include <spdlog/spdlog.h>
 
 #include "server/secret.h"
@@ -261,21 +263,39 @@ void SessionRegistry::maintain() {
     } else if (e.persisted_version != s->version()) {
       persist(*s);
     }
-    if (s->subscriber_count() == 0 && s->idle_seconds() > limits_.idle_seconds) {
-      persist(*s);
-      {
-        std::lock_guard lock(mutex_);
-        sessions_.erase(id);
-      }
-      if (shared) {
-        try {
-          store_.release(id);
-        } catch (const std::exception&) {  // the lease then simply expires
-        }
-      }
-      spdlog::info("event=session_evicted session={} idle_seconds={:.0f}", id, s->idle_seconds());
+    if (s->subscriber_count() == 0 && s->idle_seconds() > limits_.idle_seconds) evict(id, *s, "idle");
+  }
+}
+
+void SessionRegistry::evict(const std::string& id, const Session& s, const char* why) {
+  persist(s);
+  {
+    std::lock_guard lock(mutex_);
+    sessions_.erase(id);
+  }
+  if (store_.shared()) {
+    try {
+      store_.release(id);
+    } catch (const std::exception&) {  // the lease then simply expires
     }
   }
+  spdlog::info("event=session_evicted session={} reason={} idle_seconds={:.0f}", id, why, s.idle_seconds());
+}
+
+std::size_t SessionRegistry::evict_idle_until(const std::function<bool()>& enough) {
+  std::vector<std::shared_ptr<Session>> idle;
+  for (auto& s : loaded())
+    if (s->subscriber_count() == 0) idle.push_back(std::move(s));
+  // The longest idle first: the least likely to be asked for again soon.
+  std::sort(idle.begin(), idle.end(), [](const auto& a, const auto& b) { return a->idle_seconds() > b->idle_seconds(); });
+  std::size_t evicted = 0;
+  for (const auto& s : idle) {
+    if (enough()) break;
+    if (s->subscriber_count() != 0) continue;  // a stream came meanwhile
+    evict(s->id(), *s, "memory");
+    ++evicted;
+  }
+  return evicted;
 }
 
 void SessionRegistry::shutdown() {

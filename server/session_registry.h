@@ -6,6 +6,7 @@
 // store, the lease that makes exactly one replica compute each session.
 
 #include <chrono>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -79,6 +80,10 @@ class SessionRegistry {
   // (shared store: sessions whose lease was lost or asked for leave this
   // replica), and evicts idle sessions.
   void maintain();
+  // Evicts sessions no stream uses (their records stay; a later request
+  // loads them again), the longest idle first, until `enough()` says so or
+  // none is left. Returns how many were evicted. For --max-memory.
+  std::size_t evict_idle_until(const std::function<bool()>& enough);
   // Finishes every stream (UNAVAILABLE), writes every record and releases
   // every lease, so another replica can take the sessions at once.
   void shutdown();
@@ -97,6 +102,8 @@ class SessionRegistry {
   std::shared_ptr<Session> insert(std::shared_ptr<Session> s);
   // Throws SessionElsewhere if the lease passed to another replica meanwhile; extends it otherwise.
   void confirm_lease(const std::string& id);
+  // Writes the record and removes the unused session from this process (`why`: for the log).
+  void evict(const std::string& id, const Session& s, const char* why);
   // Removes the session from this process (not from the store), ending its streams with `why`.
   void drop(const std::string& id, const std::string& why);
   void persist(const Session& s);

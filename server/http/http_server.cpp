@@ -18,11 +18,14 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/post.hpp>
+#include <boost/asio/ssl/context.hpp>
+#include <boost/asio/ssl/stream_base.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
 #include <boost/asio/write.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/http.hpp>
+#include <boost/beast/ssl/ssl_stream.hpp>
 #include <spdlog/spdlog.h>
 
 #include "server/http/grpc_web_bridge.h"
@@ -39,6 +42,7 @@ using tcp = net::ip::tcp;
 constexpr auto kIdleTimeout = std::chrono::seconds(120);  // waiting for a request (keep-alive) or its body
 constexpr auto kWriteTimeout = std::chrono::seconds(30);  // one response or one streamed frame
 constexpr auto kLingerTimeout = std::chrono::seconds(2);  // after our FIN, for the client's
+constexpr auto kHandshakeTimeout = std::chrono::seconds(30);  // HTTPS: from accept to the end of the TLS handshake
 constexpr std::uint32_t kHeaderLimit = 16 * 1024;
 
 std::string_view sv(beast::string_view s) { return {s.data(), s.size()}; }
@@ -63,12 +67,20 @@ void set_grpc_web(bhttp::response<Body>& res) {
 
 }  // namespace
 
-class Connection;
+// What the server needs of a connection, whatever its transport.
+class ConnectionBase {
+ public:
+  virtual ~ConnectionBase() = default;
+  virtual void start() = 0;
+  virtual void stop() = 0;
+  virtual void force_close() = 0;
+};
 
 struct HttpServer::Impl {
   Impl(HttpOptions o, std::shared_ptr<grpc::Channel> channel)
       : options(std::move(o)), files(options.web_root),
         bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services, options.route)),
+        tls(options.tls.enabled() ? std::make_unique<HttpsContextSource>(options.tls) : nullptr),
         acceptor(net::make_strand(ioc)), accept_retry(acceptor.get_executor()) {}
 
   void accept();
@@ -77,18 +89,19 @@ struct HttpServer::Impl {
     connections.erase(id);
     if (connections.empty()) all_closed.notify_all();
   }
-  std::vector<std::shared_ptr<Connection>> live_connections();
+  std::vector<std::shared_ptr<ConnectionBase>> live_connections();
 
   HttpOptions options;
   StaticFiles files;
   std::shared_ptr<GrpcWebBridge> bridge;
+  std::unique_ptr<HttpsContextSource> tls;  // null: plaintext
   std::string address;
 
   // Declared before the io_context: handlers it destroys unregister here.
   std::mutex mutex;
   std::condition_variable all_closed;
   std::uint64_t next_connection = 0;
-  std::unordered_map<std::uint64_t, std::weak_ptr<Connection>> connections;
+  std::unordered_map<std::uint64_t, std::weak_ptr<ConnectionBase>> connections;
   bool shut_down = false;
 
   net::io_context ioc;
@@ -102,33 +115,74 @@ struct HttpServer::Impl {
 // the other (keep-alive). A gRPC-Web call's events come from gRPC threads and
 // are posted to the strand; a server-streaming response is chunked, one
 // chunk per frame, and the connection closes when it ends.
-class Connection : public std::enable_shared_from_this<Connection> {
- public:
-  Connection(tcp::socket&& socket, HttpServer::Impl& server, std::uint64_t id)
-      : stream_(std::move(socket)), server_(server), id_(id), linger_timer_(stream_.get_executor()) {}
+//
+// Stream: beast::tcp_stream (HTTP) or beast::ssl_stream over one (HTTPS):
+// the same code, TLS only adds the handshake and close_notify. Timeouts are
+// those of the TCP stream underneath.
+template <class Stream>
+class Connection final : public ConnectionBase, public std::enable_shared_from_this<Connection<Stream>> {
+  static constexpr bool kTls = !std::is_same_v<Stream, beast::tcp_stream>;
 
-  ~Connection() {
+ public:
+  // `tls`: the context of this connection's whole life (a reload gives later
+  // connections another one); null for plaintext.
+  Connection(tcp::socket&& socket, std::shared_ptr<net::ssl::context> tls, HttpServer::Impl& server, std::uint64_t id)
+      : tls_(std::move(tls)), stream_(open(std::move(socket), tls_.get())), server_(server), id_(id),
+        linger_timer_(stream_.get_executor()) {}
+
+  ~Connection() override {
     if (call_) call_->cancel();
     server_.remove(id_);
   }
 
-  void start() {
-    net::dispatch(stream_.get_executor(), [self = shared_from_this()] { self->read_request(); });
+  void start() override {
+    net::dispatch(stream_.get_executor(), [self = this->shared_from_this()] {
+      if constexpr (kTls)
+        self->handshake();
+      else
+        self->read_request();
+    });
   }
 
   // Shutdown: close now if waiting for a request, else after the response in progress.
-  void stop() {
-    net::post(stream_.get_executor(), [self = shared_from_this()] {
+  void stop() override {
+    net::post(stream_.get_executor(), [self = this->shared_from_this()] {
       self->stopping_ = true;
       if (self->idle_) self->close();
     });
   }
 
-  void force_close() {
-    net::post(stream_.get_executor(), [self = shared_from_this()] { self->close(); });
+  void force_close() override {
+    net::post(stream_.get_executor(), [self = this->shared_from_this()] { self->close(); });
   }
 
  private:
+  static Stream open(tcp::socket&& socket, net::ssl::context* tls) {
+    if constexpr (kTls)
+      return Stream(std::move(socket), *tls);
+    else
+      return Stream(std::move(socket));
+  }
+
+  beast::tcp_stream& lowest() { return beast::get_lowest_layer(stream_); }
+
+  // HTTPS: the TLS handshake comes before the first request. A client that
+  // fails it (a plaintext request, an untrusted or missing client
+  // certificate) is closed: a plaintext client could not read an HTTP error
+  // sent back inside TLS anyway, and a wrong-protocol answer would be worse.
+  void handshake() {
+    idle_ = true;  // shutdown closes a connection still in its handshake
+    lowest().expires_after(kHandshakeTimeout);
+    stream_.async_handshake(net::ssl::stream_base::server, [self = this->shared_from_this()](beast::error_code ec) {
+      if (ec) {
+        // Debug only: scanners and plaintext clients would fill the log.
+        spdlog::debug("event=https_handshake_failed error=\"{}\"", ec.message());
+        return self->close();
+      }
+      self->read_request();
+    });
+  }
+
   // ---------------------------------------------------------------- reading
 
   void read_request() {
@@ -138,9 +192,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     parser_.emplace();
     parser_->body_limit(server_.options.max_request_bytes);
     parser_->header_limit(kHeaderLimit);
-    stream_.expires_after(kIdleTimeout);
+    lowest().expires_after(kIdleTimeout);
     bhttp::async_read_header(stream_, buffer_, *parser_,
-                             [self = shared_from_this()](beast::error_code ec, std::size_t) { self->on_header(ec); });
+                             [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->on_header(ec); });
   }
 
   void on_header(beast::error_code ec) {
@@ -156,8 +210,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     if (too_large) return refuse_too_large();
     if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
       auto res = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::continue_, version_);
-      stream_.expires_after(kWriteTimeout);
-      return bhttp::async_write(stream_, *res, [self = shared_from_this(), res](beast::error_code ec, std::size_t) {
+      lowest().expires_after(kWriteTimeout);
+      return bhttp::async_write(stream_, *res, [self = this->shared_from_this(), res](beast::error_code ec, std::size_t) {
         if (ec) return self->close();
         self->read_body();
       });
@@ -166,9 +220,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   }
 
   void read_body() {
-    stream_.expires_after(kIdleTimeout);
+    lowest().expires_after(kIdleTimeout);
     bhttp::async_read(stream_, buffer_, *parser_,
-                      [self = shared_from_this()](beast::error_code ec, std::size_t) { self->on_request(ec); });
+                      [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->on_request(ec); });
   }
 
   void on_request(beast::error_code ec) {
@@ -241,7 +295,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     request.body = std::move(req.body());
     for (const auto& field : req) request.headers.emplace_back(lower(sv(field.name_string())), std::string(sv(field.value())));
 
-    const auto self = shared_from_this();
+    const auto self = this->shared_from_this();
     const auto executor = stream_.get_executor();
     GrpcWebEvents events{
         [self, executor](std::string frame) {
@@ -311,9 +365,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     if (chunked_) head->chunked(true);
     auto serializer = std::make_shared<bhttp::response_serializer<bhttp::empty_body>>(*head);
     writing_ = true;
-    stream_.expires_after(kWriteTimeout);
+    lowest().expires_after(kWriteTimeout);
     bhttp::async_write_header(stream_, *serializer,
-                              [self = shared_from_this(), head, serializer](beast::error_code ec, std::size_t) {
+                              [self = this->shared_from_this(), head, serializer](beast::error_code ec, std::size_t) {
                                 self->writing_ = false;
                                 if (ec) return self->close();
                                 spdlog::debug("event=http_request request=\"{}\" status=200 streaming=true", self->request_line_);
@@ -337,9 +391,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
       wire_ = std::move(next.bytes);
     }
     writing_ = true;
-    stream_.expires_after(kWriteTimeout);
+    lowest().expires_after(kWriteTimeout);
     net::async_write(stream_, net::buffer(wire_),
-                     [self = shared_from_this(), data = next.data](beast::error_code ec, std::size_t) {
+                     [self = this->shared_from_this(), data = next.data](beast::error_code ec, std::size_t) {
                        self->writing_ = false;
                        if (ec) return self->close();  // also cancels the upstream call
                        if (!data) return self->linger();
@@ -369,8 +423,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     }
     spdlog::debug("event=http_request request=\"{}\" status={}", request_line_, res.result_int());
     auto sp = std::make_shared<bhttp::response<Body>>(std::move(res));
-    stream_.expires_after(kWriteTimeout);
-    bhttp::async_write(stream_, *sp, [self = shared_from_this(), sp](beast::error_code ec, std::size_t) {
+    lowest().expires_after(kWriteTimeout);
+    bhttp::async_write(stream_, *sp, [self = this->shared_from_this(), sp](beast::error_code ec, std::size_t) {
       if (ec) return self->close();
       if (!sp->keep_alive()) return self->linger();
       self->read_request();
@@ -382,8 +436,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void start_discard_read() {
     if (discard_reading_ || closed_) return;
     discard_reading_ = true;
-    stream_.socket().async_read_some(net::buffer(discard_),
-                                     [self = shared_from_this()](beast::error_code ec, std::size_t) {
+    // Beneath TLS: bytes are only counted out, and the TLS stream may be
+    // writing a response meanwhile.
+    lowest().socket().async_read_some(net::buffer(discard_),
+                                     [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
                                        self->discard_reading_ = false;
                                        if (self->closed_) return;
                                        if (ec) return self->close();
@@ -396,13 +452,27 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // the response.
   void linger() {
     if (closed_) return;
-    beast::error_code ec;
-    stream_.socket().shutdown(tcp::socket::shutdown_send, ec);
-    if (ec) return close();
     linger_timer_.expires_after(kLingerTimeout);
-    linger_timer_.async_wait([self = shared_from_this()](beast::error_code ec) {
+    linger_timer_.async_wait([self = this->shared_from_this()](beast::error_code ec) {
       if (!ec) self->close();
     });
+    if constexpr (kTls) {
+      // HTTPS: close_notify before the FIN, so that the client sees a clean
+      // end rather than a possible truncation; the TLS shutdown waits
+      // (bounded by the timer) for the client's. Not after a stream: a read
+      // beneath TLS is already in progress (start_discard_read), and the
+      // chunked body has said where it ends.
+      if (!discard_reading_)
+        return stream_.async_shutdown([self = this->shared_from_this()](beast::error_code) { self->linger_tcp(); });
+    }
+    linger_tcp();
+  }
+
+  void linger_tcp() {
+    if (closed_) return;
+    beast::error_code ec;
+    lowest().socket().shutdown(tcp::socket::shutdown_send, ec);
+    if (ec) return close();
     start_discard_read();
   }
 
@@ -412,8 +482,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     if (call_) call_->cancel();  // its on_call_end still comes, and is dropped
     linger_timer_.cancel();
     beast::error_code ec;
-    stream_.socket().shutdown(tcp::socket::shutdown_both, ec);
-    stream_.close();
+    lowest().socket().shutdown(tcp::socket::shutdown_both, ec);
+    lowest().close();
   }
 
   struct Out {
@@ -421,7 +491,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     bool data;  // a data frame (else the trailer frame)
   };
 
-  beast::tcp_stream stream_;
+  std::shared_ptr<net::ssl::context> tls_;  // before stream_, which refers to it
+  Stream stream_;
   HttpServer::Impl& server_;
   const std::uint64_t id_;
   net::steady_timer linger_timer_;
@@ -453,12 +524,18 @@ void HttpServer::Impl::accept() {
     }
     beast::error_code ignored;
     socket.set_option(tcp::no_delay(true), ignored);  // frames go out as they come
-    std::shared_ptr<Connection> connection;
+    // Outside the lock: it may re-read the certificate files.
+    std::shared_ptr<net::ssl::context> context = tls ? tls->current() : nullptr;
+    std::shared_ptr<ConnectionBase> connection;
     {
       std::lock_guard lock(mutex);
       if (!shut_down) {
         const std::uint64_t id = next_connection++;
-        connection = std::make_shared<Connection>(std::move(socket), *this, id);
+        using TlsConnection = Connection<beast::ssl_stream<beast::tcp_stream>>;
+        if (context)
+          connection = std::make_shared<TlsConnection>(std::move(socket), std::move(context), *this, id);
+        else
+          connection = std::make_shared<Connection<beast::tcp_stream>>(std::move(socket), nullptr, *this, id);
         connections.emplace(id, connection);
       }
     }
@@ -467,8 +544,8 @@ void HttpServer::Impl::accept() {
   });
 }
 
-std::vector<std::shared_ptr<Connection>> HttpServer::Impl::live_connections() {
-  std::vector<std::shared_ptr<Connection>> out;
+std::vector<std::shared_ptr<ConnectionBase>> HttpServer::Impl::live_connections() {
+  std::vector<std::shared_ptr<ConnectionBase>> out;
   std::lock_guard lock(mutex);
   for (const auto& [id, weak] : connections)
     if (auto c = weak.lock()) out.push_back(std::move(c));
@@ -512,13 +589,20 @@ HttpServer::HttpServer(HttpOptions options, std::shared_ptr<grpc::Channel> chann
         }
       }
     });
-  spdlog::info("event=http_listening address={} web_root=\"{}\"", s.address,
+  spdlog::info("event=http_listening address={} transport={} web_root=\"{}\"", s.address,
+               !s.tls ? "plaintext" : s.options.tls.client_ca.empty() ? "https" : "https-mutual-tls",
                s.files.root() ? s.files.root()->string() : std::string());
 }
 
 HttpServer::~HttpServer() { shutdown(); }
 
 std::string HttpServer::address() const { return impl_ ? impl_->address : std::string(); }
+
+bool HttpServer::https() const { return impl_ && impl_->tls; }
+
+void HttpServer::reload_certificates() {
+  if (impl_ && impl_->tls) impl_->tls->reload();
+}
 
 void HttpServer::stop_accepting() {
   if (!impl_) return;

@@ -4,6 +4,10 @@
 // port (grpc_web_bridge.h), with CORS. Its own I/O threads; nothing blocks
 // them on gRPC (gRPC completions are posted to each connection's strand).
 //
+// With HttpOptions::tls, HTTPS only (tls_context.h): the gRPC port's
+// certificate, renewed without dropping connections; a plaintext request
+// there gets its connection closed.
+//
 // Routes: OPTIONS anything → CORS preflight (204); POST → gRPC-Web
 // (/<package.Service>/<Method>); GET/HEAD → static files (static_files.h).
 
@@ -17,6 +21,8 @@
 #include <vector>
 
 #include <grpcpp/channel.h>
+
+#include "server/http/tls_context.h"
 
 namespace filigree::server::http {
 
@@ -33,6 +39,9 @@ struct HttpOptions {
   // channel to the replica that serves it, or nullptr for the in-process
   // channel. Empty: always in-process (one machine).
   std::function<std::shared_ptr<grpc::Channel>(const std::string& session_id)> route;
+  // Certificate and key: HTTPS instead of HTTP; with client_ca, mutual TLS
+  // (browsers then need a client certificate of that CA installed).
+  HttpsFiles tls;
 };
 
 class HttpServer {
@@ -47,6 +56,16 @@ class HttpServer {
 
   // HOST:PORT with the bound port.
   std::string address() const;
+  // Serving HTTPS (options.tls given).
+  bool https() const;
+
+  // HTTPS: re-reads the certificate, key and client CA files now (they are
+  // also re-read by themselves when their modification times change, checked
+  // at most every tls.refresh). New connections get the new certificate; open
+  // ones keep theirs. Throws std::runtime_error naming the bad file, and keeps
+  // the certificate in use, if the files are not a valid pair. Plaintext:
+  // does nothing.
+  void reload_certificates();
 
   // Closes the listener; connections already open keep working.
   void stop_accepting();

@@ -2,59 +2,13 @@
 
 #include <charconv>
 
-#include <hiredis/hiredis.h>
-
+#include "server/state/redis_connection.h"
 #include "server/state/session_store.h"
 
 namespace filigree::server {
-namespace {
 
-timeval to_timeval(std::chrono::milliseconds ms) {
-  return {static_cast<time_t>(ms.count() / 1000), static_cast<suseconds_t>((ms.count() % 1000) * 1000)};
-}
-
-RedisReply convert(const redisReply& r) {
-  RedisReply out;
-  switch (r.type) {
-    case REDIS_REPLY_STRING:
-      out.type = RedisReply::Type::kString;
-      out.str.assign(r.str, r.len);
-      break;
-    case REDIS_REPLY_STATUS:
-      out.type = RedisReply::Type::kStatus;
-      out.str.assign(r.str, r.len);
-      break;
-    case REDIS_REPLY_INTEGER:
-      out.type = RedisReply::Type::kInteger;
-      out.integer = r.integer;
-      break;
-    case REDIS_REPLY_ARRAY:
-      out.type = RedisReply::Type::kArray;
-      for (std::size_t i = 0; i < r.elements; ++i) out.elements.push_back(convert(*r.element[i]));
-      break;
-    default:
-      break;
-  }
-  return out;
-}
-
-using ReplyPtr = std::unique_ptr<redisReply, void (*)(void*)>;
-
-// Sends one command, arguments binary-safe; the reply, or null if the
-// connection broke or timed out (c->errstr says why).
-ReplyPtr send_command(redisContext* c, const std::vector<std::string_view>& args) {
-  std::vector<const char*> argv;
-  std::vector<std::size_t> lengths;
-  for (const auto& a : args) argv.push_back(a.data()), lengths.push_back(a.size());
-  return ReplyPtr(static_cast<redisReply*>(redisCommandArgv(c, static_cast<int>(args.size()), argv.data(), lengths.data())),
-                  freeReplyObject);
-}
-
-}  // namespace
-
-void RedisClient::Free::operator()(redisContext* c) const { redisFree(c); }
-
-RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials)
+RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials,
+                         const RedisTlsOptions& tls)
     : address_(address), host_(address), timeout_(timeout), credentials_(std::move(credentials)) {
   const auto colon = address.rfind(':');
   if (colon != std::string::npos) {
@@ -65,6 +19,7 @@ RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds t
       throw StoreUnavailable("Redis address '" + address + "' has no valid port (HOST:PORT)");
   }
   if (host_.empty()) throw StoreUnavailable("Redis address '" + address + "' has no host (HOST:PORT)");
+  if (tls.enabled) tls_ = std::make_unique<RedisTls>(tls);
   idle_.push_back(connect());
   command({"PING"});
 }
@@ -72,23 +27,19 @@ RedisClient::RedisClient(const std::string& address, std::chrono::milliseconds t
 RedisClient::~RedisClient() = default;
 
 RedisClient::Connection RedisClient::connect() {
-  Connection c(redisConnectWithTimeout(host_.c_str(), port_, to_timeval(timeout_)));
-  if (!c) throw StoreUnavailable("cannot allocate a Redis connection");
-  if (c->err) throw StoreUnavailable("cannot connect to Redis at " + address_ + ": " + c->errstr);
-  redisSetTimeout(c.get(), to_timeval(timeout_));
-  redisEnableKeepAlive(c.get());
+  auto c = std::make_unique<RedisConnection>(host_, port_, address_, timeout_, tls_.get());
   // AUTH first, on every new connection: Redis refuses anything else until then.
   if (!credentials_.password.empty()) {
     std::vector<std::string_view> args{"AUTH"};
     if (!credentials_.user.empty()) args.push_back(credentials_.user);
     args.push_back(credentials_.password);
-    const ReplyPtr reply = send_command(c.get(), args);
-    if (!reply) throw StoreUnavailable("Redis at " + address_ + " did not answer AUTH: " + (c->err ? c->errstr : "no reply"));
+    // A broken connection throws here; the connection's messages never quote a command.
+    const RedisConnection::Answer answer = c->command(args);
     // Redis' reply (WRONGPASS …) never repeats the password, so it can be quoted.
-    if (reply->type == REDIS_REPLY_ERROR)
+    if (answer.error)
       throw StoreUnavailable("Redis at " + address_ + " refused authentication" +
                              (credentials_.user.empty() ? std::string() : " as user '" + credentials_.user + "'") +
-                             ": " + std::string(reply->str, reply->len));
+                             ": " + *answer.error);
   }
   return c;
 }
@@ -103,24 +54,21 @@ RedisReply RedisClient::command(const std::vector<std::string_view>& args) {
     }
   }
   if (!c) c = connect();
-  const ReplyPtr reply = send_command(c.get(), args);
-  if (!reply) {  // the connection is broken (or timed out): drop it
-    throw StoreUnavailable("Redis at " + address_ + " did not answer: " + (c->err ? c->errstr : "no reply"));
-  }
-  if (reply->type == REDIS_REPLY_ERROR) {
-    std::string message(reply->str, reply->len);
+  // A broken (or timed-out) connection throws, and is dropped with `c`.
+  RedisConnection::Answer answer = c->command(args);
+  {
     std::lock_guard lock(mutex_);
     idle_.push_back(std::move(c));
+  }
+  if (answer.error) {
+    const std::string& message = *answer.error;
     // Redis needs a password this client was not given: say so, not just "NOAUTH".
     if (message.rfind("NOAUTH", 0) == 0)
       throw StoreUnavailable("Redis at " + address_ + " needs authentication" +
                              (credentials_.password.empty() ? " and no password was given" : "") + ": " + message);
     throw StoreUnavailable("Redis at " + address_ + " answered an error: " + message);
   }
-  RedisReply out = convert(*reply);
-  std::lock_guard lock(mutex_);
-  idle_.push_back(std::move(c));
-  return out;
+  return std::move(answer.reply);
 }
 
 RedisReply RedisClient::eval(std::string_view script, const std::vector<std::string_view>& keys,

@@ -1,8 +1,8 @@
 #pragma once
-// A small, thread-safe Redis client over hiredis: a pool of blocking
-// connections on loopback or a LAN, each command on one connection.
-// Connection errors and timeouts throw StoreUnavailable; the broken
-// connection is dropped and the next command opens a new one. With
+// A small, thread-safe Redis client: a pool of blocking connections
+// (RedisConnection: plaintext or TLS) on loopback or a LAN, each command on
+// one connection. Connection errors and timeouts throw StoreUnavailable; the
+// broken connection is dropped and the next command opens a new one. With
 // credentials, every new connection sends AUTH before anything else.
 
 #include <chrono>
@@ -13,19 +13,12 @@
 #include <string_view>
 #include <vector>
 
-struct redisContext;
+#include "server/state/redis_reply.h"
+#include "server/state/redis_tls.h"
 
 namespace filigree::server {
 
-struct RedisReply {
-  enum class Type { kNil, kString, kInteger, kArray, kStatus };
-  Type type = Type::kNil;
-  std::string str;  // kString, kStatus
-  long long integer = 0;
-  std::vector<RedisReply> elements;
-
-  bool nil() const { return type == Type::kNil; }
-};
+class RedisConnection;
 
 // How to authenticate to Redis. No password: no AUTH. A password alone:
 // AUTH password (requirepass, or the "default" ACL user). A user too: AUTH
@@ -38,10 +31,14 @@ struct RedisCredentials {
 class RedisClient {
  public:
   // `address`: "HOST:PORT" or "HOST" (port 6379). Connects (and authenticates)
-  // at once, so a wrong address or password fails at start, not at the first
-  // request. A refused AUTH, or a Redis that needs a password when none was
-  // given (NOAUTH), throws StoreUnavailable saying so.
-  RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials = {});
+  // at once, so a wrong address, password or certificate fails at start, not
+  // at the first request. A refused AUTH, or a Redis that needs a password when
+  // none was given (NOAUTH), throws StoreUnavailable saying so. With
+  // `tls.enabled`, every connection is TLS and verifies the server (a
+  // certificate it cannot verify throws StoreUnavailable saying why).
+  // `timeout` bounds connecting and every wait for Redis.
+  RedisClient(const std::string& address, std::chrono::milliseconds timeout, RedisCredentials credentials = {},
+              const RedisTlsOptions& tls = {});
   ~RedisClient();
   RedisClient(const RedisClient&) = delete;
   RedisClient& operator=(const RedisClient&) = delete;
@@ -56,16 +53,14 @@ class RedisClient {
   const std::string& address() const { return address_; }
 
  private:
-  struct Free {
-    void operator()(redisContext* c) const;
-  };
-  using Connection = std::unique_ptr<redisContext, Free>;
+  using Connection = std::unique_ptr<RedisConnection>;
   Connection connect();
 
   std::string address_, host_;
   int port_ = 6379;
   std::chrono::milliseconds timeout_;
   RedisCredentials credentials_;
+  std::unique_ptr<RedisTls> tls_;  // null: plaintext
   std::mutex mutex_;
   std::vector<Connection> idle_;
 };

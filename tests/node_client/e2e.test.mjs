@@ -15,12 +15,15 @@
 //   FILIGREE_SERVER  path of the filigree-server binary
 //   FILIGREE_ROOT    the repository root (for the proto and tests/data)
 //
+// The last suite starts its own server with --tls-cert/--tls-key (certificates
+// made by the openssl CLI at run time) and checks grpc-js over TLS.
+//
 // Run with `node --test` (Node 18 or newer); run.sh installs the packages first.
 
 import { after, before, describe, it } from 'node:test';
 import assert from 'node:assert/strict';
-import { spawn } from 'node:child_process';
-import { mkdtempSync, readFileSync, rmSync } from 'node:fs';
+import { execFileSync, spawn } from 'node:child_process';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 import { createInterface } from 'node:readline';
@@ -53,8 +56,8 @@ const STOP_TIMEOUT_MS = 20_000;
 
 // Starts filigree-server on a free loopback port; resolves with the address
 // once it prints "listening on HOST:PORT" on stdout, rejects if it exits first.
-function startServer(binary, dataDir) {
-  const child = spawn(binary, ['--listen', '127.0.0.1:0', '--data-dir', dataDir, '--log-level', 'warn'], {
+function startServer(binary, dataDir, extraArgs = []) {
+  const child = spawn(binary, ['--listen', '127.0.0.1:0', '--data-dir', dataDir, '--log-level', 'warn', ...extraArgs], {
     stdio: ['ignore', 'pipe', 'pipe'],
   });
   let stderr = '';
@@ -770,4 +773,125 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       metadata({ 'x-session-id': 'no-such-session', 'x-filigree-token': created.viewer_token })),
     grpc.status.NOT_FOUND);
   });
+});
+
+// ------------------------------------------------------------------ TLS
+
+// A throwaway CA in `dir` (valid for a day) and, with `signer`, a server
+// certificate for 127.0.0.1 and localhost signed by it; EC keys (fast).
+function makeCert(dir, name, signer) {
+  const openssl = (...args) => execFileSync('openssl', args, { cwd: dir, stdio: ['ignore', 'ignore', 'pipe'] });
+  const newKey = ['-newkey', 'ec', '-pkeyopt', 'ec_paramgen_curve:prime256v1', '-nodes', '-subj', `/CN=${name}`,
+    '-keyout', `${name}.key`];
+  if (!signer) {
+    openssl('req', '-x509', ...newKey, '-days', '1', '-out', `${name}.pem`);
+    return;
+  }
+  openssl('req', ...newKey, '-out', `${name}.csr`);
+  writeFileSync(join(dir, `${name}.ext`), 'subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n');
+  openssl('x509', '-req', '-in', `${name}.csr`, '-CA', `${signer}.pem`, '-CAkey', `${signer}.key`, '-set_serial', '1',
+    '-days', '1', '-out', `${name}.pem`, '-extfile', `${name}.ext`);
+}
+
+describe('filigree-server with --tls-cert from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS }, () => {
+  let server;
+  let dataDir;
+  let certDir;
+  let address;
+  let filigree;     // the loaded filigree package
+  let healthPkg;
+  const clients = [];
+
+  // A client of the TLS server with `credentials`; closed in `after`. The
+  // name checked in the certificate (and sent as SNI) is localhost: an IP
+  // address is no valid SNI (RFC 6066).
+  const connect = (Service, credentials) => {
+    const c = new Service(address, credentials, { 'grpc.ssl_target_name_override': 'localhost' });
+    clients.push(c);
+    return c;
+  };
+  const trusting = () => grpc.credentials.createSsl(readFileSync(join(certDir, 'test-ca.pem')));
+  // Fail fast: a refused connection is UNAVAILABLE at once, not after the default wait.
+  const deadline = () => ({ deadline: Date.now() + 10_000 });
+
+  before(async () => {
+    assert.ok(SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
+    assert.ok(ROOT, 'set FILIGREE_ROOT to the repository root');
+    certDir = mkdtempSync(join(tmpdir(), 'filigree-node-tls-'));
+    makeCert(certDir, 'test-ca');
+    makeCert(certDir, 'other-ca');
+    makeCert(certDir, 'server', 'test-ca');
+    dataDir = mkdtempSync(join(tmpdir(), 'filigree-node-tls-data-'));
+    server = startServer(SERVER, dataDir,
+      ['--tls-cert', join(certDir, 'server.pem'), '--tls-key', join(certDir, 'server.key')]);
+    address = await server.address;
+    filigree = grpc.loadPackageDefinition(protoLoader.loadSync('filigree/v1/filigree.proto', {
+      ...LOADER_OPTIONS, includeDirs: [join(ROOT, 'proto')],
+    })).filigree.v1;
+    healthPkg = grpc.loadPackageDefinition(protoLoader.loadSync(healthCheck.protoPath, LOADER_OPTIONS)).grpc.health.v1;
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  after(async () => {
+    for (const c of clients) c.close();
+    if (server && server.child.exitCode === null && server.child.signalCode === null) {
+      server.child.kill('SIGTERM');
+      let timer;
+      const stopped = await Promise.race([
+        server.exited,
+        new Promise((resolve) => { timer = setTimeout(() => resolve(null), STOP_TIMEOUT_MS); }),
+      ]);
+      clearTimeout(timer);
+      if (stopped === null) server.child.kill('SIGKILL');
+      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
+      assert.equal(stopped.code, 0, 'filigree-server exits 0 on SIGTERM');
+    }
+    for (const dir of [dataDir, certDir]) if (dir) rmSync(dir, { recursive: true, force: true });
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  it('talks gRPC over TLS with credentials.createSsl(ca): health, an upload, a join', { timeout: TEST_TIMEOUT_MS },
+    async () => {
+      const health = connect(healthPkg.Health, trusting());
+      assert.equal((await unary(health, 'Check', { service: '' }, new grpc.Metadata())).status, 'SERVING');
+
+      const client = connect(filigree.Filigree, trusting());
+      const bytes = readFileSync(MESH);
+      const call = client.CreateSession(new grpc.Metadata());
+      const responses = collect(call);
+      await write(call, { begin: { format: 'obj', total_bytes: String(bytes.length),
+        options: { base_vertices: BASE_VERTICES }, client_name: 'node-tls' } });
+      for (let offset = 0; offset < bytes.length; offset += CHUNK_BYTES) {
+        await write(call, { chunk: bytes.subarray(offset, offset + CHUNK_BYTES) });
+      }
+      call.end();
+      const created = (await responses).find((m) => m.kind === 'created')?.created;
+      assert.ok(created, 'a Created message over TLS');
+      assert.equal(created.info.rest.vertex_count, REST_VERTICES);
+
+      const id = created.info.session_id;
+      const info = await unary(client, 'JoinSession', { session_id: id },
+        metadata({ 'x-session-id': id, 'x-filigree-token': created.viewer_token }));
+      assert.equal(info.session_id, id);
+      const list = await unary(client, 'ListSessions', {}, new grpc.Metadata());
+      assert.deepEqual(list.sessions.map((s) => s.session_id), [id]);
+    });
+
+  it('fails a plaintext client, and one that does not trust the CA, cleanly with UNAVAILABLE', { timeout: TEST_TIMEOUT_MS },
+    async () => {
+      const plaintext = connect(healthPkg.Health, grpc.credentials.createInsecure());
+      const err = await expectCode(new Promise((resolve, reject) => {
+        plaintext.Check({ service: '' }, new grpc.Metadata(), deadline(), (e, r) => (e ? reject(e) : resolve(r)));
+      }), grpc.status.UNAVAILABLE);
+      assert.ok(err.details.length > 0, 'the error says something');
+
+      const otherCa = grpc.credentials.createSsl(readFileSync(join(certDir, 'other-ca.pem')));
+      const untrusting = connect(healthPkg.Health, otherCa);
+      await expectCode(new Promise((resolve, reject) => {
+        untrusting.Check({ service: '' }, new grpc.Metadata(), deadline(), (e, r) => (e ? reject(e) : resolve(r)));
+      }), grpc.status.UNAVAILABLE);
+
+      // The server is unharmed: a trusting client on a new connection is served.
+      const health = connect(healthPkg.Health, trusting());
+      assert.equal((await unary(health, 'Check', { service: '' }, new grpc.Metadata())).status, 'SERVING');
+      assert.equal(server.child.exitCode, null, 'the server still runs');
+    });
 });

@@ -153,3 +153,57 @@ def test_plaintext_beyond_loopback_needs_insecure():
         assert refused.returncode == 1, (args, refused.stdout)
         assert flag in refused.stderr and "--insecure" in refused.stderr, refused.stderr
         assert "listening on" not in refused.stdout
+
+
+def test_sighup_renews_the_https_certificate_without_dropping_sessions(pki):
+    """The browser port's certificate is replaced on disk, SIGHUP: the next
+    HTTPS connection gets the new certificate, the session and a connection
+    opened before go on."""
+    import signal
+    import socket
+    import ssl
+
+    d = Path(tempfile.mkdtemp(prefix="filigree_sighup_", dir=pki))
+    for name in ("server.pem", "server.key"):
+        shutil.copy(pki / name, d / name)
+    server = subprocess.Popen([os.environ["FILIGREE_SERVER"], "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0",
+                               "--log-level", "info", "--tls-cert", str(d / "server.pem"), "--tls-key",
+                               str(d / "server.key")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        grpc_address = server.stdout.readline().split()[-1]
+        http_host, http_port = server.stdout.readline().split()[-1].rsplit(":", 1)
+        context = ssl.create_default_context(cafile=str(pki / "ca.pem"))
+
+        def serial() -> int:
+            with socket.create_connection((http_host, int(http_port)), timeout=30) as raw, \
+                    context.wrap_socket(raw, server_hostname="localhost") as tls:
+                return int(tls.getpeercert()["serialNumber"], 16)
+
+        before = serial()
+        client = filigree.Client(grpc_address, root_certificates=(pki / "ca.pem").read_bytes())
+        session = client.create_session(DATA / "bunny_small.obj", options=filigree.SessionOptions(base_vertices=150))
+        kept = context.wrap_socket(socket.create_connection((http_host, int(http_port)), timeout=30),
+                                   server_hostname="localhost")
+        # A renewal: a new certificate of the same CA, written over the old files.
+        for suffix in ("pem", "key"):
+            shutil.copy(pki / f"ca.{suffix}", d / f"ca.{suffix}")
+        make_cert(d, "server", "ca", "subjectAltName=IP:127.0.0.1,DNS:localhost")
+        server.send_signal(signal.SIGHUP)
+        for line in server.stderr:  # the reload is in force before this line is logged
+            assert "reload_failed" not in line, line
+            if "event=https_certificate_reloaded" in line:
+                break
+        after = serial()
+        assert after != before
+        # The connection opened before still works, and so does the session.
+        kept.sendall(f"GET / HTTP/1.1\r\nHost: {http_host}\r\n\r\n".encode())
+        assert kept.recv(12).startswith(b"HTTP/1.1")
+        kept.close()
+        with session.drive("after-renewal") as driver:
+            frame = driver.wait_for_pose(driver.send(session.base_positions), 30)
+            assert frame.pose_id >= 1
+        session.free()
+        client.close()
+    finally:
+        server.terminate()
+        server.wait(timeout=60)

@@ -7,10 +7,15 @@
 // Needs `npm run build` first (dist/); run-tests.sh does both.
 //
 // No sleeps: every wait is on a condition in the page or on a process, with a timeout.
+//
+// The last suite loads the viewer over HTTPS (--tls-cert/--tls-key, a CA made
+// by openssl at run time), the server's key pinned in Chromium.
 
 import { after, before, describe, it } from 'node:test';
 import assert from 'node:assert/strict';
-import { mkdtempSync, rmSync } from 'node:fs';
+import { execFileSync } from 'node:child_process';
+import { createHash, X509Certificate } from 'node:crypto';
+import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
@@ -341,5 +346,106 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     t.diagnostic(`T = 1e5: ${withRegions.regionCount} regions at v${withRegions.overlaysVersion}, ` +
       `${(100 * coloured).toFixed(1)}% coloured pixels; T = 0: ${(100 * without).toFixed(2)}%`);
     await page.context().close();
+  });
+});
+
+// ------------------------------------------------------------------ HTTPS
+
+// A CA valid for a day and a server certificate for 127.0.0.1 and localhost
+// signed by it, in `dir` (ca.pem, server.pem, server.key); EC keys (fast).
+function makeCertificates(dir) {
+  const openssl = (...args) => execFileSync('openssl', args, { cwd: dir, stdio: ['ignore', 'ignore', 'pipe'] });
+  const newKey = (name) => ['-newkey', 'ec', '-pkeyopt', 'ec_paramgen_curve:prime256v1', '-nodes', '-subj', `/CN=${name}`,
+    '-keyout', `${name}.key`];
+  openssl('req', '-x509', ...newKey('ca'), '-days', '1', '-out', 'ca.pem');
+  openssl('req', ...newKey('server'), '-out', 'server.csr');
+  writeFileSync(join(dir, 'server.ext'), 'subjectAltName=IP:127.0.0.1,DNS:localhost\nextendedKeyUsage=serverAuth\n');
+  openssl('x509', '-req', '-in', 'server.csr', '-CA', 'ca.pem', '-CAkey', 'ca.key', '-set_serial', '1', '-days', '1',
+    '-out', 'server.pem', '-extfile', 'server.ext');
+}
+
+// base64(SHA-256(SubjectPublicKeyInfo)): what --ignore-certificate-errors-spki-list takes.
+function spkiHash(pemFile) {
+  const der = new X509Certificate(readFileSync(pemFile)).publicKey.export({ type: 'spki', format: 'der' });
+  return createHash('sha256').update(der).digest('base64');
+}
+
+describe('the web viewer over HTTPS (--tls-cert on the --http port)', { timeout: 3 * TEST_TIMEOUT_MS }, () => {
+  let server;
+  let dataDir;
+  let certDir;
+  let baseUrl;   // https://H:P
+  let grpcAddress;
+  let browser;   // trusts the test server's key, nothing else
+  let session;
+  const tlsArgs = () => ['--tls-ca', join(certDir, 'ca.pem')];
+  const pageErrors = [];
+
+  before(async () => {
+    assert.ok(process.env.FILIGREE_SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
+    checkTools();
+    certDir = mkdtempSync(join(tmpdir(), 'filigree-viewer-tls-'));
+    makeCertificates(certDir);
+    dataDir = mkdtempSync(join(tmpdir(), 'filigree-viewer-tls-data-'));
+    server = startServer(dataDir, ['--tls-cert', join(certDir, 'server.pem'), '--tls-key', join(certDir, 'server.key')]);
+    const addresses = await server.addresses;
+    grpcAddress = addresses.grpc;
+    baseUrl = `https://${addresses.http}`;
+    session = await upload(grpcAddress, MESH, 'browser-tls-test', tlsArgs());
+    // Pinning the server's key is narrower than ignoreHTTPSErrors (any certificate).
+    browser = await chromium.launch({
+      executablePath: CHROMIUM, headless: true,
+      args: [...CHROMIUM_ARGS, `--ignore-certificate-errors-spki-list=${spkiHash(join(certDir, 'server.pem'))}`],
+    });
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  after(async () => {
+    await browser?.close();
+    if (server && server.child.exitCode === null && server.child.signalCode === null) {
+      const stopped = await stopServer(server, STOP_TIMEOUT_MS);
+      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
+      assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
+    }
+    for (const dir of [dataDir, certDir]) if (dir) rmSync(dir, { recursive: true, force: true });
+    assert.deepEqual(pageErrors, [], 'no uncaught errors in any page');
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  it('loads over https://, shows the session\'s mesh and follows a drive', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    const context = await browser.newContext({ viewport: { width: 800, height: 600 } });
+    const page = await context.newPage();
+    page.on('pageerror', (error) => pageErrors.push(`https: ${error.message}`));
+    const response = await page.goto(`${baseUrl}/?session=${session.session_id}&token=${session.viewer_token}`);
+    assert.equal(response.status(), 200);
+    assert.ok((await response.securityDetails())?.protocol?.startsWith('TLS'), 'the page came over TLS');
+    assert.deepEqual(await page.evaluate(() => [location.protocol, window.isSecureContext]), ['https:', true]);
+
+    await page.waitForFunction(() => window.__filigree?.framesApplied >= 1 && window.__filigree.framesRendered >= 1,
+      null, { timeout: WAIT_MS });
+    const joined = await hookState(page);
+    assert.equal(joined.state, 'live');
+    assert.equal(joined.vertexCount, 1839);
+    assert.equal(joined.error, null);
+    const variance = luminanceVariance(png(await page.locator('#view canvas').screenshot()));
+    assert.ok(variance > 100, `the canvas shows a mesh (luminance variance ${variance.toFixed(1)})`);
+
+    // Frames streamed over the same TLS port (gRPC-Web Watch) reach the page.
+    await cli([...driveArgs(grpcAddress, session, 'bend', 20, 30, 'browser-tls-bend'), ...tlsArgs()]);
+    await page.waitForFunction((before) => window.__filigree.framesReceived >= before + 5, joined.framesReceived,
+      { timeout: WAIT_MS });
+    const done = await hookState(page);
+    assert.ok(done.version > joined.version, `version grows over HTTPS: ${done.version} > ${joined.version}`);
+    t.diagnostic(`over ${(await response.securityDetails()).protocol}: frames received ` +
+      `${done.framesReceived - joined.framesReceived}, v${joined.version} → v${done.version}`);
+    await context.close();
+  });
+
+  it('is refused by a browser that does not trust the certificate', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const plain = await chromium.launch({ executablePath: CHROMIUM, headless: true, args: CHROMIUM_ARGS });
+    try {
+      const page = await (await plain.newContext()).newPage();
+      await assert.rejects(page.goto(`${baseUrl}/`), /ERR_CERT_AUTHORITY_INVALID/);
+    } finally {
+      await plain.close();
+    }
   });
 });

@@ -34,9 +34,10 @@ export function checkTools() {
 
 // Starts filigree-server with gRPC-Web and the viewer; `addresses` resolves
 // with both once it has printed `listening on H:P` and `http on H:P`.
-export function startServer(dataDir) {
+// `extraArgs`: more options (--tls-cert/--tls-key: HTTPS on the same port).
+export function startServer(dataDir, extraArgs = []) {
   const child = spawn(SERVER, ['--listen', '127.0.0.1:0', '--http', '127.0.0.1:0', '--web-root', WEB_ROOT,
-    '--data-dir', dataDir, '--log-level', 'warn'], { stdio: ['ignore', 'pipe', 'pipe'] });
+    '--data-dir', dataDir, '--log-level', 'warn', ...extraArgs], { stdio: ['ignore', 'pipe', 'pipe'] });
   let stderr = '';
   child.stderr.on('data', (d) => { stderr += d; });
   const exited = new Promise((done) => {
@@ -84,8 +85,9 @@ export function cli(args, timeoutMs = 60_000) {
 }
 
 // Uploads a mesh; resolves with { session_id, editor_token, viewer_token, … }.
-export async function upload(grpcAddress, mesh, name) {
-  const session = fields(await cli(['upload', mesh, '--server', grpcAddress, '--name', name]));
+// `extraArgs`: more CLI options (--tls-ca for a TLS server).
+export async function upload(grpcAddress, mesh, name, extraArgs = []) {
+  const session = fields(await cli(['upload', mesh, '--server', grpcAddress, '--name', name, ...extraArgs]));
   if (!session.session_id || !session.editor_token || !session.viewer_token) throw new Error('upload printed no session and tokens');
   return session;
 }

@@ -1,0 +1,170 @@
+// filigree-server's bounds on what outside clients may hold, end to end over
+// gRPC: --max-memory (idle sessions are evicted before an upload is refused;
+// sessions in use stay and keep working) and --upload-timeout (a stalled
+// upload ends with DEADLINE_EXCEEDED; other calls go on).
+
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+#include "support/server_process.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+using test::ServerProcess;
+
+struct Server {
+  Server(const std::filesystem::path& data_dir, std::vector<std::string> args) {
+    args.insert(args.end(), {"--data-dir", data_dir.string()});
+    process = std::make_unique<ServerProcess>(FILIGREE_SERVER_BINARY, args);
+    stub = v1::Filigree::NewStub(grpc::CreateChannel(process->address(), grpc::InsecureChannelCredentials()));
+  }
+  std::unique_ptr<ServerProcess> process;
+  std::unique_ptr<v1::Filigree::Stub> stub;
+};
+
+std::unique_ptr<grpc::ClientContext> context(const std::string& session, const std::string& token) {
+  auto c = std::make_unique<grpc::ClientContext>();
+  c->AddMetadata("x-filigree-token", token);
+  c->AddMetadata("x-session-id", session);
+  return c;
+}
+
+struct Upload {
+  grpc::Status status;
+  v1::CreateSessionResponse::Created created;
+};
+
+Upload upload(v1::Filigree::Stub& stub) {
+  const std::string bytes = test::file_bytes(test::shipped_path("bunny_small.obj"));
+  grpc::ClientContext ctx;
+  auto stream = stub.CreateSession(&ctx);
+  v1::CreateSessionRequest message;
+  message.mutable_begin()->set_format("obj");
+  message.mutable_begin()->set_total_bytes(bytes.size());
+  message.mutable_begin()->mutable_options()->set_base_vertices(150);
+  stream->Write(message);
+  message.set_chunk(bytes);
+  stream->Write(message);
+  stream->WritesDone();
+  Upload out;
+  v1::CreateSessionResponse r;
+  while (stream->Read(&r))
+    if (r.has_created()) out.created = r.created();
+  out.status = stream->Finish();
+  return out;
+}
+
+std::vector<std::string> listed(v1::Filigree::Stub& stub) {
+  grpc::ClientContext ctx;
+  v1::ListSessionsResponse list;
+  EXPECT_TRUE(stub.ListSessions(&ctx, {}, &list).ok());
+  std::vector<std::string> ids;
+  for (const auto& e : list.sessions()) ids.push_back(e.session_id());
+  return ids;
+}
+
+bool has(const std::vector<std::string>& ids, const std::string& id) {
+  return std::find(ids.begin(), ids.end(), id) != ids.end();
+}
+
+class LimitsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    data_dir_ = std::filesystem::path(::testing::TempDir()) /
+                ("filigree_limits_" + std::to_string(::getpid()) + "_" +
+                 ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(data_dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(data_dir_); }
+  std::filesystem::path data_dir_;
+};
+
+TEST_F(LimitsTest, OverMaxMemoryIdleSessionsAreEvictedFirstAndSessionsInUseStay) {
+  std::string idle_id, idle_token;
+  {
+    Server unlimited(data_dir_, {});
+    const Upload a = upload(*unlimited.stub);
+    ASSERT_TRUE(a.status.ok()) << a.status.error_message();
+    idle_id = a.created.info().session_id();
+    idle_token = a.created.editor_token();
+    ASSERT_EQ(unlimited.process->terminate(), 0);
+  }
+  // 1 MiB: any server is over it, so every upload must first evict what is idle.
+  Server limited(data_dir_, {"--max-memory", "1"});
+  ASSERT_TRUE(has(listed(*limited.stub), idle_id)) << "restored at start";
+
+  const Upload refused = upload(*limited.stub);
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.status.error_message().find("--max-memory"), std::string::npos) << refused.status.error_message();
+  EXPECT_NE(refused.status.error_message().find("after evicting 1 idle sessions"), std::string::npos)
+      << refused.status.error_message();
+  EXPECT_FALSE(has(listed(*limited.stub), idle_id)) << "the idle session was not evicted";
+
+  // Evicted, not lost: its record brings it back on the next request.
+  v1::GetStateRequest get;
+  get.set_session_id(idle_id);
+  v1::SessionState state;
+  ASSERT_TRUE(limited.stub->GetState(context(idle_id, idle_token).get(), get, &state).ok());
+  EXPECT_TRUE(has(listed(*limited.stub), idle_id));
+
+  // In use (a watcher): not evicted by the next refused upload, and it goes on.
+  grpc::ClientContext watch_context;
+  watch_context.AddMetadata("x-filigree-token", idle_token);
+  watch_context.AddMetadata("x-session-id", idle_id);
+  v1::WatchRequest watch;
+  watch.set_session_id(idle_id);
+  auto watcher = limited.stub->Watch(&watch_context, watch);
+  v1::Frame frame;
+  ASSERT_TRUE(watcher->Read(&frame));  // subscribed: the current frame came
+  EXPECT_EQ(upload(*limited.stub).status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_TRUE(has(listed(*limited.stub), idle_id)) << "a watched session was evicted";
+  v1::DriveRequest pose;
+  pose.set_session_id(idle_id);
+  pose.add_indices(3);
+  pose.add_positions(0.25f), pose.add_positions(0.5f), pose.add_positions(-0.25f);
+  v1::SubmitPoseResponse accepted;
+  ASSERT_TRUE(limited.stub->SubmitPose(context(idle_id, idle_token).get(), pose, &accepted).ok());
+  do {
+    ASSERT_TRUE(watcher->Read(&frame));
+  } while (frame.version() <= accepted.accepted_at_version());
+  watch_context.TryCancel();
+  watcher->Finish();
+}
+
+TEST_F(LimitsTest, AStalledUploadEndsAtUploadTimeoutAndOthersGoOn) {
+  Server server(data_dir_, {"--upload-timeout", "1"});
+  // An upload that says it will send bytes and never does.
+  grpc::ClientContext stalled_context;
+  auto stalled = server.stub->CreateSession(&stalled_context);
+  v1::CreateSessionRequest begin;
+  begin.mutable_begin()->set_format("obj");
+  begin.mutable_begin()->set_total_bytes(1000);
+  ASSERT_TRUE(stalled->Write(begin));
+  v1::CreateSessionRequest chunk;
+  chunk.set_chunk("v 0 0 0\n");
+  ASSERT_TRUE(stalled->Write(chunk));
+  v1::CreateSessionResponse r;
+  while (stalled->Read(&r)) {
+  }
+  const grpc::Status status = stalled->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  EXPECT_NE(status.error_message().find("--upload-timeout"), std::string::npos) << status.error_message();
+  EXPECT_NE(status.error_message().find("8 bytes came"), std::string::npos) << status.error_message();
+  // The server goes on: a whole upload is accepted (its preprocessing is not
+  // counted against the timeout), and no session came of the stalled one.
+  const Upload whole = upload(*server.stub);
+  ASSERT_TRUE(whole.status.ok()) << whole.status.error_message();
+  EXPECT_EQ(listed(*server.stub).size(), 1u);
+}
+
+}  // namespace
+}  // namespace filigree
