@@ -7,7 +7,9 @@
 #include <mutex>
 #include <optional>
 #include <sstream>
+#include <string>
 #include <thread>
+#include <utility>
 
 #include <malloc.h>
 #include <sys/resource.h>
@@ -140,21 +142,41 @@ grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t ve
   return grpc::Status::OK;
 }
 
+std::shared_ptr<void> FiligreeService::reserve_stream_place(const std::string& session_id) {
+  const std::uint64_t max = limits_.max_streams_per_session;
+  if (max == 0) return std::make_shared<int>(0);
+  // Counted and taken under one lock, so concurrent opens cannot overshoot.
+  std::lock_guard lock(places_mutex_);
+  std::uint64_t& used = stream_places_[session_id];
+  if (used >= max) return nullptr;
+  ++used;
+  // Non-null, or the slot would read as "refused"; the deleter is what matters.
+  return std::shared_ptr<void>(static_cast<void*>(this), [this, session_id](void*) {
+    std::lock_guard lock(places_mutex_);
+    if (--stream_places_[session_id] == 0) stream_places_.erase(session_id);
+  });
+}
+
 grpc::Status FiligreeService::open_stream(const Session& session, std::shared_ptr<void>* slot) {
   slot->reset();
-  // Every stream subscribes to its session: the subscribers are its streams.
-  if (limits_.max_streams_per_session != 0 && session.subscriber_count() >= limits_.max_streams_per_session)
+  std::shared_ptr<void> place = reserve_stream_place(session.id());
+  if (!place)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "session " + session.id() + " serves its maximum of " +
                                                       std::to_string(limits_.max_streams_per_session) +
                                                       " streams (--max-streams-per-session)"};
   const std::shared_ptr<const ApiKeys> keys = api_keys();
-  if (!keys || session.owner().empty()) return grpc::Status::OK;
+  if (!keys || session.owner().empty()) {
+    *slot = std::move(place);
+    return grpc::Status::OK;
+  }
   const ApiKey* key = keys->by_name(session.owner());
   const std::uint64_t limit = key ? key->quota.streams : 0;  // a key removed since: no quota left to apply
-  *slot = ledger_.open_stream(session.owner(), limit);
-  if (!*slot)
+  std::shared_ptr<void> quota = ledger_.open_stream(session.owner(), limit);
+  if (!quota)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "the sessions of API key '" + session.owner() + "' have their quota of " +
                                                       std::to_string(limit) + " streams open"};
+  // One slot holds both: released together when the stream ends.
+  *slot = std::make_shared<std::pair<std::shared_ptr<void>, std::shared_ptr<void>>>(std::move(place), std::move(quota));
   return grpc::Status::OK;
 }
 
@@ -819,6 +841,8 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
       response->set_handles_in_session(static_cast<std::uint32_t>(s->set_handles(request->client_name(), handles)));
     } catch (const PoseError& e) {
       status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+    } catch (const StoreUnavailable& e) {  // handles are journaled now
+      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
   }
   return finish_unary(context, status);

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <string>
 
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "server/api_key_ledger.h"
@@ -103,8 +104,9 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not).
   grpc::Status admit_vertices(const ApiKey& key, std::uint64_t vertices);
   // A stream on `session`: refused (RESOURCE_EXHAUSTED) when the session
-  // serves limits().max_streams_per_session already; else a slot of its
-  // owner's stream quota, held by *slot until released (null: no owner).
+  // serves limits().max_streams_per_session already or its owner's key has
+  // its quota of streams open; else *slot holds the stream's place (and
+  // quota) until it is released.
   grpc::Status open_stream(const Session& session, std::shared_ptr<void>* slot);
 
  private:
@@ -120,6 +122,11 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   int jobs_ = 0;
   unsigned preprocessing_ = 0;  // uploads preprocessing now
   bool draining_ = false;
+  // One of the session's limits().max_streams_per_session places, or null
+  // when they are all taken; released when the pointer goes.
+  std::shared_ptr<void> reserve_stream_place(const std::string& session_id);
+  std::mutex places_mutex_;
+  std::map<std::string, std::uint64_t> stream_places_;  // places taken, by session id
   struct Upload {
     std::chrono::steady_clock::time_point deadline;
     std::function<void()> expire;

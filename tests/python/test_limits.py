@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -35,11 +36,25 @@ def test_a_session_serves_at_most_max_streams_per_session():
             driver.send(session.base_positions)
             with pytest.raises(filigree.ResourceExhausted):
                 driver.next_frame(30)
+            # A stream that ends gives its place back (the server learns of
+            # the end after the client; bounded wait, as any client would).
+            first.free()
+            deadline = time.monotonic() + 30
+            while True:
+                again = session.watch()
+                try:
+                    again.next_frame(30)
+                    break
+                except filigree.ResourceExhausted:
+                    again.free()
+                    assert time.monotonic() < deadline, "a closed stream's place never came back"
+                    time.sleep(0.05)
+            again.free()
             # Other sessions are not affected.
             other = client.create_session(DATA / "bunny_small.obj", options=filigree.SessionOptions(base_vertices=150))
             with other.watch() as watcher:
                 watcher.next_frame(30)
-            for stream in (first, second, third, driver):
+            for stream in (second, third, driver):
                 stream.free()
     finally:
         server.terminate()
