@@ -1,8 +1,10 @@
 #include "server/session.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <stdexcept>
 #include <tuple>
 
 #include <spdlog/spdlog.h>
@@ -117,8 +119,35 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
     rig_ = std::move(rig);
   }
   assigned_version_ = record_.version;
+  // Handles carried over a restart or a failover, in the order they were set
+  // (the newest per vertex wins, as it did there). The live copy is handles_.
+  for (const SessionHandle& kept : record_.handles) {
+    const Vec3 target(kept.target[0], kept.target[1], kept.target[2]);
+    if (kept.vertex >= h.vertex_count() || !target.allFinite())
+      throw std::runtime_error("session " + record_.id + " record: handle of vertex " + std::to_string(kept.vertex) +
+                               " is out of range or not finite");
+    handles_[kept.vertex].push_back({target, kept.client, ++handle_stamp_});
+  }
+  // Solved handles are in the pose already: solving them again would move it
+  // (the solve starts from the current pose), which the old process would not have done.
+  handles_dirty_ = record_.handles_pending && !handles_.empty();
+  record_.handles.clear();
+  record_.handles_pending = false;
 
   deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
+  // The adaptive cut is not a function of the pose: it moves a bounded number
+  // of nodes a frame by scores it remembers. Restored, the frame below (of
+  // the recorded pose) is the old process's last one, and the next frames
+  // are the ones it would have computed; started full, they would differ by
+  // more than a frame's quantization error until the cut adapted again.
+  if (!record_.cut.empty()) {
+    try {
+      deformer_->restore_cut(record_.cut);
+    } catch (const std::invalid_argument& e) {  // a record of another hierarchy build: start full
+      spdlog::warn("session={} event=cut_not_restored error=\"{}\"", record_.id, e.what());
+    }
+    record_.cut = {};  // record() takes the live cut
+  }
   handle_solver_ = std::make_unique<HandleSolver>(h.base_mesh());
   // The current frame exists from the start: the rest mesh, or after a
   // restart the latest pose, under the version it had. Computed and encoded
@@ -392,6 +421,8 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
     if (!target.allFinite()) throw PoseError("handle target of vertex " + std::to_string(v) + " is not finite");
   }
   std::size_t count = 0;
+  std::uint64_t seq;
+  SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     if (closed_) return 0;
@@ -405,10 +436,14 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
     change.set_client_name(client_name);
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(handles.size()));
     handles_dirty_ = true;
+    // Journaled like a pose: a session that moves keeps every client's handles.
+    seq = ++journal_seq_;
+    if (journal_) progress = progress_with_change_locked();
     pending_ = true;
     maybe_compute_locked();
     touch();
   }
+  journal(progress, seq);
   return count;
 }
 
@@ -460,7 +495,21 @@ std::string Session::failure() const {
 
 SessionProgress Session::progress_with_change_locked() const {
   // The frame that will show a change made now: the next, or the one after the one computing.
-  return {record_.options, record_.pose, record_.version + in_flight_locked() + 1};
+  return {record_.options, record_.pose, record_.version + in_flight_locked() + 1, handles_locked(), handles_dirty_, {}};
+}
+
+std::vector<SessionHandle> Session::handles_locked() const {
+  // Oldest first, so that a restore gives them stamps in the same order.
+  std::vector<std::pair<std::uint64_t, SessionHandle>> stamped;
+  for (const auto& [v, entries] : handles_)
+    for (const HandleEntry& e : entries)
+      stamped.push_back({e.stamp,
+                         {v, e.client, {static_cast<float>(e.target.x()), static_cast<float>(e.target.y()), static_cast<float>(e.target.z())}}});
+  std::sort(stamped.begin(), stamped.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<SessionHandle> out;
+  out.reserve(stamped.size());
+  for (auto& [stamp, handle] : stamped) out.push_back(std::move(handle));
+  return out;
 }
 
 void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
@@ -646,6 +695,8 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       std::lock_guard lock(mutex_);
       progress.options = record_.options;
       progress.version = f.version;
+      progress.handles = handles_locked();
+      progress.handles_pending = handles_dirty_;
     }
     try {
       journal(progress, seq);
@@ -666,6 +717,8 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       for (const auto& sink : sinks) sink->close(false, std::string("the session stopped on this replica: ") + e.what());
       return false;
     }
+    // Held through the overlays: record() reads the cut this frame leaves.
+    std::lock_guard cut_lock(cut_mutex_);
     if (threshold) deformer_->set_threshold(*threshold);
     // The rest pose gives the rest mesh exactly (no 1e-16 noise to encode).
     bool at_rest = true;
@@ -847,8 +900,16 @@ v1::SessionState Session::state(v1::FrameFormat format) {
 }
 
 SessionRecord Session::record() const {
+  // No frame may change the cut between its snapshot and the copy of the
+  // pose; the O(nodes) snapshot is taken outside mutex_ (it blocks no call).
+  std::lock_guard cut_lock(cut_mutex_);
+  CutSnapshot cut = deformer_->cut_snapshot();
   std::lock_guard lock(mutex_);
-  return record_;
+  SessionRecord r = record_;
+  r.handles = handles_locked();
+  r.handles_pending = handles_dirty_;
+  r.cut = std::move(cut);
+  return r;
 }
 
 std::shared_ptr<const PublishedFrame> Session::current_frame() const {

@@ -139,8 +139,9 @@ class Session {
   void set_threshold(double threshold, bool whole_mesh);
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
   // targets); the next frame solves every client's handles into the base pose.
-  // Throws PoseError for a vertex out of range or a non-finite target.
-  // Returns the number of handles in the session after the merge.
+  // Throws PoseError for a vertex out of range or a non-finite target. With a
+  // journal, returns once the handles are journaled, and throws what the
+  // journal throws. Returns the number of handles in the session after the merge.
   std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
   // Finishes every stream; the session computes nothing more.
   void close();
@@ -157,6 +158,8 @@ class Session {
   // The merged pose and the current frame in `format` (with its keyframe
   // when chunked and sparse).
   v1::SessionState state(v1::FrameFormat format);
+  // With the handles and, for an adaptive cut, the cut of the latest frame
+  // (O(nodes): waits for a frame computing now).
   SessionRecord record() const;
   const SessionAssets& assets() const { return *assets_; }
   std::shared_ptr<const PublishedFrame> current_frame() const;
@@ -219,6 +222,8 @@ class Session {
   void journal(const SessionProgress& progress, std::uint64_t seq);
   // The progress including a change just merged, under the version of the frame that will show it.
   SessionProgress progress_with_change_locked() const;
+  // Every client's handles as kept, oldest first (mutex_ held).
+  std::vector<SessionHandle> handles_locked() const;
   // Frames assigned a version but not published yet.
   std::uint64_t in_flight_locked() const { return assigned_version_ - record_.version; }
 
@@ -232,6 +237,9 @@ class Session {
   std::unique_ptr<SkeletonPose> joint_pose_;
   std::vector<Vec3> skinned_positions_;  // the skinned base, then as floats for merge()
   std::vector<float> skinned_;
+  // cut_mutex_ guards what record() reads of the deformer (its cut) against
+  // the compute changing it; taken before mutex_, never after.
+  mutable std::mutex cut_mutex_;
   std::unique_ptr<Deformer> deformer_;
   std::unique_ptr<HandleSolver> handle_solver_;
   FrameScheduler& scheduler_;

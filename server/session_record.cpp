@@ -5,9 +5,61 @@
 #include "filigree/internal/session_record.pb.h"
 
 namespace filigree::server {
+namespace {
+
+void put_handles(const std::vector<SessionHandle>& handles, bool pending, internal::SessionRecord& p) {
+  for (const SessionHandle& h : handles) {
+    internal::SessionHandle& out = *p.add_handles();
+    out.set_vertex(h.vertex);
+    out.set_client(h.client);
+    out.set_x(h.target[0]);
+    out.set_y(h.target[1]);
+    out.set_z(h.target[2]);
+  }
+  p.set_handles_pending(pending);
+}
+
+std::vector<SessionHandle> handles_of(const internal::SessionRecord& p) {
+  std::vector<SessionHandle> out;
+  out.reserve(static_cast<std::size_t>(p.handles_size()));
+  for (const internal::SessionHandle& h : p.handles()) out.push_back({h.vertex(), h.client(), {h.x(), h.y(), h.z()}});
+  return out;
+}
+
+void put_cut(const CutSnapshot& cut, internal::SessionRecord& p) {
+  if (cut.empty()) return;  // absent: no adaptive cut to restore
+  internal::CutSnapshot& out = *p.mutable_cut();
+  out.mutable_unrecovered()->Add(cut.unrecovered.begin(), cut.unrecovered.end());
+  out.mutable_scores()->Add(cut.scores.begin(), cut.scores.end());
+  out.set_next_block(cut.next_block);
+}
+
+CutSnapshot cut_of(const internal::SessionRecord& p) {
+  CutSnapshot out;
+  if (!p.has_cut()) return out;
+  out.unrecovered.assign(p.cut().unrecovered().begin(), p.cut().unrecovered().end());
+  out.scores.assign(p.cut().scores().begin(), p.cut().scores().end());
+  out.next_block = p.cut().next_block();
+  return out;
+}
+
+}  // namespace
 
 bool is_session_id(const std::string& id) {
   return id.size() == kSessionIdLength && id.find_first_not_of("0123456789abcdef") == std::string::npos;
+}
+
+SessionProgress progress_of(const SessionRecord& r) {
+  return {r.options, r.pose, r.version, r.handles, r.handles_pending, r.cut};
+}
+
+void apply_progress(const SessionProgress& p, SessionRecord& r) {
+  r.options = p.options;
+  r.pose = p.pose;
+  r.version = p.version;
+  r.handles = p.handles;
+  r.handles_pending = p.handles_pending;
+  if (!p.cut.empty()) r.cut = p.cut;
 }
 
 std::string encode_session_record(const SessionRecord& r) {
@@ -23,6 +75,8 @@ std::string encode_session_record(const SessionRecord& r) {
   p.mutable_uploaded_ids()->Add(r.uploaded_ids.begin(), r.uploaded_ids.end());
   p.set_rig(r.rig);
   p.set_owner(r.owner);
+  put_handles(r.handles, r.handles_pending, p);
+  put_cut(r.cut, p);
   return p.SerializeAsString();
 }
 
@@ -43,6 +97,9 @@ SessionRecord decode_session_record(const std::string& bytes) {
   r.uploaded_ids.assign(p.uploaded_ids().begin(), p.uploaded_ids().end());
   r.rig = p.rig();
   r.owner = p.owner();
+  r.handles = handles_of(p);
+  r.handles_pending = p.handles_pending();
+  r.cut = cut_of(p);
   return r;
 }
 
@@ -52,15 +109,18 @@ std::string encode_session_progress(const SessionProgress& progress) {
   *p.mutable_options() = progress.options;
   p.mutable_pose()->Add(progress.pose.begin(), progress.pose.end());
   p.set_version(progress.version);
+  put_handles(progress.handles, progress.handles_pending, p);
+  put_cut(progress.cut, p);
   return p.SerializeAsString();
 }
 
 void apply_session_progress(const std::string& bytes, SessionRecord& r) {
   internal::SessionRecord p;
   if (!p.ParseFromString(bytes) || p.format_version() != 1) throw std::runtime_error("unreadable session progress");
-  r.options = p.options();
-  r.pose.assign(p.pose().begin(), p.pose().end());
-  r.version = p.version();
+  // Progress written before handles were kept has none: the same as the
+  // writer had (it dropped them on a restart too).
+  apply_progress({p.options(), {p.pose().begin(), p.pose().end()}, p.version(), handles_of(p), p.handles_pending(), cut_of(p)},
+                 r);
 }
 
 }  // namespace filigree::server

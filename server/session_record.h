@@ -2,6 +2,7 @@
 // What is kept of a session beyond one process: enough to restart it, on this
 // replica after a restart or on another after a failover (DESIGN §4).
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -9,8 +10,18 @@
 
 #include "filigree/v1/filigree.pb.h"
 #include "mesh/tri_mesh.h"
+#include "runtime/cut_snapshot.h"
 
 namespace filigree::server {
+
+// A handle as kept: the vertex, the client that set it and its target (floats
+// as SetHandles carries them, so nothing is lost).
+struct SessionHandle {
+  Index vertex = 0;
+  std::string client;
+  std::array<float, 3> target{};
+  bool operator==(const SessionHandle&) const = default;
+};
 
 struct SessionRecord {
   std::string id;
@@ -24,6 +35,11 @@ struct SessionRecord {
   std::vector<Index> uploaded_ids;  // repair's vertex map, empty if none
   std::string rig;  // serialize_rig() of the base mesh's rig; empty: no skeleton
   std::string owner;  // the API key that created it (its name); empty without --api-keys
+  // Every client's handles, oldest first (per vertex the last listed wins).
+  std::vector<SessionHandle> handles;
+  bool handles_pending = false;  // not solved into `pose` yet
+  // The adaptive cut of the frame showing `pose` (empty: none, or not taken).
+  CutSnapshot cut;
 };
 
 // Session ids are 20 lowercase hex digits (80 random bits): safe as file
@@ -37,14 +53,26 @@ struct SessionProgress {
   v1::SessionOptions options;
   std::vector<float> pose;
   std::uint64_t version = 0;
+  std::vector<SessionHandle> handles;
+  bool handles_pending = false;
+  // Empty in journaled changes (O(nodes), too large to write per change);
+  // set when a whole record is saved as progress (progress_of).
+  CutSnapshot cut;
 };
+
+// The part of `r` that progress carries, and progress applied onto a record.
+// Progress without a cut (a journaled change) keeps the record's: a cut a few
+// frames old is a valid cut, closer to the adapted one than a full cut.
+SessionProgress progress_of(const SessionRecord& r);
+void apply_progress(const SessionProgress& p, SessionRecord& r);
 
 // The record as bytes (filigree.internal.SessionRecord) and back. decode
 // throws std::runtime_error for bytes that are not a record of this format.
 std::string encode_session_record(const SessionRecord& r);
 SessionRecord decode_session_record(const std::string& bytes);
-// Progress as bytes (a record with only options, pose and version), and
-// applied onto a record; throws std::runtime_error for unreadable bytes.
+// Progress as bytes (a record with only options, pose, version, handles and
+// the cut), and applied onto a record; throws std::runtime_error for
+// unreadable bytes.
 std::string encode_session_progress(const SessionProgress& p);
 void apply_session_progress(const std::string& bytes, SessionRecord& r);
 

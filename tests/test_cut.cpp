@@ -8,6 +8,7 @@
 #include <atomic>
 #include <random>
 #include <set>
+#include <stdexcept>
 
 #include <Eigen/SparseCholesky>
 #include <gtest/gtest.h>
@@ -332,6 +333,94 @@ TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
     ASSERT_EQ(one.in_cut(), two.in_cut()) << "frame " << frame;
     for (NodeId k = 0; k < h_.node_count(); ++k) ASSERT_EQ(one.score(k), two.score(k));
   }
+}
+
+// The cut depends on its history (it moves a bounded number of nodes a frame
+// by remembered scores), so a session moved to another process carries it:
+// restored, it moves exactly as the original would have.
+TEST_P(CutTest, ARestoredCutContinuesAsTheOriginalWould) {
+  const std::size_t eval = 64 + h_.node_count() / 16, moves = 16 + h_.node_count() / 100;
+  AdaptiveCut original(h_, laplacian_, 2e4);
+  for (int frame = 0; frame < 6; ++frame) original.update(bent_result(0.2 * frame), eval, moves);
+  ASSERT_GT(original.regions().count(), 0u);
+  const CutSnapshot snapshot = original.snapshot();
+  ASSERT_FALSE(snapshot.empty());
+  EXPECT_LT(snapshot.unrecovered.size(), h_.node_count() / 2);
+
+  AdaptiveCut restored(h_, laplacian_, 2e4), fresh(h_, laplacian_, 2e4);
+  restored.restore(snapshot);
+  ASSERT_EQ(restored.in_cut(), original.in_cut());
+  expect_equal(restored.regions(), original.regions(), "restored");
+  const CutSnapshot again = restored.snapshot();
+  EXPECT_EQ(again.unrecovered, snapshot.unrecovered);
+  EXPECT_EQ(again.scores, snapshot.scores);
+  EXPECT_EQ(again.next_block, snapshot.next_block);
+
+  bool fresh_differs = false;
+  for (int frame = 6; frame < 12; ++frame) {
+    const std::vector<Vec3> x = bent_result(0.15 * frame);
+    const std::string when = "frame " + std::to_string(frame);
+    ASSERT_EQ(restored.update(x, eval, moves), original.update(x, eval, moves)) << when;
+    ASSERT_EQ(restored.in_cut(), original.in_cut()) << when;
+    expect_equal(restored.regions(), original.regions(), when);
+    for (NodeId k = 0; k < h_.node_count(); ++k) ASSERT_EQ(restored.score(k), original.score(k)) << when;
+    fresh.update(x, eval, moves);
+    fresh_differs |= fresh.in_cut() != original.in_cut();
+  }
+  // The finding behind carrying it: a cut started over is not the same cut.
+  EXPECT_TRUE(fresh_differs);
+}
+
+TEST_P(CutTest, ASnapshotOfAnotherMeshIsRefused) {
+  AdaptiveCut cut(h_, laplacian_, 2e4);
+  CutSnapshot wrong;
+  wrong.scores.assign(h_.node_count() + 1, 1.0f);
+  EXPECT_THROW(cut.restore(wrong), std::invalid_argument);
+  // Not a cut: a node whose children are recovered cannot leave it.
+  CutSnapshot parent_only;
+  parent_only.scores.assign(h_.node_count(), 0.0f);
+  for (NodeId k = 0; k < h_.node_count() && parent_only.unrecovered.empty(); ++k)
+    if (!h_.children_of(k).empty()) parent_only.unrecovered.push_back(k);
+  ASSERT_FALSE(parent_only.unrecovered.empty());
+  EXPECT_THROW(cut.restore(parent_only), std::invalid_argument);
+  EXPECT_EQ(cut.state().recovered_count(), h_.node_count());  // left full
+  // Without an adaptive T there is nothing to restore.
+  AdaptiveCut direct(h_, laplacian_, 0.0);
+  EXPECT_TRUE(direct.snapshot().empty());
+  direct.restore(wrong);
+  EXPECT_EQ(direct.state().recovered_count(), h_.node_count());
+}
+
+// What a session does after a restore: the recorded pose deformed with the
+// restored cut is the old process's last frame, and later frames match.
+TEST_P(CutTest, ADeformerWithARestoredCutGivesTheOriginalsFrames) {
+  DeformerOptions o;
+  o.threshold = 2e4;
+  const auto pose = [&](int frame) { return procedural_pose(h_.base_mesh().positions, Motion::kBend, 0.15 * frame); };
+  Deformer original(h_, o);
+  std::vector<Vec3> last;
+  for (int frame = 0; frame < 6; ++frame) last = original.deform(pose(frame)).positions;
+  Deformer restored(h_, o), fresh(h_, o);
+  restored.restore_cut(original.cut_snapshot());
+  const std::vector<Vec3> again = restored.deform(pose(5)).positions;
+  const double diagonal = bounding_box_diagonal(h_.rest_positions);
+  const auto worst = [](const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
+    double w = 0.0;
+    for (std::size_t i = 0; i < a.size(); ++i) w = std::max(w, (a[i] - b[i]).cwiseAbs().maxCoeff());
+    return w;
+  };
+  EXPECT_LE(worst(again, last), 1e-12 * diagonal);
+  double fresh_gap = 0.0;
+  fresh.deform(pose(5));
+  for (int frame = 6; frame < 10; ++frame) {
+    const DeformResult want = original.deform(pose(frame)), got = restored.deform(pose(frame));
+    EXPECT_EQ(got.stats.cut_nodes, want.stats.cut_nodes) << frame;
+    EXPECT_LE(worst(got.positions, want.positions), 1e-12 * diagonal) << frame;
+    fresh_gap = std::max(fresh_gap, worst(fresh.deform(pose(frame)).positions, want.positions));
+  }
+  // Started over, the frames differ by more than a frame's quantization
+  // error (the server's automatic target is 5e-5 of the diagonal).
+  EXPECT_GT(fresh_gap, 5e-5 * diagonal);
 }
 
 TriMesh bunny() { return test::shipped_mesh("bunny_small.obj"); }

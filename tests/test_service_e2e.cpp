@@ -475,6 +475,138 @@ TEST_F(ServiceTest, SessionsSurviveARestart) {
 namespace filigree {
 namespace {
 
+// Handles (every client's) and the adaptive cut survive a restart: two
+// sessions of one mesh get the same history; one takes its next steps before
+// the restart, the other after it, and they must agree. Each step waits for
+// its frame, so both sessions compute the same frames (no coalescing).
+TEST_F(ServiceTest, HandlesAndTheCutSurviveARestart) {
+  const Created a = upload(file_bytes(kBunny), "obj"), b = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(a.status.ok() && b.status.ok());
+  const v1::RestMesh& rest = a.created.info().rest();
+  struct Step {
+    v1::Frame frame;
+    std::uint32_t handles_in_session = 0;
+  };
+  auto watch_after = [&](const Created& c, std::uint64_t after) {
+    const std::string& id = c.created.info().session_id();
+    auto wctx = context(id, c.created.viewer_token());
+    v1::WatchRequest wr;
+    wr.set_session_id(id);
+    wr.set_after_version(after);
+    auto watch = stub_->Watch(wctx.get(), wr);
+    v1::Frame f;
+    do {
+      EXPECT_TRUE(watch->Read(&f));
+    } while (f.version() <= after);
+    wctx->TryCancel();
+    watch->Finish();
+    return f;
+  };
+  auto version_of = [&](const Created& c) {
+    v1::SessionState state;
+    v1::GetStateRequest gr;
+    gr.set_session_id(c.created.info().session_id());
+    EXPECT_TRUE(stub_->GetState(context(gr.session_id(), c.created.editor_token()).get(), gr, &state).ok());
+    return state.version();
+  };
+  auto set_handles = [&](const Created& c, const std::string& client, int vertex, const Vec3& offset) {
+    v1::SetHandlesRequest r;
+    r.set_session_id(c.created.info().session_id());
+    r.set_client_name(client);
+    v1::Handle& h = *r.add_handles();
+    h.set_vertex(vertex);
+    h.set_x(rest.positions(3 * vertex) + float(offset.x()));
+    h.set_y(rest.positions(3 * vertex + 1) + float(offset.y()));
+    h.set_z(rest.positions(3 * vertex + 2) + float(offset.z()));
+    v1::SetHandlesResponse response;
+    EXPECT_TRUE(stub_->SetHandles(context(r.session_id(), c.created.editor_token()).get(), r, &response).ok());
+    return Step{watch_after(c, response.accepted_at_version()), response.handles_in_session()};
+  };
+  auto bend = [&](const Created& c, double phase) {
+    const Pose p = procedural_pose(local_hierarchy().base_mesh().positions, Motion::kBend, phase);
+    v1::DriveRequest r;
+    r.set_session_id(c.created.info().session_id());
+    r.set_client_name("engine");
+    for (float x : pose_floats(p)) r.add_positions(x);
+    v1::SubmitPoseResponse accepted;
+    EXPECT_TRUE(stub_->SubmitPose(context(r.session_id(), c.created.editor_token()).get(), r, &accepted).ok());
+    return Step{watch_after(c, accepted.accepted_at_version()), 0};
+  };
+  auto overlays = [&](const Created& c) {
+    v1::GetOverlaysRequest req;
+    req.set_session_id(c.created.info().session_id());
+    v1::Overlays o;
+    EXPECT_TRUE(stub_->GetOverlays(context(req.session_id(), c.created.viewer_token()).get(), req, &o).ok());
+    return o;
+  };
+  // The history: an adaptive cut (T > 0), Alice's and Bob's handles, bends.
+  auto history = [&](const Created& c) {
+    v1::SetOptionsRequest so;
+    so.set_session_id(c.created.info().session_id());
+    so.set_threshold(1e5);
+    v1::SessionInfo info;
+    ASSERT_TRUE(stub_->SetOptions(context(so.session_id(), c.created.editor_token()).get(), so, &info).ok());
+    watch_after(c, info.version());
+    EXPECT_EQ(set_handles(c, "alice", 100, Vec3(0.0, 0.3, 0.0)).handles_in_session, 1u);
+    EXPECT_EQ(set_handles(c, "bob", 1500, Vec3(0.0, 0.0, 0.0)).handles_in_session, 2u);
+    for (int i = 1; i <= 4; ++i) bend(c, 0.2 * i);
+  };
+  // The steps compared: overlays asked for (a frame of the current pose
+  // follows, with them), a new pose, then Bob moves his handle (solved with
+  // Alice's, which only a restored session still has).
+  struct Steps {
+    Step pose, handles;
+    v1::Overlays overlays;
+  };
+  auto steps = [&](const Created& c) {
+    Steps out;
+    const std::uint64_t now = version_of(c);
+    overlays(c);  // the first answer may not be ready: it starts a frame that builds them
+    watch_after(c, now);
+    out.pose = bend(c, 1.3);
+    out.handles = set_handles(c, "bob", 1500, Vec3(0.1, -0.05, 0.0));
+    out.overlays = overlays(c);
+    return out;
+  };
+  history(a);
+  history(b);
+  const Steps before = steps(a);
+  ASSERT_EQ(before.handles.handles_in_session, 2u);
+  ASSERT_TRUE(before.overlays.ready());
+  ASSERT_EQ(before.overlays.version(), before.handles.frame.version());
+  ASSERT_GT(before.overlays.region_count(), 0u) << "T must have moved nodes into regions";
+  const std::uint64_t b_version = version_of(b);
+
+  EXPECT_EQ(server_->terminate(), 0);
+  start({});
+  EXPECT_EQ(version_of(b), b_version);
+  const Steps after = steps(b);
+
+  // Alice's handle is still there: Bob's replacement leaves two.
+  EXPECT_EQ(after.handles.handles_in_session, 2u);
+  // The same cut: overlays and the frames' cut statistics agree exactly.
+  ASSERT_TRUE(after.overlays.ready());
+  EXPECT_EQ(after.overlays.version(), after.handles.frame.version());
+  EXPECT_EQ(after.overlays.region_count(), before.overlays.region_count());
+  EXPECT_TRUE(std::equal(after.overlays.region_of().begin(), after.overlays.region_of().end(),
+                         before.overlays.region_of().begin(), before.overlays.region_of().end()));
+  EXPECT_TRUE(std::equal(after.overlays.cut_faces().begin(), after.overlays.cut_faces().end(),
+                         before.overlays.cut_faces().begin(), before.overlays.cut_faces().end()));
+  // The same frames, within both frames' stated quantization error (and
+  // float32 rounding of rest positions and deltas).
+  const double slack = 1e-6 * bounding_box_diagonal(local_hierarchy().rest_positions);
+  for (const auto& [got, want] : {std::pair{&after.pose.frame, &before.pose.frame}, {&after.handles.frame, &before.handles.frame}}) {
+    EXPECT_EQ(got->stats().cut_nodes(), want->stats().cut_nodes());
+    EXPECT_EQ(got->stats().regions(), want->stats().regions());
+    EXPECT_EQ(got->stats().region_vertices(), want->stats().region_vertices());
+    const std::vector<Vec3> g = decode(*got), w = decode(*want);
+    ASSERT_EQ(g.size(), w.size());
+    double worst = 0.0;
+    for (std::size_t i = 0; i < g.size(); ++i) worst = std::max(worst, (g[i] - w[i]).cwiseAbs().maxCoeff());
+    EXPECT_LE(worst, double{got->max_error()} + want->max_error() + slack) << "frame " << got->version();
+  }
+}
+
 TEST_F(ServiceTest, UnarySubmitPoseReachesWatchers) {
   const Created c = upload(file_bytes(kBunny), "obj");
   ASSERT_TRUE(c.status.ok());

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <stdexcept>
+#include <string>
 #include <cmath>
 #include <thread>
 
@@ -359,6 +361,10 @@ void AdaptiveCut::rebuild_regions() {
   update_regions(laplacian_, in_cut_, changed_, regions_);
   changed_.clear();
   moved_id_.clear();
+  sync_estimate();
+}
+
+void AdaptiveCut::sync_estimate() {
   estimate_ = regions_.performance_estimate();
   const std::size_t count = regions_.count();
   uf_parent_.resize(count);
@@ -457,6 +463,47 @@ std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t 
   }
   if (!changed_.empty()) rebuild_regions();
   return moves;
+}
+
+CutSnapshot AdaptiveCut::snapshot() const {
+  CutSnapshot out;
+  if (!adaptive()) return out;
+  for (NodeId k = 0; k < h_.node_count(); ++k)
+    if (!cut_.recovered(k)) out.unrecovered.push_back(k);
+  out.scores = score_;
+  out.next_block = next_block_;
+  return out;
+}
+
+void AdaptiveCut::restore(const CutSnapshot& snapshot) {
+  if (!adaptive() || snapshot.empty()) return;
+  const std::size_t block_count = (h_.vertex_count() + kScoreBlock - 1) / kScoreBlock;
+  if (snapshot.scores.size() != h_.node_count() || snapshot.next_block >= std::max<std::size_t>(block_count, 1))
+    throw std::invalid_argument("the cut snapshot is of another mesh (" + std::to_string(snapshot.scores.size()) +
+                                " nodes for " + std::to_string(h_.node_count()) + ")");
+  reset(threshold_);
+  try {
+    // Ascending node ids remove children before their parents (the reverse
+    // of recovery_order).
+    NodeId previous = kNone;
+    for (const NodeId k : snapshot.unrecovered) {
+      if (k >= h_.node_count() || (previous != kNone && k <= previous) || !cut_.can_remove(k))
+        throw std::invalid_argument("the cut snapshot's node " + std::to_string(k) + " cannot leave the cut");
+      cut_.remove(k);
+      in_cut_[h_.node_vertex[k]] = false;
+      previous = k;
+    }
+  } catch (const std::exception&) {
+    reset(threshold_);
+    throw;
+  }
+  score_ = snapshot.scores;
+  next_block_ = snapshot.next_block;
+  regions_ = find_regions(laplacian_, in_cut_);
+  sync_estimate();
+  // Queue membership and order follow from the cut and the scores alone
+  // (ties go to the lower node id), so this is the queues update() left.
+  for (NodeId k = 0; k < h_.node_count(); ++k) place(k);
 }
 
 std::size_t AdaptiveCut::memory_bytes() const {

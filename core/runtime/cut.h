@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "hierarchy/cut_state.h"
+#include "runtime/cut_snapshot.h"
 #include "runtime/node_heap.h"
 #include "runtime/regions.h"
 
@@ -52,6 +53,15 @@ class AdaptiveCut {
   // moves touched. Returns the nodes moved (a move undone is none).
   std::size_t update(const std::vector<Vec3>& positions, std::size_t eval_budget, std::size_t move_budget,
                      int threads = 1);
+
+  // The state update() continues from (empty unless 0 < T < ∞), and back:
+  // restore() makes this cut the snapshot's, with the queues and regions it
+  // implies, so that the next update() moves what the snapshot's cut would
+  // have moved on the same positions. A snapshot of another mesh, or of an
+  // invalid cut, throws std::invalid_argument and leaves the cut as reset()
+  // does; without an adaptive T (or with an empty snapshot) it does nothing.
+  CutSnapshot snapshot() const;
+  void restore(const CutSnapshot& snapshot);
 
   const CutState& state() const { return cut_; }
   const Regions& regions() const { return regions_; }
@@ -118,6 +128,8 @@ class AdaptiveCut {
   Index region_root(Index v);
   double delta_unrecover(NodeId k);
   void rebuild_regions();
+  // The union-find estimate from regions_ as they stand (exact).
+  void sync_estimate();
   void release_queues();
 
   const Hierarchy& h_;

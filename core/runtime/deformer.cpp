@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "geometry/best_fit_rotation.h"
 #include "geometry/cotangent_laplacian.h"
@@ -48,6 +49,9 @@ struct Deformer::State {
   RecoveryWorkspace workspace;
   std::unique_ptr<Optimised> optimised;
   std::unique_ptr<CutState> full_cut;  // cut_state() at T = 0, made when asked
+  // A restored cut is the one its frame was computed with: the next deform()
+  // must not update it again.
+  bool cut_restored = false;
 };
 
 Deformer::Deformer(std::shared_ptr<const DeformerModel> model, const DeformerOptions& options)
@@ -96,9 +100,20 @@ void Deformer::set_threshold(double threshold) {
   options_.threshold = threshold;
   if (threshold <= 0.0) {
     s_->optimised.reset();  // direct recovery only: free the cut and the factorisations
+    s_->cut_restored = false;
   } else if (s_->optimised) {
     s_->optimised->cut.set_threshold(threshold);
   }
+}
+
+CutSnapshot Deformer::cut_snapshot() const {
+  return s_->optimised ? s_->optimised->cut.snapshot() : CutSnapshot{};
+}
+
+void Deformer::restore_cut(const CutSnapshot& snapshot) {
+  if (!s_->optimised || snapshot.empty()) return;
+  s_->optimised->cut.restore(snapshot);
+  s_->cut_restored = true;
 }
 
 std::size_t Deformer::memory_bytes() const {
@@ -140,7 +155,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   Optimised& s = optimised();
   // 1. Move the cut where the last frame deformed acutely (thesis §3.3).
   auto t = Clock::now();
-  if (options_.update_cut) {
+  if (options_.update_cut && !std::exchange(s_->cut_restored, false)) {
     const std::size_t nodes = h.node_count();
     const std::size_t eval = options_.cut_eval_budget ? options_.cut_eval_budget : std::max<std::size_t>(2048, nodes / 32);
     const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(128, nodes / 256);

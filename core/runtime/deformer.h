@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "runtime/base_rotations.h"
+#include "runtime/cut_snapshot.h"
 #include "runtime/pose.h"
 
 namespace filigree {
@@ -85,6 +86,15 @@ class Deformer {
 
   // Changes T live; the cut adapts over the next frames (0 and ∞ take effect at once).
   void set_threshold(double threshold);
+  // The adaptive cut as the last frame left it (empty unless 0 < T < ∞), and
+  // back: restore_cut() takes a snapshot made by another deformer of the same
+  // model after its frame of pose P; the next deform() then uses that cut as
+  // it stands (that frame's cut update already happened), so deforming P
+  // again gives that frame, and the frames after it follow as they would
+  // have there. Throws std::invalid_argument for a snapshot of another mesh
+  // (the cut is then the full one); does nothing without an adaptive T.
+  CutSnapshot cut_snapshot() const;
+  void restore_cut(const CutSnapshot& snapshot);
   // Threads for the next frames (≥ 1; results do not depend on it).
   void set_threads(int threads);
   const DeformerOptions& options() const { return options_; }

@@ -37,9 +37,7 @@ bool FileSessionStore::save(const SessionRecord& r) {
 bool FileSessionStore::save_progress(const std::string& id, const SessionProgress& p) {
   std::optional<SessionRecord> r = load(id);
   if (!r) return false;
-  r->options = p.options;
-  r->pose = p.pose;
-  r->version = p.version;
+  apply_progress(p, *r);
   return save(*r);
 }
 

@@ -68,7 +68,7 @@ bool RedisSessionStore::create(const SessionRecord& r) {
   return redis_->eval(kCreate, {lease, session}, {options_.replica_id, bytes, lease_ms_}).integer == 1;
 }
 
-bool RedisSessionStore::save(const SessionRecord& r) { return save_progress(r.id, {r.options, r.pose, r.version}); }
+bool RedisSessionStore::save(const SessionRecord& r) { return save_progress(r.id, progress_of(r)); }
 
 bool RedisSessionStore::save_progress(const std::string& id, const SessionProgress& p) {
   const std::string lease = key("lease:", id), state = key("state:", id), bytes = encode_session_progress(p);
