@@ -86,6 +86,11 @@ int main(int argc, char** argv) {
   app.add_option("--max-vertices", service_limits.max_vertices, "Largest accepted mesh in vertices");
   app.add_option("--max-streams-per-session", service_limits.max_streams_per_session,
                  "Most streams (drivers, watchers, clips) one session serves at once; 0: no limit");
+  int max_streams_per_connection = 100;
+  app.add_option("--max-streams-per-connection", max_streams_per_connection,
+                 "Most calls one gRPC connection (HTTP/2) carries at once; more wait for one to end; 0: gRPC's default "
+                 "(no limit)")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--max-sessions", registry_limits.max_sessions, "Most sessions held at once");
   std::uint64_t max_memory_mib = 0;
   app.add_option("--max-memory", max_memory_mib,
@@ -229,6 +234,11 @@ int main(int argc, char** argv) {
     // gRPC allows SO_REUSEPORT by default: a second server started on the same
     // port by mistake would silently take half of the connections. Refuse instead.
     builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+    // One client connection cannot hold unbounded calls (each a stream's
+    // buffers and, for Watch, a writer); per connection, so unlike
+    // --max-streams-per-session it also bounds calls spread over sessions.
+    if (max_streams_per_connection > 0)
+      builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, max_streams_per_connection);
     builder.RegisterService(&service);
     std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
     if (!server || port == 0) {

@@ -26,7 +26,7 @@ class ReplicaRouter {
  private:
   SessionRegistry& registry_;
   std::mutex mutex_;
-  std::map<std::string, std::shared_ptr<grpc::Channel>> channels_;  // by address
+  std::map<std::string, std::shared_ptr<grpc::Channel>> channels_;  // by "address#connection"
 };
 
 }  // namespace filigree::server

@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <stdexcept>
@@ -39,11 +40,12 @@ namespace bhttp = boost::beast::http;
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
 
-constexpr auto kIdleTimeout = std::chrono::seconds(120);  // waiting for a request (keep-alive) or its body
-constexpr auto kWriteTimeout = std::chrono::seconds(30);  // one response or one streamed frame
+// The timeouts and limits clients see are HttpOptions'; these are internal.
 constexpr auto kLingerTimeout = std::chrono::seconds(2);  // after our FIN, for the client's
-constexpr auto kHandshakeTimeout = std::chrono::seconds(30);  // HTTPS: from accept to the end of the TLS handshake
-constexpr std::uint32_t kHeaderLimit = 16 * 1024;
+constexpr std::size_t kFirstReadBytes = 4096;  // the read that ends an idle wait
+// A refused connection's warning at most this often: under a flood, one line
+// says it (with the count), not one per connection.
+constexpr auto kRefusalLogInterval = std::chrono::seconds(10);
 
 std::string_view sv(beast::string_view s) { return {s.data(), s.size()}; }
 
@@ -84,6 +86,7 @@ struct HttpServer::Impl {
         acceptor(net::make_strand(ioc)), accept_retry(acceptor.get_executor()) {}
 
   void accept();
+  void refuse(tcp::socket& socket);
   void remove(std::uint64_t id) {
     std::lock_guard lock(mutex);
     connections.erase(id);
@@ -103,6 +106,9 @@ struct HttpServer::Impl {
   std::uint64_t next_connection = 0;
   std::unordered_map<std::uint64_t, std::weak_ptr<ConnectionBase>> connections;
   bool shut_down = false;
+  // Over max_connections (the acceptor's strand only).
+  std::uint64_t refused_since_log = 0;
+  std::chrono::steady_clock::time_point last_refusal_log{};
 
   net::io_context ioc;
   std::optional<net::executor_work_guard<net::io_context::executor_type>> work;
@@ -172,7 +178,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   // sent back inside TLS anyway, and a wrong-protocol answer would be worse.
   void handshake() {
     idle_ = true;  // shutdown closes a connection still in its handshake
-    lowest().expires_after(kHandshakeTimeout);
+    lowest().expires_after(server_.options.handshake_timeout);
     stream_.async_handshake(net::ssl::stream_base::server, [self = this->shared_from_this()](beast::error_code ec) {
       if (ec) {
         // Debug only: scanners and plaintext clients would fill the log.
@@ -185,32 +191,54 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
 
   // ---------------------------------------------------------------- reading
 
+  // Two phases, two deadlines: idle_timeout for the request's first byte,
+  // then header_timeout for the rest of its header. One deadline for both
+  // would have to be long for idle browsers, and so long for slowloris too.
   void read_request() {
     if (closed_) return;
     if (stopping_) return close();
     idle_ = true;
     parser_.emplace();
     parser_->body_limit(server_.options.max_request_bytes);
-    parser_->header_limit(kHeaderLimit);
-    lowest().expires_after(kIdleTimeout);
+    parser_->header_limit(static_cast<std::uint32_t>(
+        std::min<std::size_t>(server_.options.max_header_bytes, std::numeric_limits<std::uint32_t>::max())));
+    if (buffer_.size() > 0) return read_header();  // pipelined: the next request has begun already
+    lowest().expires_after(server_.options.idle_timeout);
+    stream_.async_read_some(buffer_.prepare(kFirstReadBytes),
+                            [self = this->shared_from_this()](beast::error_code ec, std::size_t n) {
+                              if (ec) return self->close();  // the client closed, or stayed idle too long
+                              self->buffer_.commit(n);
+                              self->read_header();
+                            });
+  }
+
+  void read_header() {
+    lowest().expires_after(server_.options.header_timeout);
     bhttp::async_read_header(stream_, buffer_, *parser_,
                              [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->on_header(ec); });
   }
 
   void on_header(beast::error_code ec) {
+    if (ec == bhttp::error::header_limit) return refuse_header_too_large();
     // body_limit here: the header is parsed, its Content-Length is over the limit.
     const bool too_large = ec == bhttp::error::body_limit;
-    if (ec && !too_large) return close();  // the client closed, timed out, or sent garbage
+    if (ec && !too_large) {
+      // Debug only: a flood of slow clients would fill the log.
+      if (ec == beast::error::timeout) spdlog::debug("event=http_timeout phase=header");
+      return close();  // the client closed, timed out, or sent garbage
+    }
     idle_ = false;
     const auto& req = parser_->get();
     version_ = req.version();
     keep_alive_ = req.keep_alive();
+    const unsigned max_requests = server_.options.max_requests_per_connection;
+    if (max_requests != 0 && ++requests_ >= max_requests) keep_alive_ = false;
     head_ = req.method() == bhttp::verb::head;
     request_line_ = std::string(sv(req.method_string())) + " " + std::string(sv(req.target()));
     if (too_large) return refuse_too_large();
     if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
       auto res = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::continue_, version_);
-      lowest().expires_after(kWriteTimeout);
+      lowest().expires_after(server_.options.write_timeout);
       return bhttp::async_write(stream_, *res, [self = this->shared_from_this(), res](beast::error_code ec, std::size_t) {
         if (ec) return self->close();
         self->read_body();
@@ -220,14 +248,17 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   }
 
   void read_body() {
-    lowest().expires_after(kIdleTimeout);
+    lowest().expires_after(server_.options.body_timeout);
     bhttp::async_read(stream_, buffer_, *parser_,
                       [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->on_request(ec); });
   }
 
   void on_request(beast::error_code ec) {
     if (ec == bhttp::error::body_limit) return refuse_too_large();
-    if (ec) return close();
+    if (ec) {
+      if (ec == beast::error::timeout) spdlog::debug("event=http_timeout phase=body request=\"{}\"", request_line_);
+      return close();
+    }
     handle(parser_->release());
   }
 
@@ -352,6 +383,18 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     send(text(bhttp::status::payload_too_large, "request body over the limit of " + std::to_string(limit) + " bytes\n"));
   }
 
+  // The header is not parsed: what it asked is unknown, so a plain answer
+  // in HTTP/1.1, and close (the rest of the header is never read).
+  void refuse_header_too_large() {
+    idle_ = false;
+    version_ = 11;
+    keep_alive_ = false;
+    head_ = false;
+    request_line_ = "(header over the limit)";
+    send(text(bhttp::status::request_header_fields_too_large,
+              "request header over the limit of " + std::to_string(server_.options.max_header_bytes) + " bytes\n"));
+  }
+
   // A server-streaming response: the header now, then a chunk per frame as
   // it arrives (flushed at once), the trailer frame, the last chunk, close.
   void begin_stream() {
@@ -365,7 +408,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     if (chunked_) head->chunked(true);
     auto serializer = std::make_shared<bhttp::response_serializer<bhttp::empty_body>>(*head);
     writing_ = true;
-    lowest().expires_after(kWriteTimeout);
+    lowest().expires_after(server_.options.write_timeout);
     bhttp::async_write_header(stream_, *serializer,
                               [self = this->shared_from_this(), head, serializer](beast::error_code ec, std::size_t) {
                                 self->writing_ = false;
@@ -391,7 +434,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
       wire_ = std::move(next.bytes);
     }
     writing_ = true;
-    lowest().expires_after(kWriteTimeout);
+    lowest().expires_after(server_.options.write_timeout);
     net::async_write(stream_, net::buffer(wire_),
                      [self = this->shared_from_this(), data = next.data](beast::error_code ec, std::size_t) {
                        self->writing_ = false;
@@ -423,7 +466,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     }
     spdlog::debug("event=http_request request=\"{}\" status={}", request_line_, res.result_int());
     auto sp = std::make_shared<bhttp::response<Body>>(std::move(res));
-    lowest().expires_after(kWriteTimeout);
+    lowest().expires_after(server_.options.write_timeout);
     bhttp::async_write(stream_, *sp, [self = this->shared_from_this(), sp](beast::error_code ec, std::size_t) {
       if (ec) return self->close();
       if (!sp->keep_alive()) return self->linger();
@@ -501,6 +544,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   unsigned version_ = 11;
   std::string request_line_;
   bool keep_alive_ = true, head_ = false, idle_ = false, stopping_ = false, closed_ = false;
+  unsigned requests_ = 0;  // begun on this connection
   // gRPC-Web
   std::shared_ptr<GrpcWebCall> call_;
   std::string unary_body_;
@@ -527,9 +571,11 @@ void HttpServer::Impl::accept() {
     // Outside the lock: it may re-read the certificate files.
     std::shared_ptr<net::ssl::context> context = tls ? tls->current() : nullptr;
     std::shared_ptr<ConnectionBase> connection;
+    bool full = false;
     {
       std::lock_guard lock(mutex);
-      if (!shut_down) {
+      full = options.max_connections != 0 && connections.size() >= options.max_connections;
+      if (!shut_down && !full) {
         const std::uint64_t id = next_connection++;
         using TlsConnection = Connection<beast::ssl_stream<beast::tcp_stream>>;
         if (context)
@@ -540,8 +586,36 @@ void HttpServer::Impl::accept() {
       }
     }
     if (connection) connection->start();
+    if (full) refuse(socket);
     accept();
   });
+}
+
+// Over max_connections: answered and closed on the acceptor's strand, never
+// read from, so that a flood costs no more than the accept. Plaintext gets a
+// 503 written into the fresh socket's (empty) send buffer; should the client
+// have sent its request already, the close may reset the connection before
+// the 503 is read, which the client sees as a failed connection all the same.
+void HttpServer::Impl::refuse(tcp::socket& socket) {
+  beast::error_code ec;
+  if (!tls) {
+    static constexpr std::string_view kBusy =
+        "HTTP/1.1 503 Service Unavailable\r\nServer: filigree-server\r\nRetry-After: 1\r\n"
+        "Content-Type: text/plain; charset=utf-8\r\nContent-Length: 26\r\nConnection: close\r\n\r\n"
+        "too many open connections\n";
+    socket.non_blocking(true, ec);
+    if (!ec) socket.write_some(net::buffer(kBusy.data(), kBusy.size()), ec);
+    socket.shutdown(tcp::socket::shutdown_send, ec);
+  }
+  socket.close(ec);
+  ++refused_since_log;
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_refusal_log >= kRefusalLogInterval) {
+    spdlog::warn("event=http_connection_refused reason=max_connections max_connections={} refused={}",
+                 options.max_connections, refused_since_log);
+    refused_since_log = 0;
+    last_refusal_log = now;
+  }
 }
 
 std::vector<std::shared_ptr<ConnectionBase>> HttpServer::Impl::live_connections() {

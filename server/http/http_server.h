@@ -34,6 +34,47 @@ struct HttpOptions {
   std::vector<std::string> grpc_web_services;
   // Largest request body; over it, gRPC-Web answers RESOURCE_EXHAUSTED, anything else 413.
   std::size_t max_request_bytes = 4u << 20;
+  // Largest request header (request line and fields). Over it: 431 and the
+  // connection closes. 16 KiB: far above what a browser sends (cookies
+  // included), and what one connection may make the server hold.
+  std::size_t max_header_bytes = 16u << 10;
+
+  // Timeouts; each closes the connection when over (a request cut short gets
+  // no answer: the timeout may be mid-request). Each is a deadline for the
+  // whole phase, not between bytes, so that a client sending one byte at a
+  // time (slowloris) is bounded by it all the same.
+  //
+  // Waiting for the first byte of a request: a new connection's first one,
+  // or the next on a kept-alive one. 60 s: browsers reuse a connection for
+  // their next call well within it; idle sockets do not pile up for long.
+  std::chrono::milliseconds idle_timeout = std::chrono::seconds(60);
+  // From the first byte of a request to the end of its header. 10 s: a
+  // header is a few hundred bytes, one round trip for any real client.
+  std::chrono::milliseconds header_timeout = std::chrono::seconds(10);
+  // From the end of the header to the end of the body. 60 s: a full
+  // max_request_bytes body at ~70 KB/s.
+  std::chrono::milliseconds body_timeout = std::chrono::seconds(60);
+  // Writing one response, or one frame of a streamed response, to a client
+  // that does not read it. 30 s. (A streamed response has no other bound:
+  // a Watch lasts as long as the browser follows it.)
+  std::chrono::milliseconds write_timeout = std::chrono::seconds(30);
+  // HTTPS: from accept to the end of the TLS handshake. 30 s: a browser may
+  // ask its user to choose a client certificate (mutual TLS) meanwhile.
+  std::chrono::milliseconds handshake_timeout = std::chrono::seconds(30);
+
+  // Requests served on one kept-alive connection; the last one's response
+  // says Connection: close. Bounds what one connection is worth to a client
+  // and lets connections move between servers behind a balancer. 1000
+  // (nginx's keepalive_requests); 0: no limit.
+  unsigned max_requests_per_connection = 1000;
+  // Connections open at once (a Watch in a browser holds one for its whole
+  // life). Beyond it a new connection is refused at once: plaintext gets a
+  // 503 with Retry-After, HTTPS is closed (an answer would need a
+  // handshake). Bounds the descriptors and memory idle or slow clients can
+  // take; the process's descriptor limit (ulimit -n) must be above it, with
+  // room for the gRPC port. 1000; 0: no limit.
+  std::size_t max_connections = 1000;
+
   int threads = 1;
   // Where a gRPC-Web call that names a session (x-session-id) goes: a
   // channel to the replica that serves it, or nullptr for the in-process
