@@ -285,48 +285,36 @@ void watch(const WatchArgs& a) {
   FrameDecoder decoder(session.rest_positions);
   std::vector<std::vector<Vec3>> frames;
   int count = 0;
-  std::uint64_t last_version = a.after;
-  // A stream that ends with UNAVAILABLE or CANCELLED (the server stopped, the session moved
-  // to another replica) is reopened from the last version seen, for up to a minute.
-  auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  std::chrono::milliseconds backoff(250);
-  while (true) {
-    auto watcher = client.watch(a.session, token, last_version);
-    bool enough = false;
-    while (auto frame = watcher->read()) {
-      const DecodedFrame d = decoder.decode(*frame);
-      last_version = d.version;
-      give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-      backoff = std::chrono::milliseconds(250);
-      std::string changes;
-      for (const auto& c : d.changes)
-        changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
-                   std::to_string(c.vertex_count());
-      std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
-                  static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
-                  changes.empty() ? "-" : changes.c_str());
-      std::fflush(stdout);
-      if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
-      if (a.frames > 0 && ++count >= a.frames) {
-        watcher->cancel();  // enough: the CANCELLED status below is ours
-        enough = true;
-        break;
-      }
+  // The Watcher reopens the stream by itself when the server goes away (a
+  // restart, the session moving to another replica), from the last version
+  // it delivered; the CLI only says so.
+  Reconnect reconnect;
+  reconnect.on_reconnect = [](const grpc::Status& why, int attempt) {
+    std::fprintf(stderr, "stream ended (%s); reconnecting, attempt %d\n", why.error_message().c_str(), attempt);
+  };
+  auto watcher = client.watch(a.session, token, a.after, std::move(reconnect));
+  bool enough = false;
+  while (auto frame = watcher->read()) {
+    const DecodedFrame d = decoder.decode(*frame);
+    std::string changes;
+    for (const auto& c : d.changes)
+      changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
+                 std::to_string(c.vertex_count());
+    std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
+                static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
+                changes.empty() ? "-" : changes.c_str());
+    std::fflush(stdout);
+    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+    if (a.frames > 0 && ++count >= a.frames) {
+      watcher->cancel();  // enough: the CANCELLED status below is ours
+      enough = true;
+      break;
     }
-    const grpc::Status status = watcher->finish();
-    if (enough) break;
-    // CANCELLED too: we did not cancel, so a server stopping did.
-    const bool retry = status.error_code() == grpc::StatusCode::UNAVAILABLE || status.error_code() == grpc::StatusCode::CANCELLED;
-    if (retry && std::chrono::steady_clock::now() < give_up) {
-      std::fprintf(stderr, "stream ended (%s); reconnecting after version %llu\n", status.error_message().c_str(),
-                   static_cast<unsigned long long>(last_version));
-      std::this_thread::sleep_for(backoff);  // retry backoff
-      backoff = std::min(backoff * 2, std::chrono::milliseconds(2000));
-      continue;
-    }
+  }
+  const grpc::Status status = watcher->finish();
+  if (!enough) {
     throw_if_error(status);
     std::fprintf(stderr, "the session was closed\n");
-    break;
   }
   if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
 }
@@ -346,11 +334,12 @@ void play(const PlayArgs& a) {
   auto stream = client.play_clip(a.session, token, a.clip, playback, a.name);
   std::vector<std::vector<Vec3>> frames;
   std::size_t bytes = 0;
+  int count = 0;  // frames received, written or not
   while (auto frame = stream->read()) {
     const DecodedFrame d = decoder.decode(*frame);
     bytes += d.encoded_bytes;
     if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
-    if (a.frames > 0 && static_cast<int>(frames.size()) >= a.frames) stream->cancel();
+    if (a.frames > 0 && ++count >= a.frames) stream->cancel();
     std::printf("version %llu  sample %llu  bytes %zu  max_error %.3g\n", static_cast<unsigned long long>(d.version),
                 static_cast<unsigned long long>(d.pose_id), d.encoded_bytes, d.max_error);
   }
