@@ -12,6 +12,8 @@
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include "filigree/client.h"
+#include "filigree/client_error.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
@@ -164,6 +166,29 @@ TEST_F(LimitsTest, AStalledUploadEndsAtUploadTimeoutAndOthersGoOn) {
   const Upload whole = upload(*server.stub);
   ASSERT_TRUE(whole.status.ok()) << whole.status.error_message();
   EXPECT_EQ(listed(*server.stub).size(), 1u);
+}
+
+TEST_F(LimitsTest, AUnaryCallToAFrozenServerEndsAtTheClientsCallTimeout) {
+  Server server(data_dir_, {});
+  const Upload made = upload(*server.stub);
+  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
+  Client client(server.process->address());
+  client.state(made.created.info().session_id(), made.created.viewer_token());  // connected, answered
+  client.set_call_timeout(std::chrono::milliseconds(300));
+  server.process->pause();  // SIGSTOP: the connection stays open, nothing answers
+  try {
+    client.list();
+    ADD_FAILURE() << "a call to a frozen server returned";
+  } catch (const ClientError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::DEADLINE_EXCEEDED) << e.what();
+  }
+  try {
+    client.state(made.created.info().session_id(), made.created.viewer_token());
+    ADD_FAILURE() << "a call to a frozen server returned";
+  } catch (const ClientError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::DEADLINE_EXCEEDED) << e.what();
+  }
+  server.process->resume();
 }
 
 }  // namespace

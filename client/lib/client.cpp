@@ -47,9 +47,11 @@ std::string new_session_id() {
 template <class Request, class Response>
 Response call(v1::Filigree::Stub& stub,
               grpc::Status (v1::Filigree::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-              const std::string& session_id, const std::string& token, const Request& request, Routing routing) {
+              const std::string& session_id, const std::string& token, const Request& request, Routing routing,
+              std::chrono::milliseconds timeout) {
   grpc::ClientContext context;
   set_session_metadata(context, session_id, token, routing);
+  context.set_deadline(std::chrono::system_clock::now() + timeout);
   Response response;
   throw_if_error((stub.*method)(&context, request, &response));
   return response;
@@ -122,14 +124,14 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {
   v1::JoinSessionRequest request;
   request.set_session_id(session_id);
-  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_));
+  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_, call_timeout_));
 }
 
 v1::SessionState Client::state(const std::string& session_id, const std::string& token) {
   v1::GetStateRequest request;
   request.set_session_id(session_id);
   request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_);
+  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_, call_timeout_);
 }
 
 void Client::set_threshold(const std::string& session_id, const std::string& token, double threshold,
@@ -138,7 +140,7 @@ void Client::set_threshold(const std::string& session_id, const std::string& tok
   request.set_session_id(session_id);
   request.set_threshold(threshold);
   request.set_whole_mesh(whole_mesh);
-  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_);
+  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_, call_timeout_);
 }
 
 std::uint32_t Client::set_handles(const std::string& session_id, const std::string& token,
@@ -157,18 +159,19 @@ std::uint32_t Client::set_handles(const std::string& session_id, const std::stri
     h->set_y(targets[i][1]);
     h->set_z(targets[i][2]);
   }
-  return call(*stub_, &v1::Filigree::Stub::SetHandles, session_id, token, request, routing_).handles_in_session();
+  return call(*stub_, &v1::Filigree::Stub::SetHandles, session_id, token, request, routing_, call_timeout_).handles_in_session();
 }
 
 void Client::close(const std::string& session_id, const std::string& token) {
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request, routing_);
+  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request, routing_, call_timeout_);
 }
 
 std::vector<v1::ListSessionsResponse::Entry> Client::list() {
   grpc::ClientContext context;
   if (!api_key_.empty()) context.AddMetadata("x-filigree-api-key", api_key_);
+  context.set_deadline(std::chrono::system_clock::now() + call_timeout_);
   v1::ListSessionsResponse response;
   throw_if_error(stub_->ListSessions(&context, v1::ListSessionsRequest(), &response));
   return {response.sessions().begin(), response.sessions().end()};
@@ -177,7 +180,7 @@ std::vector<v1::ListSessionsResponse::Entry> Client::list() {
 v1::SessionLocation Client::locate(const std::string& session_id) {
   v1::LocateSessionRequest request;
   request.set_session_id(session_id);
-  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request, routing_);
+  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request, routing_, call_timeout_);
 }
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,

@@ -5,6 +5,12 @@
 #include "filigree/call_metadata.h"
 
 namespace filigree {
+namespace {
+
+// Poses kept for re-sending (Driver::unacknowledged()), at most.
+constexpr std::size_t kMaxUnacknowledged = 4096;
+
+}  // namespace
 
 Driver::Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
                std::string client_name, Routing routing, Reconnect reconnect)
@@ -27,14 +33,20 @@ Driver::~Driver() {
 void Driver::open(std::unique_lock<std::mutex>&) {
   auto context = std::make_unique<grpc::ClientContext>();
   set_session_metadata(*context, session_id_, token_, routing_);
-  auto stream = stub_.Drive(context.get());
+  // With poses to re-send, the metadata goes with the first of them: Drive()
+  // then returns at once instead of waiting for a connection (seconds to an
+  // unreachable host) while holding mutex_, and so every send(). Without,
+  // the call must start now: a refused token shows before the first pose.
+  if (!unacknowledged_.empty() || writes_done_) context->set_initial_metadata_corked(true);
+  grpc::ClientContext* raw = context.get();
   {
+    // Installed before the call starts, so a cancel() meanwhile reaches it.
     std::lock_guard lock(cancel_mutex_);
     stream_.reset();  // the old stream goes before its context
     context_ = std::move(context);
-    if (cancelled_) context_->TryCancel();  // cancel() came while this opened
+    if (cancelled_) context_->TryCancel();
   }
-  stream_ = std::move(stream);
+  stream_ = stub_.Drive(raw);
   broken_ = false;
   // In order: the server merges them as they would have been.
   for (const v1::DriveRequest& pose : unacknowledged_) {
@@ -54,11 +66,16 @@ bool Driver::write() {
   request_.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
   std::lock_guard lock(mutex_);
   if (ended_ || writes_done_) return false;
-  // A full pose replaces every position before it, so the position poses it
-  // follows need no re-sending (joint poses stay: they are merged apart).
-  const bool full_positions = !request_.has_joints() && request_.indices_size() == 0;
-  if (full_positions) std::erase_if(unacknowledged_, [](const v1::DriveRequest& r) { return !r.has_joints(); });
-  unacknowledged_.push_back(request_);
+  if (reconnect_.enabled()) {
+    // A full pose replaces every position before it, so the position poses
+    // it follows need no re-sending (joint poses stay: they are merged apart).
+    const bool full_positions = !request_.has_joints() && request_.indices_size() == 0;
+    if (full_positions) std::erase_if(unacknowledged_, [](const v1::DriveRequest& r) { return !r.has_joints(); });
+    // Bounded, for a driver whose frames nobody reads (nothing acknowledges):
+    // past it the oldest go, and a reconnection could not re-send them.
+    if (unacknowledged_.size() >= kMaxUnacknowledged) unacknowledged_.pop_front();
+    unacknowledged_.push_back(request_);
+  }
   if (!broken_ && !stream_->Write(request_)) broken_ = true;
   // With reconnection, a pose sent into a broken stream waits for the next one.
   return !broken_ || reconnect_.enabled();
@@ -114,7 +131,9 @@ std::optional<v1::Frame> Driver::read() {
     }
     v1::Frame frame;
     if (stream->Read(&frame)) {
-      reconnect_.reset();
+      // Only a frame that answers a pose shows the link works: a server that
+      // sends its current frame and fails again must not reset the backoff.
+      if (frame.pose_id() != 0) reconnect_.reset();
       std::lock_guard lock(mutex_);
       while (!unacknowledged_.empty() && unacknowledged_.front().pose_id() <= frame.pose_id())
         unacknowledged_.pop_front();
@@ -128,8 +147,14 @@ std::optional<v1::Frame> Driver::read() {
       status = stream_->Finish();
     }
     if (!reconnect_after(status)) {
+      bool by_us;
+      {
+        std::lock_guard lock(cancel_mutex_);
+        by_us = cancelled_;
+      }
       std::lock_guard lock(mutex_);
-      status_ = status;
+      // Cancelled during a reconnection wait: that is why it ended, not the outage.
+      status_ = by_us && status.error_code() != grpc::StatusCode::OK ? grpc::Status::CANCELLED : status;
       ended_ = true;
       return std::nullopt;
     }

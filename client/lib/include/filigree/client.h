@@ -18,6 +18,7 @@
 // contract; stub() gives the raw gRPC stub for anything not wrapped here.
 
 #include <array>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -120,6 +121,11 @@ class Client {
   // The API key CreateSession and ListSessions present (x-filigree-api-key)
   // to a server started with --api-keys; empty (the default): none.
   void set_api_key(std::string key) { api_key_ = std::move(key); }
+  // How long a unary call (join, state, options, handles, close, list,
+  // locate) may take before it fails with DEADLINE_EXCEEDED, so a server
+  // that hangs (frozen, partitioned) cannot block the caller forever.
+  // Uploads and streams are not bounded by it. Default 60 s.
+  void set_call_timeout(std::chrono::milliseconds timeout) { call_timeout_ = timeout; }
 
   v1::Filigree::Stub& stub() { return *stub_; }
 
@@ -127,6 +133,7 @@ class Client {
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::Filigree::Stub> stub_;
   Routing routing_ = Routing::kLoadBalanced;
+  std::chrono::milliseconds call_timeout_{60000};
   std::string api_key_;
 };
 
