@@ -73,5 +73,14 @@ bench: build
 	$(BUILD)/bench/filigree_bench_cluster
 	$(BUILD)/bench/filigree_bench_upstream
 
+# 16 sessions driven at 30 Hz with watchers and malformed requests for
+# SOAK_SECONDS (default 600) against the just-built server; fails on a lost
+# pose, a version going backwards, an unexpected status or memory growth.
+# Not part of `make test` (which runs a 20 s smoke of it).
+SOAK_SECONDS ?= 600
+.PHONY: soak
+soak: build
+	$(BUILD)/bench/filigree_soak --seconds $(SOAK_SECONDS) --server $(BUILD)/server/filigree-server
+
 clean:
 	rm -rf $(BUILD) $(FUZZ_BUILD) out
