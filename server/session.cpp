@@ -17,6 +17,7 @@
 #include "runtime/handle_solver.h"
 #include "runtime/pose.h"
 #include "server/secret.h"
+#include "server/state/session_store.h"
 #include "skinning/animation_clip.h"
 #include "skinning/rig_file.h"
 #include "skinning/skinning.h"
@@ -204,6 +205,7 @@ void Session::merge(const PoseOrigin& origin,
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
+    if (evicted_) throw_evicted();
     if (closed_) return;
     // Handles edit on top of the skeleton: solved again from the new skinned base.
     if (skinned && !handles_.empty()) handles_dirty_ = true;
@@ -331,7 +333,10 @@ void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<st
   {
     std::lock_guard lock(mutex_);
     if (closed_) {
-      sink->close(true, {});
+      if (evicted_)
+        sink->close(false, "session " + record_.id + " left this server's memory as the stream opened: reconnect");
+      else
+        sink->close(true, {});
       return;
     }
     sinks_.push_back(sink);
@@ -425,6 +430,7 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
+    if (evicted_) throw_evicted();
     if (closed_) return 0;
     for (auto it = handles_.begin(); it != handles_.end();) {
       std::erase_if(it->second, [&](const HandleEntry& e) { return e.client == client_name; });
@@ -477,6 +483,18 @@ void Session::close() {
   for (const auto& s : sinks) s->close(true, {});
 }
 
+bool Session::evict_if_unused() {
+  std::lock_guard lock(mutex_);
+  for (const auto& w : sinks_)
+    if (!w.expired()) return false;
+  evicted_ = closed_ = stopping_ = true;
+  return true;
+}
+
+void Session::throw_evicted() const {
+  throw StoreUnavailable("session " + record_.id + " left this server's memory while the request ran: retry");
+}
+
 void Session::close_streams(const std::string& why) {
   std::vector<std::shared_ptr<FrameSink>> sinks;
   {
@@ -495,7 +513,8 @@ std::string Session::failure() const {
 
 SessionProgress Session::progress_with_change_locked() const {
   // The frame that will show a change made now: the next, or the one after the one computing.
-  return {record_.options, record_.pose, record_.version + in_flight_locked() + 1, handles_locked(), handles_dirty_, {}};
+  return {record_.options, record_.pose, record_.version + in_flight_locked() + 1, handles_locked(),
+          handles_dirty_ || handles_solving_, {}};
 }
 
 std::vector<SessionHandle> Session::handles_locked() const {
@@ -648,6 +667,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     f.version = keep_version ? record_.version : ++assigned_version_;
     if (handles_dirty_) {
       handles_dirty_ = false;
+      handles_solving_ = true;
       for (const auto& [v, entries] : handles_) {
         const auto newest = std::max_element(entries.begin(), entries.end(),
                                              [](const HandleEntry& a, const HandleEntry& b) { return a.stamp < b.stamp; });
@@ -671,12 +691,14 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     std::lock_guard lock(mutex_);
     if (!keep_version) --assigned_version_;
     keyframe_requested_ |= f.force_keyframe;  // still owed to the next frame
+    if (std::exchange(handles_solving_, false)) handles_dirty_ = true;  // solved again next frame
   };
   try {
     if (!handle_targets.empty()) {
       // Handles move the whole base pose (as-rigid-as-possible from the current one).
       pose = handle_solver_->solve(handle_targets, pose);
       std::lock_guard lock(mutex_);
+      handles_solving_ = false;
       if (journal_seq_ == seq) {
         for (std::size_t i = 0; i < m; ++i)
           for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
@@ -696,7 +718,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       progress.options = record_.options;
       progress.version = f.version;
       progress.handles = handles_locked();
-      progress.handles_pending = handles_dirty_;
+      progress.handles_pending = handles_dirty_ || handles_solving_;
     }
     try {
       journal(progress, seq);
@@ -907,7 +929,7 @@ SessionRecord Session::record() const {
   std::lock_guard lock(mutex_);
   SessionRecord r = record_;
   r.handles = handles_locked();
-  r.handles_pending = handles_dirty_;
+  r.handles_pending = handles_dirty_ || handles_solving_;
   r.cut = std::move(cut);
   return r;
 }

@@ -145,6 +145,11 @@ class Session {
   std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
   // Finishes every stream; the session computes nothing more.
   void close();
+  // Leaves this process if no stream uses it, in one step with subscribe(),
+  // merges and handle changes: those then refuse with StoreUnavailable (load
+  // the session again) rather than change a copy nobody persists. False,
+  // and nothing changes, while a stream is open.
+  bool evict_if_unused();
   // Finishes every stream with UNAVAILABLE and `why` (the server shuts down,
   // the session moves); state stays.
   void close_streams(const std::string& why);
@@ -174,6 +179,7 @@ class Session {
   std::size_t drivers() const;
 
  private:
+  [[noreturn]] void throw_evicted() const;  // mutex_ held
   // A frame between compute and publication.
   struct InFlight {
     std::uint64_t version = 0;
@@ -273,6 +279,10 @@ class Session {
   std::map<Index, std::vector<HandleEntry>> handles_;  // by vertex
   std::uint64_t handle_stamp_ = 0;
   bool handles_dirty_ = false;
+  // Handles being solved by the frame computing now: not yet in record_.pose,
+  // so a record written meanwhile must still say they are pending.
+  bool handles_solving_ = false;
+  bool evicted_ = false;  // by evict_if_unused(): requests must go to a fresh copy
   std::vector<std::weak_ptr<FrameSink>> sinks_;
   std::shared_ptr<const PublishedFrame> current_;
   std::shared_ptr<const v1::Overlays> overlays_;

@@ -263,15 +263,17 @@ void SessionRegistry::maintain() {
     } else if (e.persisted_version != s->version()) {
       persist(*s);
     }
-    if (s->subscriber_count() == 0 && s->idle_seconds() > limits_.idle_seconds) evict(id, *s, "idle");
+    if (s->idle_seconds() > limits_.idle_seconds && s->evict_if_unused()) evict(id, *s, "idle");
   }
 }
 
 void SessionRegistry::evict(const std::string& id, const Session& s, const char* why) {
+  // s.evict_if_unused() came first: nothing changes it any more.
   persist(s);
   {
     std::lock_guard lock(mutex_);
-    sessions_.erase(id);
+    const auto it = sessions_.find(id);
+    if (it != sessions_.end() && it->second.session.get() == &s) sessions_.erase(it);
   }
   if (store_.shared()) {
     try {
@@ -291,7 +293,7 @@ std::size_t SessionRegistry::evict_idle_until(const std::function<bool()>& enoug
   std::size_t evicted = 0;
   for (const auto& s : idle) {
     if (enough()) break;
-    if (s->subscriber_count() != 0) continue;  // a stream came meanwhile
+    if (!s->evict_if_unused()) continue;  // a stream came meanwhile
     evict(s->id(), *s, "memory");
     ++evicted;
   }

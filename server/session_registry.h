@@ -102,7 +102,8 @@ class SessionRegistry {
   std::shared_ptr<Session> insert(std::shared_ptr<Session> s);
   // Throws SessionElsewhere if the lease passed to another replica meanwhile; extends it otherwise.
   void confirm_lease(const std::string& id);
-  // Writes the record and removes the unused session from this process (`why`: for the log).
+  // Writes the record of a session that evict_if_unused() closed and
+  // removes it from this process (`why`: for the log).
   void evict(const std::string& id, const Session& s, const char* why);
   // Removes the session from this process (not from the store), ending its streams with `why`.
   void drop(const std::string& id, const std::string& why);

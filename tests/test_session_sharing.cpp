@@ -85,5 +85,52 @@ TEST_F(SessionSharing, HierarchyIsFreedWhenItsLastSessionCloses) {
   EXPECT_TRUE(registry_->create(h, key, {}, {}) != nullptr);
 }
 
+// A sink that remembers how it was closed.
+struct RecordingSink : FrameSink {
+  void offer(std::shared_ptr<const PublishedFrame>) override {}
+  v1::FrameFormat format() const override { return v1::FRAME_FORMAT_CHUNKED; }
+  void close(bool session_closed, const std::string& why) override {
+    closed = true;
+    as_session_closed = session_closed;
+    reason = why;
+  }
+  bool closed = false, as_session_closed = false;
+  std::string reason;
+};
+
+TEST_F(SessionSharing, AnEvictedSessionRefusesChangesInsteadOfLosingThemAndLoadsAgain) {
+  std::string key;
+  auto h = hierarchy_of(test::icosphere(3), key);
+  auto s = registry_->create(h, key, {}, {});
+  const std::vector<std::uint32_t> index{0};
+  const std::vector<float> moved{0.5f, 0.25f, -0.125f};
+  s->submit({0, "before", 1, false}, index, moved);
+
+  // In use: not evicted.
+  auto watcher = std::make_shared<RecordingSink>();
+  s->subscribe(watcher, std::nullopt);
+  EXPECT_FALSE(s->evict_if_unused());
+  s->unsubscribe(watcher.get());
+
+  // Unused: evicted in one step; a request that still holds it is refused.
+  EXPECT_EQ(registry_->evict_idle_until([] { return false; }), 1u);
+  EXPECT_THROW(s->submit({0, "late", 2, false}, index, moved), StoreUnavailable);
+  auto late = std::make_shared<RecordingSink>();
+  s->subscribe(late, std::nullopt);
+  EXPECT_TRUE(late->closed);
+  EXPECT_FALSE(late->as_session_closed) << "an evicted session is not closed for good: reconnect";
+  EXPECT_TRUE(registry_->loaded().empty());
+
+  // Its record brings it back, with the pose merged before eviction.
+  auto again = registry_->find(s->id());
+  ASSERT_TRUE(again != nullptr);
+  EXPECT_NE(again.get(), s.get());
+  const v1::SessionState state = again->state(v1::FRAME_FORMAT_CHUNKED);
+  ASSERT_GE(state.pose_size(), 3);
+  EXPECT_EQ(state.pose(0), 0.5f);
+  EXPECT_EQ(state.pose(1), 0.25f);
+  EXPECT_EQ(state.pose(2), -0.125f);
+}
+
 }  // namespace
 }  // namespace filigree::server
