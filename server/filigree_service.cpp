@@ -116,25 +116,30 @@ grpc::Status FiligreeService::check_api_key(const grpc::CallbackServerContext& c
   return grpc::Status::OK;
 }
 
-grpc::Status FiligreeService::admit_upload(const ApiKey& key) {
-  if (key.quota.sessions != 0) {
-    std::uint64_t held = 0;
-    for (const auto& s : registry_.loaded()) held += s->owner() == key.name;
-    if (held >= key.quota.sessions)
-      return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' holds its quota of " +
-                                                        std::to_string(key.quota.sessions) + " sessions"};
-  }
+grpc::Status FiligreeService::admit_upload(const ApiKey& key, std::shared_ptr<void>* pending) {
+  pending->reset();
+  std::lock_guard lock(pending_mutex_);
+  // Uploads admitted but not yet sessions count too: concurrent uploads of
+  // one key cannot all pass the same check.
+  std::uint64_t& uploading = pending_uploads_[key.name];
+  if (key.quota.sessions != 0 && registry_.holdings(key.name).sessions + uploading >= key.quota.sessions)
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' holds its quota of " +
+                                                      std::to_string(key.quota.sessions) + " sessions (uploads in " +
+                                                      "progress included)"};
   if (!ledger_.admit_upload(key.name, key.quota.uploads_per_minute))
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' made its quota of " +
                                                       std::to_string(key.quota.uploads_per_minute) + " uploads in the last minute"};
+  ++uploading;
+  *pending = std::shared_ptr<void>(static_cast<void*>(this), [this, name = key.name](void*) {
+    std::lock_guard lock(pending_mutex_);
+    if (--pending_uploads_[name] == 0) pending_uploads_.erase(name);
+  });
   return grpc::Status::OK;
 }
 
 grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t vertices) {
   if (key.quota.vertices == 0) return grpc::Status::OK;
-  std::uint64_t held = 0;
-  for (const auto& s : registry_.loaded())
-    if (s->owner() == key.name) held += s->vertex_count();
+  const std::uint64_t held = registry_.holdings(key.name).vertices;
   if (held + vertices > key.quota.vertices)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' may hold " + std::to_string(key.quota.vertices) +
                                                       " vertices; its sessions hold " + std::to_string(held) + " and this mesh has " +
@@ -276,7 +281,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     // Who may create, and how much, is settled before any byte is read.
     const ApiKey* key = nullptr;
     grpc::Status status = service_.check_api_key(*context, &keys_, &key);
-    if (status.ok() && key) status = service_.admit_upload(*key);
+    if (status.ok() && key) status = service_.admit_upload(*key, &pending_);
     if (status.ok()) status = service_.admit_memory();
     if (!status.ok()) {
       writer_.finish(status);
@@ -426,6 +431,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       }
       auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig),
                                                 key_ ? key_->name : std::string());
+      pending_.reset();  // a session now: counted by the registry
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
       *created->mutable_info() = session->info();
@@ -458,6 +464,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   FiligreeService& service_;
   std::shared_ptr<const ApiKeys> keys_;  // keeps key_ alive across a reload
   const ApiKey* key_ = nullptr;          // null: no keys configured
+  std::shared_ptr<void> pending_;        // this upload in its key's session quota until it is a session
   StreamWriter<CreateReactor, v1::CreateSessionResponse> writer_;
   v1::CreateSessionRequest request_;
   v1::CreateSessionRequest::Begin begin_;

@@ -99,8 +99,10 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   grpc::Status check_api_key(const grpc::CallbackServerContext& context, std::shared_ptr<const ApiKeys>* keys,
                              const ApiKey** key) const;
   // Quotas of `key` at the start of an upload: uploads in the last minute
-  // (recorded when admitted) and sessions held. RESOURCE_EXHAUSTED says which.
-  grpc::Status admit_upload(const ApiKey& key);
+  // (recorded when admitted) and sessions held, loaded or evicted, with the
+  // key's uploads in progress (*pending holds this one's place until it is
+  // released). RESOURCE_EXHAUSTED says which.
+  grpc::Status admit_upload(const ApiKey& key, std::shared_ptr<void>* pending);
   // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not).
   grpc::Status admit_vertices(const ApiKey& key, std::uint64_t vertices);
   // A stream on `session`: refused (RESOURCE_EXHAUSTED) when the session
@@ -125,6 +127,8 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   // One of the session's limits().max_streams_per_session places, or null
   // when they are all taken; released when the pointer goes.
   std::shared_ptr<void> reserve_stream_place(const std::string& session_id);
+  std::mutex pending_mutex_;
+  std::map<std::string, std::uint64_t> pending_uploads_;  // admitted uploads not yet sessions, by key
   std::mutex places_mutex_;
   std::map<std::string, std::uint64_t> stream_places_;  // places taken, by session id
   struct Upload {

@@ -40,6 +40,7 @@ std::shared_ptr<Session> SessionRegistry::insert(std::shared_ptr<Session> s) {
   std::lock_guard lock(mutex_);
   const auto now = Clock::now();
   const auto [it, inserted] = sessions_.emplace(s->id(), Entry{s, s->version(), now, now});
+  if (!s->owner().empty()) owned_[s->id()] = {s->owner(), s->vertex_count()};
   return it->second.session;
 }
 
@@ -152,6 +153,7 @@ void SessionRegistry::drop(const std::string& id, const std::string& why) {
     if (it == sessions_.end()) return;
     s = it->second.session;
     sessions_.erase(it);
+    owned_.erase(id);  // another replica serves it (or the next request loads it again)
   }
   s->close_streams(why);
 }
@@ -176,11 +178,23 @@ bool SessionRegistry::close(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
     sessions_.erase(id);
+    owned_.erase(id);
   }
   s->close();
   store_.remove(id);
   spdlog::info("event=session_closed session={}", id);
   return true;
+}
+
+SessionRegistry::Holdings SessionRegistry::holdings(const std::string& owner) const {
+  std::lock_guard lock(mutex_);
+  Holdings h;
+  for (const auto& [id, entry] : owned_)
+    if (entry.first == owner) {
+      ++h.sessions;
+      h.vertices += entry.second;
+    }
+  return h;
 }
 
 std::vector<std::shared_ptr<Session>> SessionRegistry::loaded() const {

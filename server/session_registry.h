@@ -6,11 +6,13 @@
 // store, the lease that makes exactly one replica compute each session.
 
 #include <chrono>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "server/hierarchy_cache.h"
@@ -73,6 +75,13 @@ class SessionRegistry {
   // Closes the session's streams and deletes its record; false if unknown.
   bool close(const std::string& id);
   std::vector<std::shared_ptr<Session>> loaded() const;
+  // What the sessions of API key `owner` hold: loaded ones and those evicted
+  // from memory (their records stay). With a shared store, the sessions this
+  // replica has served since it started.
+  struct Holdings {
+    std::uint64_t sessions = 0, vertices = 0;
+  };
+  Holdings holdings(const std::string& owner) const;
 
   // Loads every persisted session (at start; a shared store loads lazily).
   std::size_t restore();
@@ -118,6 +127,10 @@ class SessionRegistry {
   FrameScheduler scheduler_;
   mutable std::mutex mutex_;
   std::map<std::string, Entry> sessions_;
+  // Owner and vertex count of every owned session known here, loaded or
+  // evicted (for API-key quotas); entries go when the session is closed or
+  // moves to another replica.
+  std::map<std::string, std::pair<std::string, std::uint64_t>> owned_;
   std::map<std::string, std::shared_ptr<std::mutex>> loading_;
 };
 

@@ -31,10 +31,10 @@ def make_key(name: str, *quotas: str) -> tuple[str, str]:
 
 
 class KeyedServer:
-    def __init__(self, keys_file: Path) -> None:
+    def __init__(self, keys_file: Path, *extra: str) -> None:
         self.data_dir = tempfile.mkdtemp(prefix="filigree_keys_")
         self.process = subprocess.Popen([os.environ["FILIGREE_SERVER"], "--listen", "127.0.0.1:0", "--data-dir",
-                                         self.data_dir, "--log-level", "debug", "--api-keys", str(keys_file)],
+                                         self.data_dir, "--log-level", "debug", "--api-keys", str(keys_file), *extra],
                                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         line = self.process.stdout.readline()
         assert line.startswith("listening on "), line
@@ -170,3 +170,22 @@ def test_sighup_reloads_the_keys(keyed):
     server.wait_for_log("event=api_keys_reload_failed")
     with client(server, key) as frank:  # the keys in force stay
         frank.create_session(MESH, options=OPTIONS).end()
+
+
+def test_sessions_evicted_from_memory_still_count_against_their_key():
+    tmp = Path(tempfile.mkdtemp(prefix="filigree_keyfile_"))
+    key, line = make_key("frank", "--sessions", "1")
+    (tmp / "keys").write_text(line + "\n")
+    # Idle sessions leave memory after 0.2 s (their records stay).
+    server = KeyedServer(tmp / "keys", "--idle-timeout", "0.2")
+    try:
+        with client(server, key) as frank:
+            first = frank.create_session(MESH, options=OPTIONS)
+            server.wait_for_log(f"event=session_evicted session={first.id}")
+            with pytest.raises(filigree.ResourceExhausted, match="1 sessions"):
+                frank.create_session(MESH, options=OPTIONS)
+            first.end()  # loaded again to be closed: its place comes back
+            frank.create_session(MESH, options=OPTIONS)
+    finally:
+        server.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
