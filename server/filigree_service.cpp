@@ -213,6 +213,10 @@ grpc::Status FiligreeService::admit_memory() {
   if (limits_.max_memory_bytes == 0) return grpc::Status::OK;
   const auto under = [&] { return resident_bytes() < limits_.max_memory_bytes; };
   if (under()) return grpc::Status::OK;
+  // One eviction at a time: uploads arriving meanwhile wait for it and then
+  // see what it freed, rather than each evicting (and trimming) on its own.
+  std::lock_guard evicting(evict_mutex_);
+  if (under()) return grpc::Status::OK;
   const std::size_t evicted = registry_.evict_idle_until([&] {
     release_free_memory();
     return under();

@@ -127,6 +127,7 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   // One of the session's limits().max_streams_per_session places, or null
   // when they are all taken; released when the pointer goes.
   std::shared_ptr<void> reserve_stream_place(const std::string& session_id);
+  std::mutex evict_mutex_;  // admit_memory's evictions, one at a time
   std::mutex pending_mutex_;
   std::map<std::string, std::uint64_t> pending_uploads_;  // admitted uploads not yet sessions, by key
   std::mutex places_mutex_;

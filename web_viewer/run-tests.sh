@@ -21,7 +21,9 @@ fail() { echo "web_viewer: $*" >&2; exit 1; }
 [ -x "$chromium" ] || fail "no browser at $chromium: apt-get install chromium (or set CHROMIUM)"
 [ -x "$server" ] || fail "no filigree-server at $server (build it, or pass its path)"
 [ -x "$cli" ] || fail "no filigree CLI at $cli (build it, or pass its path)"
-"$server" --help | grep -q -- '--http' || fail "$server has no --http option (gRPC-Web and the viewer's files)"
+# Captured first: `--help | grep -q` would end the server's write early (SIGPIPE), a failure under pipefail.
+server_help=$("$server" --help)
+grep -q -- '--http' <<<"$server_help" || fail "$server has no --http option (gRPC-Web and the viewer's files)"
 
 bash "$here/build.sh"
 
