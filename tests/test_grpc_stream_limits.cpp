@@ -21,6 +21,7 @@
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "support/raw_socket.h"
 #include "support/server_process.h"
+#include "support/grpc_upload.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -45,23 +46,9 @@ struct Session {
 };
 
 Session upload(v1::Filigree::Stub& stub) {
-  const std::string bytes = test::file_bytes(test::shipped_path("bunny_small.obj"));
-  grpc::ClientContext ctx;
-  auto stream = stub.CreateSession(&ctx);
-  v1::CreateSessionRequest message;
-  message.mutable_begin()->set_format("obj");
-  message.mutable_begin()->set_total_bytes(bytes.size());
-  message.mutable_begin()->mutable_options()->set_base_vertices(150);
-  stream->Write(message);
-  message.set_chunk(bytes);
-  stream->Write(message);
-  stream->WritesDone();
-  Session out;
-  v1::CreateSessionResponse r;
-  while (stream->Read(&r))
-    if (r.has_created()) out = {r.created().info().session_id(), r.created().viewer_token()};
-  EXPECT_TRUE(stream->Finish().ok());
-  return out;
+  const test::Uploaded made = test::upload_mesh(stub, test::file_bytes(test::shipped_path("bunny_small.obj")), "obj", 150);
+  EXPECT_TRUE(made.status.ok()) << made.status.error_message();
+  return {made.created.info().session_id(), made.created.viewer_token()};
 }
 
 // One Watch call: opened, and its first frame (the session's current one) read.

@@ -16,6 +16,7 @@
 #include "filigree/client_error.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "support/server_process.h"
+#include "support/grpc_upload.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -40,29 +41,10 @@ std::unique_ptr<grpc::ClientContext> context(const std::string& session, const s
   return c;
 }
 
-struct Upload {
-  grpc::Status status;
-  v1::CreateSessionResponse::Created created;
-};
+using Upload = test::Uploaded;
 
 Upload upload(v1::Filigree::Stub& stub) {
-  const std::string bytes = test::file_bytes(test::shipped_path("bunny_small.obj"));
-  grpc::ClientContext ctx;
-  auto stream = stub.CreateSession(&ctx);
-  v1::CreateSessionRequest message;
-  message.mutable_begin()->set_format("obj");
-  message.mutable_begin()->set_total_bytes(bytes.size());
-  message.mutable_begin()->mutable_options()->set_base_vertices(150);
-  stream->Write(message);
-  message.set_chunk(bytes);
-  stream->Write(message);
-  stream->WritesDone();
-  Upload out;
-  v1::CreateSessionResponse r;
-  while (stream->Read(&r))
-    if (r.has_created()) out.created = r.created();
-  out.status = stream->Finish();
-  return out;
+  return test::upload_mesh(stub, test::file_bytes(test::shipped_path("bunny_small.obj")), "obj", 150);
 }
 
 std::vector<std::string> listed(v1::Filigree::Stub& stub) {

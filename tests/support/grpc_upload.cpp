@@ -1,0 +1,29 @@
+#include "support/grpc_upload.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+
+namespace filigree::test {
+
+Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
+                     std::uint32_t base_vertices) {
+  grpc::ClientContext ctx;
+  auto stream = stub.CreateSession(&ctx);
+  v1::CreateSessionRequest message;
+  message.mutable_begin()->set_format(format);
+  message.mutable_begin()->set_total_bytes(bytes.size());
+  message.mutable_begin()->mutable_options()->set_base_vertices(base_vertices);
+  stream->Write(message);
+  message.set_chunk(bytes);
+  stream->Write(message);
+  stream->WritesDone();
+  Uploaded out;
+  v1::CreateSessionResponse r;
+  while (stream->Read(&r))
+    if (r.has_created()) out.created = r.created();
+  out.status = stream->Finish();
+  return out;
+}
+
+}  // namespace filigree::test

@@ -1,0 +1,23 @@
+#pragma once
+// CreateSession over a raw stub, for end-to-end tests written against the
+// contract alone: one mesh file's bytes uploaded whole.
+
+#include <cstdint>
+#include <string>
+
+#include <grpcpp/support/status.h>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+
+namespace filigree::test {
+
+struct Uploaded {
+  grpc::Status status;
+  v1::CreateSessionResponse::Created created;  // set when status is OK
+};
+
+// Uploads `bytes` (a mesh in `format`) with `base_vertices`; waits for the end of the call.
+Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
+                     std::uint32_t base_vertices);
+
+}  // namespace filigree::test
