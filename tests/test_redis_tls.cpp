@@ -28,6 +28,7 @@
 #include "support/child_process.h"
 #include "support/server_process.h"
 #include "support/server_run.h"
+#include "support/store_errors.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -41,24 +42,8 @@ using server::StoreUnavailable;
 
 constexpr std::chrono::milliseconds kTimeout(2000);
 
-std::string random_password() {
-  std::random_device random;
-  std::string s;
-  for (int i = 0; i < 32; ++i) s += "0123456789abcdef"[random() % 16];
-  return s;
-}
-
-// The message of the StoreUnavailable that `f` throws ("" if it throws none).
-template <typename F>
-std::string store_error(F f) {
-  try {
-    f();
-  } catch (const StoreUnavailable& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no StoreUnavailable";
-  return "";
-}
+using test::random_password;
+using test::store_error;
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
