@@ -162,18 +162,7 @@ std::optional<v1::Frame> Driver::read() {
 }
 
 bool Driver::reconnect_after(const grpc::Status& status) {
-  bool by_us;
-  {
-    std::lock_guard lock(cancel_mutex_);
-    by_us = cancelled_;
-  }
-  const std::chrono::milliseconds wait = reconnect_.next(status, by_us);
-  if (wait.count() < 0) return false;
-  {
-    // The backoff is a wait a cancel() ends at once.
-    std::unique_lock lock(cancel_mutex_);
-    if (cancelled_cv_.wait_for(lock, wait, [this] { return cancelled_; })) return false;
-  }
+  if (!reconnect_.wait_to_reconnect(status, cancel_mutex_, cancelled_cv_, cancelled_)) return false;
   std::unique_lock lock(mutex_);
   open(lock);
   return true;

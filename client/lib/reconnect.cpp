@@ -27,4 +27,17 @@ std::chrono::milliseconds ReconnectSchedule::next(const grpc::Status& status, bo
   return wait;
 }
 
+bool ReconnectSchedule::wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
+                                          const bool& cancelled) {
+  bool by_us;
+  {
+    std::lock_guard lock(mutex);
+    by_us = cancelled;
+  }
+  const std::chrono::milliseconds wait = next(status, by_us);  // calls on_reconnect: not under the lock
+  if (wait.count() < 0) return false;
+  std::unique_lock lock(mutex);
+  return !cv.wait_for(lock, wait, [&] { return cancelled; });
+}
+
 }  // namespace filigree

@@ -1,7 +1,6 @@
 #include "filigree/watcher.h"
 
 #include <algorithm>
-#include <chrono>
 
 #include "filigree/call_metadata.h"
 
@@ -62,18 +61,7 @@ std::optional<v1::Frame> Watcher::read() {
 }
 
 bool Watcher::reconnect_after(const grpc::Status& status) {
-  bool by_us;
-  {
-    std::lock_guard lock(mutex_);
-    by_us = cancelled_;
-  }
-  const std::chrono::milliseconds wait = reconnect_.next(status, by_us);
-  if (wait.count() < 0) return false;
-  {
-    // The backoff is a wait a cancel() ends at once.
-    std::unique_lock lock(mutex_);
-    if (cancelled_cv_.wait_for(lock, wait, [this] { return cancelled_; })) return false;
-  }
+  if (!reconnect_.wait_to_reconnect(status, mutex_, cancelled_cv_, cancelled_)) return false;
   open();
   return true;
 }

@@ -3,7 +3,9 @@
 // away or a session moving.
 
 #include <chrono>
+#include <condition_variable>
 #include <functional>
+#include <mutex>
 
 #include <grpcpp/support/status.h>
 
@@ -32,17 +34,24 @@ class ReconnectSchedule {
  public:
   explicit ReconnectSchedule(Reconnect policy = {}) : policy_(std::move(policy)) {}
 
-  // After `status` ended the stream: the wait before the next attempt (and
-  // on_reconnect called), or a negative duration when the stream ends for
-  // good: reconnection off, a status that is not the server going away
-  // (`cancelled_by_us`: the client cancelled), or give_up_after passed.
-  std::chrono::milliseconds next(const grpc::Status& status, bool cancelled_by_us);
+  // After `status` ended the stream: whether to try again (on_reconnect is
+  // called), then the backoff: a wait that a cancel ends at once (`cancelled`
+  // is read under `mutex`; the canceller sets it under `mutex` and notifies
+  // `cv`). True: reopen the stream now; false: it ends for good.
+  bool wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
+                         const bool& cancelled);
   // A frame arrived: the next failure starts over at first_backoff.
   void reset() { attempt_ = 0; }
   void disable() { policy_.enabled = false; }
   bool enabled() const { return policy_.enabled; }
 
  private:
+  // After `status` ended the stream: the wait before the next attempt (and
+  // on_reconnect called), or a negative duration when the stream ends for
+  // good: reconnection off, a status that is not the server going away
+  // (`cancelled_by_us`: the client cancelled), or give_up_after passed.
+  std::chrono::milliseconds next(const grpc::Status& status, bool cancelled_by_us);
+
   Reconnect policy_;
   int attempt_ = 0;
   std::chrono::milliseconds backoff_{0};
