@@ -183,6 +183,9 @@ TEST_F(RedisAuth, ServerHasNoPasswordOption) {
   const ServerRun run = run_server({"--redis", address_, "--redis-password", "unused"});
   EXPECT_FALSE(run.listened);
   EXPECT_NE(run.status, 0) << run.output;
+  // Refused as an unknown option, not by Redis after using it.
+  EXPECT_NE(run.output.find("were not expected"), std::string::npos) << run.output;
+  EXPECT_EQ(run.output.find("event=fatal"), std::string::npos) << run.output;
 }
 
 }  // namespace

@@ -374,6 +374,9 @@ TEST_F(RedisTls, ServerThatCannotVerifyRedisExitsSayingWhy) {
       test::run_server(FILIGREE_SERVER_BINARY, {"--redis", address_, "--redis-tls-ca", certs_.file("ca.pem").string()});
   EXPECT_FALSE(no_flag.listened);
   EXPECT_NE(no_flag.status, 0) << no_flag.output;
+  // Refused while reading the options, not by a plaintext connection failing later.
+  EXPECT_TRUE(contains(no_flag.output, "--redis-tls-ca requires --redis-tls")) << no_flag.output;
+  EXPECT_FALSE(contains(no_flag.output, "event=fatal")) << no_flag.output;
   // A certificate without its key.
   const test::ServerRun half = test::run_server(
       FILIGREE_SERVER_BINARY, {"--redis", address_, "--redis-tls", "--redis-tls-ca", certs_.file("ca.pem").string(),

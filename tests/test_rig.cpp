@@ -340,7 +340,11 @@ TEST(RigFile, EveryFlippedByteIsAnErrorOrAValidRig) {
     std::string damaged = bytes;
     damaged[i] = static_cast<char>(damaged[i] ^ 0xA5);
     try {
-      validate_rig(deserialize_rig(damaged, "flip.rig"));
+      const Rig read = deserialize_rig(damaged, "flip.rig");
+      validate_rig(read);
+      // Accepted: then it is the rig those bytes encode, nothing dropped or guessed.
+      EXPECT_EQ(serialize_rig(read), damaged) << "byte " << i << " accepted but read as another rig";
+      EXPECT_GE(i, 4u) << "a damaged magic was accepted";
     } catch (const RigError& e) {
       ASSERT_EQ(std::string(e.what()).rfind("flip.rig: ", 0), 0u) << e.what();
       ++errors;

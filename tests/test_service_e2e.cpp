@@ -495,9 +495,10 @@ TEST_F(ServiceTest, HandlesAndTheCutSurviveARestart) {
     wr.set_after_version(after);
     auto watch = stub_->Watch(wctx.get(), wr);
     v1::Frame f;
-    do {
-      EXPECT_TRUE(watch->Read(&f));
-    } while (f.version() <= after);
+    bool read = false;
+    while ((read = watch->Read(&f)) && f.version() <= after) {
+    }
+    EXPECT_TRUE(read) << "the watch ended before a frame after version " << after;
     wctx->TryCancel();
     watch->Finish();
     return f;
@@ -676,9 +677,11 @@ TEST_F(ServiceTest, HandlesOfSeveralClientsMergeIntoTheBasePose) {
     wr.set_after_version(v);
     auto watch = stub_->Watch(wctx.get(), wr);
     v1::Frame f;
-    do {
-      EXPECT_TRUE(watch->Read(&f));
-    } while (f.version() <= v);  // after_version 0 also yields the current frame first
+    bool read = false;
+    // after_version 0 also yields the current frame first.
+    while ((read = watch->Read(&f)) && f.version() <= v) {
+    }
+    EXPECT_TRUE(read) << "the watch ended before a frame after version " << v;
     wctx->TryCancel();
     watch->Finish();
     EXPECT_TRUE(stub_->GetState(context(id, editor).get(), gr, &state).ok());

@@ -60,12 +60,15 @@ TEST(SessionRecordTest, ProgressCarriesHandlesAndAppliesOntoARecord) {
   change.handles.clear();
   change.handles_pending = false;
   change.version = 9;
+  change.pose = {4, 5, 6};
   apply_session_progress(encode_session_progress(change), target);
+  EXPECT_EQ(target.pose, change.pose);
   EXPECT_TRUE(target.handles.empty());
   EXPECT_FALSE(target.handles_pending);
   EXPECT_EQ(target.version, 9u);
   EXPECT_EQ(target.cut.unrecovered, r.cut.unrecovered);
   EXPECT_EQ(target.cut.scores, r.cut.scores);
+  EXPECT_EQ(target.cut.next_block, r.cut.next_block);
   // The file store's path (progress applied directly) agrees.
   SessionRecord direct = r;
   apply_progress(change, direct);

@@ -320,6 +320,18 @@ TEST(GltfSkin, SeveralSkinnedPrimitivesNodeTransformsAndSixInfluences) {
   EXPECT_LT((out[0] - Vec3(0, 0, 10)).norm(), 1e-6);
   EXPECT_LT((out[1] - Vec3(0, 1, 10)).norm(), 1e-6);
   EXPECT_LT((out[6] - Vec3(0, 5, 0)).norm(), 1e-12);
+
+  // Turn only the tip 90° about z: the joints now disagree, so the weights
+  // decide. Both primitives weigh root and tip 0.5 each (the second through
+  // six influences over two sets), so a vertex lands halfway between where
+  // each joint takes it. Vertex 0 (0,0,10): root keeps it, the tip takes it
+  // to (1,-1,10). Vertex 3 (2,0,10): root keeps it, the tip takes it to (1,1,10).
+  SkeletonPose bend = SkeletonPose::rest(rig);
+  bend.local[1].rotation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Vec3::UnitZ()));
+  skin(rig, model_transforms(rig, bend), SkinningMethod::kLinearBlend, out);
+  EXPECT_LT((out[0] - Vec3(0.5, -0.5, 10)).norm(), 1e-6);
+  EXPECT_LT((out[3] - Vec3(1.5, 0.5, 10)).norm(), 1e-6);
+  EXPECT_LT((out[1] - Vec3(1, 0, 10)).norm(), 1e-6);  // at the tip joint: both keep it
 }
 
 void expect_refused(HandMadeGltf& file, const std::string& fragment) {

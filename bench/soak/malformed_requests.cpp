@@ -173,20 +173,22 @@ void MalformedRequests::run() {
 
 grpc::Status MalformedRequests::send(std::size_t kind, const SessionHandle& s) {
   const std::size_t m = s.mesh.base_vertex_count();
+  // A pose of the session, made malformed by the case that uses it.
+  const auto pose = [&] {
+    v1::DriveRequest r;
+    r.set_session_id(s.session_id);
+    r.set_pose_id(1);
+    r.set_client_name("soak-malformed");
+    return r;
+  };
   switch (kind) {
     case 0: {
-      v1::DriveRequest r;
-      r.set_session_id(s.session_id);
-      r.set_pose_id(1);
-      r.set_client_name("soak-malformed");
+      v1::DriveRequest r = pose();
       r.mutable_positions()->Assign(s.mesh.base_positions.begin(), s.mesh.base_positions.end() - 3);  // one vertex short
       return drive_once(*stub_, s, r);
     }
     case 1: {
-      v1::DriveRequest r;
-      r.set_session_id(s.session_id);
-      r.set_pose_id(1);
-      r.set_client_name("soak-malformed");
+      v1::DriveRequest r = pose();
       r.mutable_positions()->Assign(s.mesh.base_positions.begin(), s.mesh.base_positions.end());
       r.set_positions(static_cast<int>(m), std::nanf(""));  // every coordinate but one is fine
       grpc::ClientContext context;
@@ -195,10 +197,7 @@ grpc::Status MalformedRequests::send(std::size_t kind, const SessionHandle& s) {
       return stub_->SubmitPose(&context, r, &response);
     }
     case 2: {
-      v1::DriveRequest r;
-      r.set_session_id(s.session_id);
-      r.set_pose_id(1);
-      r.set_client_name("soak-malformed");
+      v1::DriveRequest r = pose();
       r.add_indices(static_cast<std::uint32_t>(m));  // one past the last base vertex
       for (int k = 0; k < 3; ++k) r.add_positions(0.0f);
       return drive_once(*stub_, s, r);
@@ -220,9 +219,7 @@ grpc::Status MalformedRequests::send(std::size_t kind, const SessionHandle& s) {
       return stub_->JoinSession(&context, r, &info);
     }
     case 5: {
-      v1::DriveRequest r;
-      r.set_session_id(s.session_id);
-      r.set_pose_id(1);
+      v1::DriveRequest r = pose();  // well formed, but sent with the viewer token
       r.mutable_positions()->Assign(s.mesh.base_positions.begin(), s.mesh.base_positions.end());
       grpc::ClientContext context;
       prepare(context, s.session_id, s.viewer_token);

@@ -99,6 +99,24 @@ function startServer(binary, dataDir, extraArgs = []) {
   return { child, address, exited };
 }
 
+// SIGTERM, bounded: a server that does not stop is killed and the caller fails;
+// it must exit 0 (drained), not by a signal.
+async function stopServer(server) {
+  if (!server || server.child.pid === undefined || server.child.exitCode !== null || server.child.signalCode !== null)
+    return;
+  server.child.kill('SIGTERM');
+  let timer;
+  const stopped = await Promise.race([
+    server.exited,
+    new Promise((resolve) => { timer = setTimeout(() => resolve(null), STOP_TIMEOUT_MS); }),
+  ]);
+  clearTimeout(timer);
+  if (stopped === null) server.child.kill('SIGKILL');
+  assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
+  assert.equal(stopped.signal, null, 'filigree-server was not killed by a signal');
+  assert.equal(stopped.code, 0, 'filigree-server exits 0 on SIGTERM');
+}
+
 function metadata(entries) {
   const md = new grpc.Metadata();
   for (const [key, value] of Object.entries(entries)) md.set(key, value);
@@ -467,22 +485,11 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     for (const call of openCalls) call.cancel();
     client?.close();
     health?.close();
-    if (server && server.child.pid !== undefined && server.child.exitCode === null && server.child.signalCode === null) {
-      server.child.kill('SIGTERM');
-      // Bounded: a server that does not stop on SIGTERM is killed and the hook fails.
-      let timer;
-      const stopped = await Promise.race([
-        server.exited,
-        new Promise((resolve) => { timer = setTimeout(() => resolve(null), STOP_TIMEOUT_MS); }),
-      ]);
-      clearTimeout(timer);
-      if (stopped === null) server.child.kill('SIGKILL');
-      rmSync(dataDir, { recursive: true, force: true });
-      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-      assert.equal(stopped.signal, null, 'filigree-server was not killed by a signal');
-      assert.equal(stopped.code, 0, 'filigree-server exits 0 on SIGTERM');
+    try {
+      await stopServer(server);
+    } finally {
+      if (dataDir) rmSync(dataDir, { recursive: true, force: true });
     }
-    if (dataDir) rmSync(dataDir, { recursive: true, force: true });
   }, { timeout: HOOK_TIMEOUT_MS });
 
   it('answers the standard health check with SERVING', { timeout: TEST_TIMEOUT_MS }, async () => {
@@ -833,19 +840,11 @@ describe('filigree-server with --tls-cert from a grpc-js client', { timeout: 5 *
 
   after(async () => {
     for (const c of clients) c.close();
-    if (server && server.child.exitCode === null && server.child.signalCode === null) {
-      server.child.kill('SIGTERM');
-      let timer;
-      const stopped = await Promise.race([
-        server.exited,
-        new Promise((resolve) => { timer = setTimeout(() => resolve(null), STOP_TIMEOUT_MS); }),
-      ]);
-      clearTimeout(timer);
-      if (stopped === null) server.child.kill('SIGKILL');
-      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-      assert.equal(stopped.code, 0, 'filigree-server exits 0 on SIGTERM');
+    try {
+      await stopServer(server);
+    } finally {
+      for (const dir of [dataDir, certDir]) if (dir) rmSync(dir, { recursive: true, force: true });
     }
-    for (const dir of [dataDir, certDir]) if (dir) rmSync(dir, { recursive: true, force: true });
   }, { timeout: HOOK_TIMEOUT_MS });
 
   it('talks gRPC over TLS with credentials.createSsl(ca): health, an upload, a join', { timeout: TEST_TIMEOUT_MS },
