@@ -11,7 +11,6 @@
 #include <thread>
 #include <utility>
 
-#include <malloc.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -380,7 +379,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       // Parsing, repair and preprocessing free tens to hundreds of MB that
       // glibc would otherwise keep in this thread's arena: give them back, so
       // the server's resident memory is what its sessions hold.
-      ::malloc_trim(0);
+      release_free_memory();
       service_.end_job();
       writer_.finish(status);  // the last touch of this reactor from the job
     });

@@ -458,6 +458,7 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
+    if (evicted_) throw_evicted();
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
@@ -514,7 +515,7 @@ std::string Session::failure() const {
 SessionProgress Session::progress_with_change_locked() const {
   // The frame that will show a change made now: the next, or the one after the one computing.
   return {record_.options, record_.pose, record_.version + in_flight_locked() + 1, handles_locked(),
-          handles_dirty_ || handles_solving_, {}};
+          handles_pending_locked(), {}};
 }
 
 std::vector<SessionHandle> Session::handles_locked() const {
@@ -667,7 +668,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     f.version = keep_version ? record_.version : ++assigned_version_;
     if (handles_dirty_) {
       handles_dirty_ = false;
-      handles_solving_ = true;
+      handles_solving_ = !handles_.empty();  // cleared where the solved pose is written back
       for (const auto& [v, entries] : handles_) {
         const auto newest = std::max_element(entries.begin(), entries.end(),
                                              [](const HandleEntry& a, const HandleEntry& b) { return a.stamp < b.stamp; });
@@ -718,7 +719,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       progress.options = record_.options;
       progress.version = f.version;
       progress.handles = handles_locked();
-      progress.handles_pending = handles_dirty_ || handles_solving_;
+      progress.handles_pending = handles_pending_locked();
     }
     try {
       journal(progress, seq);
@@ -929,7 +930,7 @@ SessionRecord Session::record() const {
   std::lock_guard lock(mutex_);
   SessionRecord r = record_;
   r.handles = handles_locked();
-  r.handles_pending = handles_dirty_ || handles_solving_;
+  r.handles_pending = handles_pending_locked();
   r.cut = std::move(cut);
   return r;
 }

@@ -180,6 +180,8 @@ class Session {
 
  private:
   [[noreturn]] void throw_evicted() const;  // mutex_ held
+  // Handles not yet solved into record_.pose (mutex_ held).
+  bool handles_pending_locked() const { return handles_dirty_ || handles_solving_; }
   // A frame between compute and publication.
   struct InFlight {
     std::uint64_t version = 0;
@@ -241,8 +243,8 @@ class Session {
   v1::Skeleton skeleton_info_;
   std::mutex skeleton_mutex_;
   std::unique_ptr<SkeletonPose> joint_pose_;
-  std::vector<Vec3> skinned_positions_;  // the skinned base, then as floats for merge()
-  std::vector<float> skinned_;
+  std::vector<Vec3> skinned_positions_;  // the skinned base (skeleton_mutex_ held)
+  std::vector<float> skinned_;  // the same as floats, for merge()
   // cut_mutex_ guards what record() reads of the deformer (its cut) against
   // the compute changing it; taken before mutex_, never after.
   mutable std::mutex cut_mutex_;

@@ -62,7 +62,9 @@ struct SessionProgress {
 
 // The part of `r` that progress carries, and progress applied onto a record.
 // Progress without a cut (a journaled change) keeps the record's: a cut a few
-// frames old is a valid cut, closer to the adapted one than a full cut.
+// frames old is a valid cut, closer to the adapted one than a full cut. (With
+// Redis a journaled change replaces the stored progress whole, cut included:
+// see SessionRecord.cut in session_record.proto.)
 SessionProgress progress_of(const SessionRecord& r);
 void apply_progress(const SessionProgress& p, SessionRecord& r);
 

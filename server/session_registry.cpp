@@ -274,10 +274,12 @@ void SessionRegistry::maintain() {
         spdlog::info("event=session_handed_off session={} version={}", id, s->version());
         continue;
       }
-    } else if (e.persisted_version != s->version()) {
-      persist(*s);
     }
-    if (s->idle_seconds() > limits_.idle_seconds && s->evict_if_unused()) evict(id, *s, "idle");
+    if (s->idle_seconds() > limits_.idle_seconds && s->evict_if_unused()) {
+      evict(id, *s, "idle");  // writes the record
+      continue;
+    }
+    if (!shared && e.persisted_version != s->version()) persist(*s);
   }
 }
 
@@ -299,13 +301,14 @@ void SessionRegistry::evict(const std::string& id, const Session& s, const char*
 }
 
 std::size_t SessionRegistry::evict_idle_until(const std::function<bool()>& enough) {
-  std::vector<std::shared_ptr<Session>> idle;
+  // Idle times read once: a session touched while sorting must not change the order.
+  std::vector<std::pair<double, std::shared_ptr<Session>>> idle;
   for (auto& s : loaded())
-    if (s->subscriber_count() == 0) idle.push_back(std::move(s));
+    if (s->subscriber_count() == 0) idle.emplace_back(s->idle_seconds(), std::move(s));
   // The longest idle first: the least likely to be asked for again soon.
-  std::sort(idle.begin(), idle.end(), [](const auto& a, const auto& b) { return a->idle_seconds() > b->idle_seconds(); });
+  std::sort(idle.begin(), idle.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
   std::size_t evicted = 0;
-  for (const auto& s : idle) {
+  for (const auto& [seconds, s] : idle) {
     if (enough()) break;
     if (!s->evict_if_unused()) continue;  // a stream came meanwhile
     evict(s->id(), *s, "memory");
