@@ -173,5 +173,33 @@ TEST_F(LimitsTest, AUnaryCallToAFrozenServerEndsAtTheClientsCallTimeout) {
   server.process->resume();
 }
 
+TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
+  Server server(data_dir_, {});
+  const Upload made = upload(*server.stub);
+  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
+  Client client(server.process->address());
+  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
+  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "keeper");
+  const std::vector<float> full = mesh.base_positions;
+  const std::vector<std::uint32_t> one{0};
+  const std::vector<float> moved{0.5f, 0.5f, 0.5f};
+  server.process->pause();  // nothing is acknowledged while it is frozen (writes still go out)
+  ASSERT_TRUE(driver->send_partial(1, one, moved));
+  ASSERT_TRUE(driver->send_partial(2, one, moved));
+  EXPECT_EQ(driver->unacknowledged(), 2u) << "partial poses accumulate";
+  ASSERT_TRUE(driver->send(3, full));
+  EXPECT_EQ(driver->unacknowledged(), 1u) << "a full pose makes the position poses before it moot";
+  ASSERT_TRUE(driver->send_partial(4, one, moved));
+  EXPECT_EQ(driver->unacknowledged(), 2u);
+  server.process->resume();
+  std::optional<v1::Frame> frame;
+  while ((frame = driver->read()) && frame->pose_id() < 4) {
+  }
+  ASSERT_TRUE(frame.has_value());
+  EXPECT_EQ(driver->unacknowledged(), 0u) << "the frame of pose 4 acknowledges it and those before";
+  driver->writes_done();
+  EXPECT_TRUE(driver->finish().ok());
+}
+
 }  // namespace
 }  // namespace filigree

@@ -9,6 +9,8 @@ namespace {
 
 // Poses kept for re-sending (Driver::unacknowledged()), at most.
 constexpr std::size_t kMaxUnacknowledged = 4096;
+// Acknowledged requests kept for send() to reuse.
+constexpr std::size_t kSpareRequests = 2;
 
 }  // namespace
 
@@ -65,7 +67,8 @@ bool Driver::write() {
   request_.set_client_name(client_name_);
   request_.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
   std::lock_guard lock(mutex_);
-  if (ended_ || writes_done_) return false;
+  if (status_ || writes_done_) return false;
+  if (!broken_ && !stream_->Write(request_)) broken_ = true;
   if (reconnect_.enabled()) {
     // A full pose replaces every position before it, so the position poses
     // it follows need no re-sending (joint poses stay: they are merged apart).
@@ -74,9 +77,14 @@ bool Driver::write() {
     // Bounded, for a driver whose frames nobody reads (nothing acknowledges):
     // past it the oldest go, and a reconnection could not re-send them.
     if (unacknowledged_.size() >= kMaxUnacknowledged) unacknowledged_.pop_front();
-    unacknowledged_.push_back(request_);
+    // Kept by moving, and request_ continues with an acknowledged message's
+    // buffers: no pose-sized allocation per send once warm.
+    unacknowledged_.push_back(std::move(request_));
+    if (!spare_.empty()) {
+      request_ = std::move(spare_.back());
+      spare_.pop_back();
+    }
   }
-  if (!broken_ && !stream_->Write(request_)) broken_ = true;
   // With reconnection, a pose sent into a broken stream waits for the next one.
   return !broken_ || reconnect_.enabled();
 }
@@ -135,8 +143,10 @@ std::optional<v1::Frame> Driver::read() {
       // sends its current frame and fails again must not reset the backoff.
       if (frame.pose_id() != 0) reconnect_.reset();
       std::lock_guard lock(mutex_);
-      while (!unacknowledged_.empty() && unacknowledged_.front().pose_id() <= frame.pose_id())
+      while (!unacknowledged_.empty() && unacknowledged_.front().pose_id() <= frame.pose_id()) {
+        if (spare_.size() < kSpareRequests) spare_.push_back(std::move(unacknowledged_.front()));
         unacknowledged_.pop_front();
+      }
       return frame;
     }
     grpc::Status status;
@@ -155,7 +165,6 @@ std::optional<v1::Frame> Driver::read() {
       std::lock_guard lock(mutex_);
       // Cancelled during a reconnection wait: that is why it ended, not the outage.
       status_ = by_us && status.error_code() != grpc::StatusCode::OK ? grpc::Status::CANCELLED : status;
-      ended_ = true;
       return std::nullopt;
     }
   }
@@ -170,9 +179,9 @@ bool Driver::reconnect_after(const grpc::Status& status) {
 
 bool Driver::writes_done() {
   std::lock_guard lock(mutex_);
-  if (writes_done_) return !ended_;
+  if (writes_done_) return !status_;
   writes_done_ = true;
-  if (ended_) return false;
+  if (status_) return false;
   // A broken stream's successor sends it (open()).
   if (!broken_ && !stream_->WritesDone()) broken_ = true;
   return !broken_ || reconnect_.enabled();

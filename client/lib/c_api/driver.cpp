@@ -8,14 +8,6 @@
 namespace filigree::c_api {
 namespace {
 
-// Why the stream ended, as a send's or close's status.
-int ended_status(filigree_driver& d, const char* function) {
-  const FrameStream::End end = d.stream->end();
-  if (end.status == FILIGREE_OK)
-    return fail(&d.error, FILIGREE_ERROR_STREAM_ENDED, std::string(function) + ": the stream has ended");
-  return fail(&d.error, end.status, std::string(function) + ": the stream ended: " + end.message);
-}
-
 // Runs `write` (a Driver::send*) unless the stream has ended. A write that
 // fails means the call is over: the reader thread then sees the end and
 // finishes the call, and the status says why.
@@ -26,7 +18,7 @@ int send(filigree_driver& d, const char* function, Write&& write) {
     if (!d.stream->wait(std::chrono::milliseconds(0)) && write()) return FILIGREE_OK;
   }
   d.stream->wait(std::nullopt);
-  return ended_status(d, function);
+  return FrameStream::report_end(d.error, function, d.stream->end());
 }
 
 int invalid(filigree_driver& d, const char* function, const std::string& message) {

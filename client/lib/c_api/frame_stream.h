@@ -75,13 +75,14 @@ class FrameStream {
   bool on_own_thread() const { return std::this_thread::get_id() == thread_id_; }
   // Why the stream ended; call after wait() returned true.
   End end() const;
+  // The status a call gives for a stream that ended (FILIGREE_ERROR_STREAM_ENDED
+  // for a normal end), recorded in `slot`.
+  static int report_end(ErrorSlot& slot, const char* function, const End& end);
 
  private:
   void run() noexcept;
   void deliver(DecodedFrame& frame);
   void ended(End end);
-  // The status poll() and wait_frame() give for a stream that ended.
-  static int report_end(ErrorSlot& slot, const char* function, const End& end);
 
   Hooks hooks_;
   FrameDecoder decoder_;  // used by the thread only

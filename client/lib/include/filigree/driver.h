@@ -9,6 +9,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <grpcpp/grpcpp.h>
 
@@ -89,7 +90,7 @@ class Driver {
   const std::string session_id_, token_, client_name_;
   const Routing routing_;
   ReconnectSchedule reconnect_;  // the reading thread's
-  v1::DriveRequest request_;  // reused by send(): no allocation per pose once warm
+  v1::DriveRequest request_;  // filled by send(); recycled (spare_), so no allocation per pose once warm
 
   // Held while writing, which may block on flow control, so cancel() has
   // its own mutex. Order: mutex_, then cancel_mutex_.
@@ -100,10 +101,10 @@ class Driver {
   bool cancelled_ = false;
   std::unique_ptr<grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>> stream_;
   std::deque<v1::DriveRequest> unacknowledged_;  // in pose_id order
+  std::vector<v1::DriveRequest> spare_;           // acknowledged, for request_ to reuse
   bool broken_ = false;       // the current stream failed; poses wait for the next one
   bool writes_done_ = false;  // asked by the caller; repeated on every new stream
-  bool ended_ = false;        // for good: send() returns false
-  std::optional<grpc::Status> status_;
+  std::optional<grpc::Status> status_;  // set once the stream has ended for good
 };
 
 }  // namespace filigree
