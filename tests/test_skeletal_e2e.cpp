@@ -362,11 +362,25 @@ TEST_F(SkeletalTest, BadJointPosesAreInvalidArgumentsAndChangeNothing) {
   twice.add_joint_indices(1);
   twice.mutable_values()->Assign(rest.begin(), rest.begin() + 20);
   expect_invalid(twice, "named twice");
+  // Valid values that cannot skin: scales of 3e38 compose to 9e76, out of
+  // float range. Refused after the joints were set, so they must be undone.
+  std::vector<JointTransform> huge = rest_locals();
+  huge[0].scale = huge[1].scale = Vec3::Constant(3e38);
+  const std::vector<float> huge_values = trs_values(huge);
+  v1::JointPose overflow;
+  overflow.mutable_values()->Assign(huge_values.begin(), huge_values.end());
+  expect_invalid(overflow, "out of float range");
   // Nothing changed: the session is still at rest, and still takes good poses.
   const v1::SessionState state = client_->state(s.session_id, s.viewer_token);
   EXPECT_EQ(state.version(), 0u);
   EXPECT_LE(max_distance({state.pose().begin(), state.pose().end()}, s.mesh.base_positions), 0.0);
-  drive_one(s, [&](Driver& d) { return d.send_joints(1, v1::JointPose::SPACE_LOCAL_TRS, {}, rest); });
+  // A pose of the last joint alone skins with the others as they were before
+  // the refused pose (at rest), not with its scales (which would fail again).
+  const std::vector<float> last_joint(rest.begin() + 20, rest.end());
+  const std::vector<std::uint32_t> joint_2{2};
+  const DecodedFrame f =
+      drive_one(s, [&](Driver& d) { return d.send_joints(1, v1::JointPose::SPACE_LOCAL_TRS, joint_2, last_joint); });
+  EXPECT_LE(max_distance(f.positions, s.mesh.rest_positions), double{f.max_error} + 1e-6);
 }
 
 TEST_F(SkeletalTest, SessionsWithoutASkeletonRefuseJointsAndClips) {
