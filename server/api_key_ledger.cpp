@@ -13,23 +13,7 @@ bool ApiKeyLedger::admit_upload(const std::string& key, std::uint64_t limit) {
 }
 
 std::shared_ptr<void> ApiKeyLedger::open_stream(const std::string& key, std::uint64_t limit) {
-  {
-    std::lock_guard lock(mutex_);
-    std::uint64_t& open = streams_[key];
-    if (limit != 0 && open >= limit) return nullptr;
-    ++open;
-  }
-  // The handle gives the slot back when the last copy goes (non-null, so
-  // that callers can tell it from a refusal).
-  struct Slot {
-    ApiKeyLedger* ledger;
-    std::string key;
-    ~Slot() {
-      std::lock_guard lock(ledger->mutex_);
-      --ledger->streams_[key];
-    }
-  };
-  return std::shared_ptr<Slot>(new Slot{this, key});
+  return streams_.take(key, limit);
 }
 
 }  // namespace filigree::server

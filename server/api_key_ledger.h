@@ -10,6 +10,8 @@
 #include <mutex>
 #include <string>
 
+#include "server/slot_counter.h"
+
 namespace filigree::server {
 
 class ApiKeyLedger {
@@ -25,7 +27,7 @@ class ApiKeyLedger {
  private:
   std::mutex mutex_;
   std::map<std::string, std::deque<std::chrono::steady_clock::time_point>> uploads_;
-  std::map<std::string, std::uint64_t> streams_;
+  SlotCounter streams_;
 };
 
 }  // namespace filigree::server

@@ -115,24 +115,29 @@ grpc::Status FiligreeService::check_api_key(const grpc::CallbackServerContext& c
   return grpc::Status::OK;
 }
 
+namespace {
+
+grpc::Status sessions_quota_exhausted(const ApiKey& key) {
+  return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' holds its quota of " +
+                                                    std::to_string(key.quota.sessions) +
+                                                    " sessions (uploads in progress included)"};
+}
+
+}  // namespace
+
 grpc::Status FiligreeService::admit_upload(const ApiKey& key, std::shared_ptr<void>* pending) {
   pending->reset();
-  std::lock_guard lock(pending_mutex_);
-  // Uploads admitted but not yet sessions count too: concurrent uploads of
-  // one key cannot all pass the same check.
-  std::uint64_t& uploading = pending_uploads_[key.name];
-  if (key.quota.sessions != 0 && registry_.holdings(key.name).sessions + uploading >= key.quota.sessions)
-    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' holds its quota of " +
-                                                      std::to_string(key.quota.sessions) + " sessions (uploads in " +
-                                                      "progress included)"};
+  // Uploads admitted but not yet sessions take a place too: concurrent
+  // uploads of one key cannot all pass the same check.
+  const std::uint64_t held = registry_.holdings(key.name).sessions;
+  if (key.quota.sessions != 0 && held >= key.quota.sessions)
+    return sessions_quota_exhausted(key);
+  std::shared_ptr<void> place = uploading_.take(key.name, key.quota.sessions == 0 ? 0 : key.quota.sessions - held);
+  if (!place) return sessions_quota_exhausted(key);
   if (!ledger_.admit_upload(key.name, key.quota.uploads_per_minute))
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' made its quota of " +
                                                       std::to_string(key.quota.uploads_per_minute) + " uploads in the last minute"};
-  ++uploading;
-  *pending = std::shared_ptr<void>(static_cast<void*>(this), [this, name = key.name](void*) {
-    std::lock_guard lock(pending_mutex_);
-    if (--pending_uploads_[name] == 0) pending_uploads_.erase(name);
-  });
+  *pending = std::move(place);
   return grpc::Status::OK;
 }
 
@@ -146,24 +151,9 @@ grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t ve
   return grpc::Status::OK;
 }
 
-std::shared_ptr<void> FiligreeService::reserve_stream_place(const std::string& session_id) {
-  const std::uint64_t max = limits_.max_streams_per_session;
-  if (max == 0) return std::make_shared<int>(0);
-  // Counted and taken under one lock, so concurrent opens cannot overshoot.
-  std::lock_guard lock(places_mutex_);
-  std::uint64_t& used = stream_places_[session_id];
-  if (used >= max) return nullptr;
-  ++used;
-  // Non-null, or the slot would read as "refused"; the deleter is what matters.
-  return std::shared_ptr<void>(static_cast<void*>(this), [this, session_id](void*) {
-    std::lock_guard lock(places_mutex_);
-    if (--stream_places_[session_id] == 0) stream_places_.erase(session_id);
-  });
-}
-
 grpc::Status FiligreeService::open_stream(const Session& session, std::shared_ptr<void>* slot) {
   slot->reset();
-  std::shared_ptr<void> place = reserve_stream_place(session.id());
+  std::shared_ptr<void> place = stream_places_.take(session.id(), limits_.max_streams_per_session);
   if (!place)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "session " + session.id() + " serves its maximum of " +
                                                       std::to_string(limits_.max_streams_per_session) +

@@ -16,6 +16,7 @@
 #include "server/api_keys.h"
 #include "server/hierarchy_cache.h"
 #include "server/session_registry.h"
+#include "server/slot_counter.h"
 
 namespace filigree::server {
 
@@ -124,14 +125,9 @@ class FiligreeService final : public v1::Filigree::CallbackService {
   int jobs_ = 0;
   unsigned preprocessing_ = 0;  // uploads preprocessing now
   bool draining_ = false;
-  // One of the session's limits().max_streams_per_session places, or null
-  // when they are all taken; released when the pointer goes.
-  std::shared_ptr<void> reserve_stream_place(const std::string& session_id);
-  std::mutex evict_mutex_;  // admit_memory's evictions, one at a time
-  std::mutex pending_mutex_;
-  std::map<std::string, std::uint64_t> pending_uploads_;  // admitted uploads not yet sessions, by key
-  std::mutex places_mutex_;
-  std::map<std::string, std::uint64_t> stream_places_;  // places taken, by session id
+  std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
+  SlotCounter uploading_;      // admitted uploads not yet sessions, by API key
+  SlotCounter stream_places_;  // streams open, by session id
   struct Upload {
     std::chrono::steady_clock::time_point deadline;
     std::function<void()> expire;

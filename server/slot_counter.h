@@ -1,0 +1,26 @@
+#pragma once
+// Places counted per key, each held by a handle until it is released: a
+// session's streams, the streams of an API key's sessions, a key's uploads in
+// progress.
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+namespace filigree::server {
+
+class SlotCounter {
+ public:
+  // A place under `key`, held until the last copy of the handle goes; null
+  // (nothing taken) when `limit` places are taken already. limit 0: no limit.
+  // The counter must outlive the handles.
+  std::shared_ptr<void> take(const std::string& key, std::uint64_t limit);
+
+ private:
+  std::mutex mutex_;
+  std::map<std::string, std::uint64_t> taken_;  // keys with no place taken are removed
+};
+
+}  // namespace filigree::server
