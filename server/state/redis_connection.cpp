@@ -305,7 +305,7 @@ class TlsTransport final : public RedisTransport {
       throw StoreUnavailable("cannot verify the TLS certificate of Redis at " + address_ + ": " +
                              X509_verify_cert_error_string(verify) + " (trusting " + tls_.trust() +
                              ", expecting the name '" + name_ + "')");
-    const std::string reason = reason_of(e);
+    const std::string reason = openssl_reason(e);
     ERR_clear_error();
     const int code = ERR_GET_REASON(e);
     // Reasons from SSL_AD_REASON_OFFSET on are alerts Redis sent: it refused us.
@@ -327,14 +327,6 @@ class TlsTransport final : public RedisTransport {
                              " (is its port a TLS port? a plaintext Redis does not answer TLS)");
     throw StoreUnavailable(std::string(handshake ? "TLS handshake with" : "TLS error from") + " Redis at " + address_ +
                            " failed: " + reason);
-  }
-
-  static std::string reason_of(unsigned long e) {
-    if (e == 0) return "unknown TLS error";
-    if (const char* reason = ERR_reason_error_string(e)) return reason;
-    char buffer[256];
-    ERR_error_string_n(e, buffer, sizeof buffer);
-    return buffer;
   }
 
   std::string closed() const { return "Redis at " + address_ + " closed the TLS connection"; }

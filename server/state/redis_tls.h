@@ -10,6 +10,10 @@ struct ssl_ctx_st;
 
 namespace filigree::server {
 
+// The reason of OpenSSL error `e` ("no such file", "certificate required");
+// "unknown OpenSSL error" for 0.
+std::string openssl_reason(unsigned long e);
+
 struct RedisTlsOptions {
   bool enabled = false;
   std::string ca_file;      // CA bundle (PEM) Redis' certificate must chain to; empty: the system store
