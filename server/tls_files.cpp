@@ -1,28 +1,14 @@
 #include "server/tls_files.h"
 
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
 
 #include <grpcpp/security/server_credentials.h>
 #include <grpcpp/security/tls_certificate_provider.h>
 #include <grpcpp/security/tls_credentials_options.h>
 
+#include "server/pem_file.h"
+
 namespace filigree::server {
-namespace {
-
-// Checked here, so a wrong path fails at start with its name rather than as
-// handshakes that fail later with a generic error.
-void check_pem(const std::string& path, const char* what) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(std::string(what) + " " + path + " cannot be read");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (text.str().find("-----BEGIN ") == std::string::npos)
-    throw std::runtime_error(std::string(what) + " " + path + " holds no PEM block");
-}
-
-}  // namespace
 
 std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& files) {
   if (files.cert.empty() != files.key.empty())
@@ -31,9 +17,11 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& file
     if (!files.client_ca.empty()) throw std::runtime_error("--tls-client-ca needs --tls-cert and --tls-key");
     return grpc::InsecureServerCredentials();
   }
-  check_pem(files.cert, "--tls-cert");
-  check_pem(files.key, "--tls-key");
-  if (!files.client_ca.empty()) check_pem(files.client_ca, "--tls-client-ca");
+  // Checked here, so a wrong path fails at start with its name rather than as
+  // handshakes that fail later with a generic error.
+  read_pem(files.cert, "--tls-cert");
+  read_pem(files.key, "--tls-key");
+  if (!files.client_ca.empty()) read_pem(files.client_ca, "--tls-client-ca");
   // A file watcher: a renewed certificate is picked up within refresh_seconds.
   auto provider = std::make_shared<grpc::experimental::FileWatcherCertificateProvider>(
       files.key, files.cert, files.client_ca, files.refresh_seconds);

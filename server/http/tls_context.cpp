@@ -1,7 +1,5 @@
 #include "server/http/tls_context.h"
 
-#include <fstream>
-#include <sstream>
 #include <stdexcept>
 #include <utility>
 
@@ -17,24 +15,12 @@
 #include <openssl/x509.h>
 #include <spdlog/spdlog.h>
 
+#include "server/pem_file.h"
+
 namespace filigree::server::http {
 namespace {
 
 namespace ssl = boost::asio::ssl;
-
-// The whole file at once, so that each build reads one version of it; a wrong
-// path fails with its name rather than as an OpenSSL "system lib" error.
-std::string read_pem(const std::string& path, const char* option) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(std::string(option) + " " + path + " cannot be read");
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (!in.good() && !in.eof()) throw std::runtime_error(std::string(option) + " " + path + " cannot be read");
-  std::string out = std::move(text).str();
-  if (out.find("-----BEGIN ") == std::string::npos)
-    throw std::runtime_error(std::string(option) + " " + path + " holds no PEM block");
-  return out;
-}
 
 // Zeroes the private key's text however the build ends.
 struct Cleansed {
