@@ -1,5 +1,6 @@
 #include "support/server_process.h"
 
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
 #include <stdexcept>
@@ -69,11 +70,23 @@ void ServerProcess::kill_now() {
 }
 
 void ServerProcess::pause() {
-  if (pid_ > 0) kill(pid_, SIGSTOP);
+  if (pid_ <= 0) return;
+  kill(pid_, SIGSTOP);
+  // kill() only sends it: wait until the process has stopped (or ended), so
+  // that nothing it does after this call is a race with the stop.
+  int status = 0;
+  while (waitpid(pid_, &status, WUNTRACED) < 0 && errno == EINTR) {
+  }
+  if (WIFEXITED(status) || WIFSIGNALED(status)) pid_ = -1;  // it ended instead (reaped now)
 }
 
 void ServerProcess::resume() {
-  if (pid_ > 0) kill(pid_, SIGCONT);
+  if (pid_ <= 0) return;
+  kill(pid_, SIGCONT);
+  int status = 0;
+  while (waitpid(pid_, &status, WCONTINUED) < 0 && errno == EINTR) {
+  }
+  if (WIFEXITED(status) || WIFSIGNALED(status)) pid_ = -1;
 }
 
 int ServerProcess::terminate() {
