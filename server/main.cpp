@@ -22,6 +22,7 @@
 #include "server/http/http_server.h"
 #include "server/listen_address.h"
 #include "server/replica_router.h"
+#include "server/resident_memory.h"
 #include "server/state/file_session_store.h"
 #include "server/state/redis_client.h"
 #include "server/state/redis_hierarchy_store.h"
@@ -73,6 +74,7 @@ std::string redis_password(const std::string& file) {
 
 int main(int argc, char** argv) {
   using namespace filigree::server;
+  keep_large_buffers_out_of_the_heap();
   CLI::App app{"filigree-server: detail-preserving deformation sessions over gRPC"};
   std::string listen = "127.0.0.1:50051", data_dir;
   ServiceLimits service_limits;

@@ -16,4 +16,10 @@ std::size_t resident_bytes() {
 
 void release_free_memory() { ::malloc_trim(0); }
 
+void keep_large_buffers_out_of_the_heap() {
+  constexpr int kThreshold = 256 * 1024;
+  ::mallopt(M_MMAP_THRESHOLD, kThreshold);  // also stops the threshold from moving
+  ::mallopt(M_TRIM_THRESHOLD, kThreshold);  // and return a heap's free top past this
+}
+
 }  // namespace filigree::server
