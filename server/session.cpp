@@ -75,10 +75,11 @@ void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::Fr
 // error within this fraction of the rest mesh's diagonal.
 constexpr double kAutomaticError = 5e-5;
 
-FrameEncoderOptions encoder_options(const v1::SessionOptions& o, double diagonal) {
+FrameEncoderOptions encoder_options(const v1::SessionOptions& o, const SessionAssets& assets) {
   FrameEncoderOptions e;
   e.bits = o.quantization_bits();
-  e.max_error = kAutomaticError * std::max(diagonal, 1e-30);
+  e.max_error = kAutomaticError * std::max(assets.rest_diagonal, 1e-30);
+  e.staging = assets.staging;
   return e;
 }
 
@@ -105,7 +106,7 @@ std::pair<DeltaQuantization, double> quantize_within(std::span<const float> valu
 Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
                  Journal journal)
     : assets_(std::move(assets)), scheduler_(scheduler), lane_(scheduler.lane()),
-      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, assets_->rest_diagonal)),
+      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, *assets_)),
       record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = assets_->hierarchy();
   const v1::BaseMesh& base = assets_->base;
@@ -162,6 +163,7 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
     quantize_part_of(*f, c);
     encode_part_of(*f, c);
   }
+  assets_->frames->give(std::exchange(frame_, {}));
   publish(*f);
 }
 
@@ -627,7 +629,10 @@ void Session::part_task(InFlight* f, std::size_t c) {
   }
   {
     std::lock_guard lock(mutex_);
-    if (--positions_busy_ == 0) maybe_compute_locked();  // the next frame may compute now
+    if (--positions_busy_ == 0) {
+      assets_->frames->give(std::exchange(frame_, {}));  // read by no one until the next compute
+      maybe_compute_locked();  // the next frame may compute now
+    }
   }
   try {
     if (!f->failed) encode_part_of(*f, c);
@@ -749,7 +754,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       for (int k = 0; k < 3; ++k) at_rest &= static_cast<float>(pose.positions[i][k]) == assets_->base.positions(static_cast<int>(3 * i + k));
     // Deform anyway so the cut, regions and stats (overlays) follow this
     // frame; the deformer writes straight into the frame buffer.
-    frame_.resize(h.vertex_count());
+    if (frame_.empty()) frame_ = assets_->frames->take(h.vertex_count());
     f.stats = deformer_->deform(pose, frame_);
     if (at_rest) std::copy(h.rest_positions.begin(), h.rest_positions.end(), frame_.begin());
 

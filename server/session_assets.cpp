@@ -1,5 +1,6 @@
 #include "server/session_assets.h"
 
+#include "codec/frame_encoder.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/deformer_model.h"
 
@@ -24,6 +25,11 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   for (FaceId f = 0; f < h.original_face_count; ++f)
     for (Index v : h.faces[f]) a->rest.add_faces(v);
   a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
+  // Frames: a few in flight at once. Staging: two frames' chunks, enough for
+  // one encoding while the next frame quantizes.
+  a->frames = std::make_shared<BufferPool<Vec3>>(4);
+  const std::size_t chunks = h.vertex_count() / FrameEncoderOptions{}.chunk_vertices + 1;
+  a->staging = std::make_shared<BufferPool<float>>(2 * chunks + 2);
   return a;
 }
 

@@ -9,6 +9,8 @@
 #include <mutex>
 
 #include "filigree/v1/filigree.pb.h"
+#include "mesh/tri_mesh.h"
+#include "util/buffer_pool.h"
 
 namespace filigree {
 struct Hierarchy;
@@ -22,6 +24,11 @@ struct SessionAssets {
   v1::BaseMesh base;
   v1::RestMesh rest;  // positions and faces; a session adds its upload's ids when it answers
   double rest_diagonal = 1.0;
+  // Scratch the sessions of this mesh take in turn, so that an idle session
+  // holds none (issue 10: a further session ≤ 64 B/vertex): frame positions
+  // from compute to quantization, chunk deltas from quantization to encoding.
+  std::shared_ptr<BufferPool<Vec3>> frames;
+  std::shared_ptr<BufferPool<float>> staging;
 
   const Hierarchy& hierarchy() const;
 };

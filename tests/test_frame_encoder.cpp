@@ -286,5 +286,47 @@ TEST(FrameEncoder, AStaleKeyframeIsRenewedWhenItCostsMoreThanAFrame) {
   EXPECT_EQ(std::count(keyframe.begin(), keyframe.end(), true), 1) << "one renewal is enough";
 }
 
+TEST(FrameEncoder, StagingFromASharedPoolGivesTheSameFramesAndHoldsNothingBetween) {
+  // Two sessions' encoders sharing one pool, against one with buffers of its
+  // own: the same bytes frame after frame (dense, sparse, absent chunks), and
+  // between frames every staging buffer is back in the pool.
+  const TriMesh bunny = test::shipped_mesh("bunny_small.obj");
+  const std::vector<Vec3>& rest = bunny.positions;
+  const double target = 5e-5 * bounding_box_diagonal(rest);
+  auto pool = std::make_shared<BufferPool<float>>(16);
+  const FrameEncoderOptions own{.chunk_vertices = 256, .bits = 0, .max_error = target};
+  FrameEncoderOptions pooled = own;
+  pooled.staging = pool;
+  Sender alone{FrameEncoder(rest, own)}, a{FrameEncoder(rest, pooled)}, b{FrameEncoder(rest, pooled)};
+  const Vec3 centre = rest[rest.size() / 3];
+  for (int frame = 0; frame < 6; ++frame) {
+    const std::vector<Vec3> posed = frame < 2 ? body_motion(rest, 0.02, 0.1 * frame)
+                                              : bump(body_motion(rest, 0.02, 0.1), rest, centre, 0.1, 0.01 * frame);
+    const SentFrame expected = alone.send(posed), got_a = a.send(posed), got_b = b.send(posed);
+    for (const SentFrame* got : {&got_a, &got_b}) {
+      ASSERT_EQ(got->chunks.size(), expected.chunks.size()) << "frame " << frame;
+      for (std::size_t c = 0; c < expected.chunks.size(); ++c) {
+        EXPECT_EQ(got->chunks[c].bytes, expected.chunks[c].bytes) << "frame " << frame << " chunk " << c;
+        EXPECT_EQ(got->chunks[c].runs, expected.chunks[c].runs) << "frame " << frame << " chunk " << c;
+      }
+      EXPECT_EQ(got->max_error, expected.max_error);
+    }
+    EXPECT_GT(pool->free_buffers(), 0u);
+  }
+  // encode() stages one chunk at a time, so one buffer went round.
+  EXPECT_EQ(pool->free_buffers(), 1u);
+  // A session quantizes every chunk before encoding them (in parallel): each
+  // holds a buffer until its encode, then all are back.
+  const std::vector<Vec3> posed = body_motion(rest, 0.03, 0.7);
+  const SentFrame expected = alone.send(posed, true);
+  a.encoder.begin(true);
+  for (std::size_t c = 0; c < a.encoder.chunk_count(); ++c) a.encoder.quantize_chunk(c, posed);
+  EXPECT_EQ(pool->free_buffers(), 0u);
+  for (std::size_t c = 0; c < a.encoder.chunk_count(); ++c) a.encoder.encode_chunk(c);
+  a.encoder.finish();
+  EXPECT_EQ(pool->free_buffers(), a.encoder.chunk_count());
+  for (std::size_t c = 0; c < expected.chunks.size(); ++c) EXPECT_EQ(a.encoder.chunk(c).bytes, expected.chunks[c].bytes) << c;
+}
+
 }  // namespace
 }  // namespace filigree

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <utility>
 
 #include "codec/delta_codec.h"
 
@@ -44,7 +45,11 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   // and which vertices moved away from the keyframe (and, to know when a
   // fresh keyframe pays off, from the previous frame).
   slot.changed.assign(count, 1);
-  slot.values.resize(3 * count);
+  if (options_.staging && slot.values.capacity() == 0) {
+    slot.values = options_.staging->take(3 * count);
+  } else {
+    slot.values.resize(3 * count);
+  }
   std::size_t changed = 0, moved_since_last = 0;
   const std::vector<float>& previous = previous_is_keyframe_ ? keyframe_ : decoded_;
   for (std::size_t i = 0; i < count; ++i) {
@@ -100,11 +105,10 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
   // Pass 2: the decoded values and the exact error, present vertices from the
   // quantization (or exactly 0), absent ones from the keyframe.
+  // Decoded straight into decoded_ (no per-session scratch): a dense chunk
+  // whole, a sparse one vertex by vertex.
   while (true) {
-    if (!all_zero) {
-      slot.decoded.resize(slot.values.size());
-      q.decode(slot.values, slot.decoded);
-    }
+    if (dense && !all_zero) q.decode(slot.values, std::span<float>(&decoded_[3 * a], 3 * count));
     double error = 0.0;
     for (std::size_t i = 0, j = 0; i < count; ++i) {
       const Vec3 d = positions[a + i] - rest_[a + i];
@@ -112,8 +116,8 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
       if (slot.changed[i]) {
         if (all_zero) {
           dec[0] = dec[1] = dec[2] = 0.0f;
-        } else {
-          std::copy_n(&slot.decoded[3 * j], 3, dec);
+        } else if (!dense) {
+          q.decode(std::span<const float>(&slot.values[3 * j], 3), std::span<float>(dec, 3));
         }
         ++j;
       } else {
@@ -132,6 +136,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
 void FrameEncoder::encode_chunk(std::size_t c) {
   Slot& slot = chunks_.at(c);
   slot.out.bytes = encode_draco(slot.values, slot.out.quantization, options_.speed);
+  if (options_.staging) options_.staging->give(std::exchange(slot.values, {}));
 }
 
 EncodedFrameSummary FrameEncoder::finish() {

@@ -15,12 +15,14 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "codec/delta_quantization.h"
 #include "mesh/tri_mesh.h"
+#include "util/buffer_pool.h"
 
 namespace filigree {
 
@@ -32,6 +34,10 @@ struct FrameEncoderOptions {
   double max_error = 0.0;  // absolute; with bits = 0 it must be > 0
   double dense_fraction = 0.5;
   int speed = 5;  // Draco encoding speed (delta_codec.h)
+  // Where a chunk's staged deltas live from quantize_chunk to encode_chunk;
+  // shared by the encoders of many sessions, so an idle one holds none.
+  // Null: each chunk keeps its own buffer.
+  std::shared_ptr<BufferPool<float>> staging = nullptr;
 };
 
 struct EncodedChunk {
@@ -86,7 +92,6 @@ class FrameEncoder {
   struct Slot {
     EncodedChunk out;
     std::vector<float> values;      // present deltas, x y z
-    std::vector<float> decoded;     // what clients decode of them
     std::vector<std::uint8_t> changed;
   };
   std::span<const Vec3> rest_;
