@@ -2,7 +2,9 @@
 // one hierarchy object, one deformer model, one copy of the rest mesh; and
 // all of it goes when the last session does.
 
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
 
 #include <gtest/gtest.h>
 
@@ -11,6 +13,7 @@
 #include "runtime/deformer_model.h"
 #include "server/hierarchy_cache.h"
 #include "server/secret.h"
+#include "server/session_assets.h"
 #include "server/session_registry.h"
 #include "server/state/file_session_store.h"
 #include "support/test_meshes.h"
@@ -130,6 +133,48 @@ TEST_F(SessionSharing, AnEvictedSessionRefusesChangesInsteadOfLosingThemAndLoads
   EXPECT_EQ(state.pose(0), 0.5f);
   EXPECT_EQ(state.pose(1), 0.25f);
   EXPECT_EQ(state.pose(2), -0.125f);
+}
+
+// Waits (on the session's own signal, no sleeping) for a frame newer than `after`.
+struct VersionSink : FrameSink {
+  void offer(std::shared_ptr<const PublishedFrame> frame) override {
+    std::lock_guard lock(mutex);
+    latest = std::max(latest, frame->frame.version());
+    changed.notify_all();
+  }
+  v1::FrameFormat format() const override { return v1::FRAME_FORMAT_CHUNKED; }
+  void close(bool, const std::string&) override {}
+  void wait_past(std::uint64_t after) {
+    std::unique_lock lock(mutex);
+    changed.wait(lock, [&] { return latest > after; });
+  }
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::uint64_t latest = 0;
+};
+
+TEST_F(SessionSharing, IdleSessionsHoldNoFrameBufferAndShareOneThatGoesRound) {
+  // A session needs its frame positions only from computing a frame to
+  // quantizing it; the rest of the time they are in the mesh's pool, so a
+  // further idle session costs no frame buffer (issue 10: ≤ 64 B/vertex).
+  std::string key;
+  auto h = hierarchy_of(test::icosphere(3), key);
+  auto a = registry_->create(h, key, {}, {});
+  auto b = registry_->create(h, key, {}, {});
+  const BufferPool<Vec3>& frames = *a->assets().frames;
+  EXPECT_EQ(frames.free_buffers(), 1u) << "both initial frames used the same buffer, now free";
+  const std::vector<std::uint32_t> index{0};
+  for (int round = 1; round <= 3; ++round)
+    for (const auto& s : {a, b}) {
+      auto sink = std::make_shared<VersionSink>();
+      s->subscribe(sink, std::nullopt);
+      const std::uint64_t before = s->version();
+      const std::vector<float> moved{0.1f * static_cast<float>(round), 0.2f, -0.1f};
+      s->submit({0, "editor", static_cast<std::uint64_t>(round), false}, index, moved);
+      sink->wait_past(before);
+      s->unsubscribe(sink.get());
+      EXPECT_EQ(frames.free_buffers(), 1u) << "round " << round << ": the frame buffer went back";
+    }
 }
 
 }  // namespace
