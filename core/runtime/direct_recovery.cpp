@@ -1,7 +1,6 @@
 #include "runtime/direct_recovery.h"
 
 #include <algorithm>
-#include <barrier>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
@@ -11,6 +10,7 @@
 
 #include "hierarchy/hierarchy.h"
 #include "mesh/vertex_order.h"
+#include "util/spin_barrier.h"
 
 namespace filigree {
 namespace {
@@ -403,7 +403,7 @@ void DirectRecovery::recover(std::span<const Vec3> base, RecoveryWorkspace& ws, 
     return;
   }
   // Thread `id` runs its partitions of every phase; a barrier between phases.
-  std::barrier sync(static_cast<std::ptrdiff_t>(t));
+  SpinBarrier sync(static_cast<std::uint32_t>(t));
   auto work = [&](std::size_t id) {
     const std::size_t first = partitions_ * id / t, last = partitions_ * (id + 1) / t;
     for (std::size_t ph = 0; ph < phases_; ++ph) {
