@@ -26,18 +26,44 @@ float float_at_least(double x) {
   return f;
 }
 
-void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
+namespace {
+
+// Draco's quantizer rounds with floor(float): without SSE4.1 that is a libm
+// call per value (2.5% of a busy server's time at 1.25M vertices), with it
+// one instruction. Both compile the same Draco code, so results are equal.
+struct DecodeArgs {
+  const float* values;
+  float* out;
+  std::size_t n;
+  float min, range;
+  std::int32_t levels;
+};
+[[gnu::always_inline]] inline void decode_values(const DecodeArgs& a) {
   // The same objects and arithmetic as AttributeQuantizationTransform's
   // GeneratePortableAttribute and InverseTransformAttribute.
   draco::Quantizer quantizer;
-  quantizer.Init(range, max_level(bits));
+  quantizer.Init(a.range, a.levels);
   draco::Dequantizer dequantizer;
-  dequantizer.Init(range, max_level(bits));
-  const std::size_t n = std::min(values.size(), out.size());
-  for (std::size_t i = 0; i < n; ++i) {
-    const float value = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(values[i] - min));
-    out[i] = value + min;
-  }
+  dequantizer.Init(a.range, a.levels);
+  for (std::size_t i = 0; i < a.n; ++i) a.out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(a.values[i] - a.min)) + a.min;
+}
+#if defined(__x86_64__) && defined(__GNUC__)
+[[gnu::target("sse4.1")]] void decode_values_sse41(const DecodeArgs& a) { decode_values(a); }
+void decode_values_baseline(const DecodeArgs& a) { decode_values(a); }
+using DecodeFn = void (*)(const DecodeArgs&);
+DecodeFn pick_decode() {
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("sse4.1") ? decode_values_sse41 : decode_values_baseline;
+}
+const DecodeFn kDecodeValues = pick_decode();
+#else
+void kDecodeValues(const DecodeArgs& a) { decode_values(a); }
+#endif
+
+}  // namespace
+
+void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
+  kDecodeValues({values.data(), out.data(), std::min(values.size(), out.size()), min, range, max_level(bits)});
 }
 
 double DeltaQuantization::half_step() const { return double{range} / max_level(bits) / 2.0; }

@@ -9,6 +9,30 @@
 #include "codec/delta_codec.h"
 
 namespace filigree {
+namespace {
+
+// Names the first implausible delta of a range (the check itself is branch-free).
+[[noreturn]] void throw_bad_delta(const Vec3* pos, const Vec3* rest, std::size_t first, std::size_t count) {
+  for (std::size_t i = 0; i < count; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double d = pos[i][k] - rest[i][k];
+      if (!std::isfinite(d)) throw DeltaCodecError("delta of vertex " + std::to_string(first + i) + " is not finite");
+      if (std::abs(d) > kMaxDeltaMagnitude)
+        throw DeltaCodecError("delta of vertex " + std::to_string(first + i) + " is implausibly large");
+    }
+  throw std::logic_error("an implausible delta that is not there");
+}
+
+// max |decoded − (pos − rest)| over a range: one running maximum per axis,
+// so the three do not wait on each other.
+double max_error_of(const float* dec, const Vec3* pos, const Vec3* rest, std::size_t count) {
+  double e[3] = {0.0, 0.0, 0.0};
+  for (std::size_t i = 0; i < count; ++i)
+    for (int k = 0; k < 3; ++k) e[k] = std::max(e[k], std::abs(double{dec[3 * i + k]} - (pos[i][k] - rest[i][k])));
+  return std::max({e[0], e[1], e[2]});
+}
+
+}  // namespace
 
 FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions options) : rest_(rest), options_(options) {
   if (options_.chunk_vertices == 0) throw std::invalid_argument("frame chunks must hold at least one vertex");
@@ -50,25 +74,35 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   } else {
     slot.values.resize(3 * count);
   }
-  std::size_t changed = 0, moved_since_last = 0;
-  const std::vector<float>& previous = previous_is_keyframe_ ? keyframe_ : decoded_;
-  for (std::size_t i = 0; i < count; ++i) {
-    const Vec3 d = positions[a + i] - rest_[a + i];
+  // Branch-free, so that the compiler vectorises it; a bad delta is named
+  // afterwards, on the slow path.
+  const Vec3* pos = positions.data() + a;
+  const Vec3* rest = rest_.data() + a;
+  float* staged = slot.values.data();
+  bool plausible = true;
+  for (std::size_t i = 0; i < count; ++i)
     for (int k = 0; k < 3; ++k) {
-      if (!std::isfinite(d[k])) throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is not finite");
-      if (std::abs(d[k]) > kMaxDeltaMagnitude)
-        throw DeltaCodecError("delta of vertex " + std::to_string(a + i) + " is implausibly large");
-      slot.values[3 * i + k] = static_cast<float>(d[k]);
+      const double d = pos[i][k] - rest[i][k];
+      plausible &= std::abs(d) <= kMaxDeltaMagnitude;  // false for NaN and ±∞ too
+      staged[3 * i + k] = static_cast<float>(d);
     }
-    if (!force_) {
-      const float* key = &keyframe_[3 * (a + i)];
-      const double moved = std::max({std::abs(d.x() - key[0]), std::abs(d.y() - key[1]), std::abs(d.z() - key[2])});
-      slot.changed[i] = moved > tolerance ? 1 : 0;
-      const float* last = &previous[3 * (a + i)];
-      moved_since_last +=
-          std::max({std::abs(d.x() - last[0]), std::abs(d.y() - last[1]), std::abs(d.z() - last[2])}) > tolerance;
+  if (!plausible) throw_bad_delta(pos, rest, a, count);
+  std::size_t changed = 0, moved_since_last = 0;
+  if (!force_) {
+    const float* key = keyframe_.data() + 3 * a;
+    const float* last = (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a;
+    std::uint8_t* flags = slot.changed.data();
+    for (std::size_t i = 0; i < count; ++i) {
+      const Vec3 d = pos[i] - rest[i];
+      const double moved = std::max(std::max(std::abs(d.x() - key[3 * i]), std::abs(d.y() - key[3 * i + 1])), std::abs(d.z() - key[3 * i + 2]));
+      const double since_last =
+          std::max(std::max(std::abs(d.x() - last[3 * i]), std::abs(d.y() - last[3 * i + 1])), std::abs(d.z() - last[3 * i + 2]));
+      flags[i] = moved > tolerance ? 1 : 0;
+      changed += flags[i];
+      moved_since_last += since_last > tolerance ? 1 : 0;
     }
-    changed += slot.changed[i];
+  } else {
+    changed = count;
   }
   const bool dense = force_ || static_cast<double>(changed) > options_.dense_fraction * static_cast<double>(count);
   if (dense) std::fill(slot.changed.begin(), slot.changed.end(), std::uint8_t{1});
@@ -104,27 +138,30 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   DeltaQuantization q = quantization_over(slot.values, options_.bits ? options_.bits : 8);
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
   // Pass 2: the decoded values and the exact error, present vertices from the
-  // quantization (or exactly 0), absent ones from the keyframe.
-  // Decoded straight into decoded_ (no per-session scratch): a dense chunk
-  // whole, a sparse one vertex by vertex.
+  // quantization (or exactly 0), absent ones from the keyframe; straight into
+  // decoded_, a sparse chunk run by run.
+  float* dec = decoded_.data() + 3 * a;
   while (true) {
-    if (dense && !all_zero) q.decode(slot.values, std::span<float>(&decoded_[3 * a], 3 * count));
-    double error = 0.0;
-    for (std::size_t i = 0, j = 0; i < count; ++i) {
-      const Vec3 d = positions[a + i] - rest_[a + i];
-      float* dec = &decoded_[3 * (a + i)];
-      if (slot.changed[i]) {
-        if (all_zero) {
-          dec[0] = dec[1] = dec[2] = 0.0f;
-        } else if (!dense) {
-          q.decode(std::span<const float>(&slot.values[3 * j], 3), std::span<float>(dec, 3));
-        }
-        ++j;
+    if (dense) {
+      if (all_zero) {
+        std::fill_n(dec, 3 * count, 0.0f);
       } else {
-        std::copy_n(&keyframe_[3 * (a + i)], 3, dec);
+        q.decode(slot.values, std::span<float>(dec, 3 * count));
       }
-      for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(double{dec[k]} - d[k]));
+    } else {
+      std::copy_n(keyframe_.data() + 3 * a, 3 * count, dec);
+      for (std::size_t r = 0, i = 0, j = 0; r < out.runs.size(); r += 2) {
+        i += out.runs[r];
+        const std::size_t take = out.runs[r + 1];
+        if (all_zero) {
+          std::fill_n(dec + 3 * i, 3 * take, 0.0f);
+        } else {
+          q.decode(std::span<const float>(slot.values).subspan(3 * j, 3 * take), std::span<float>(dec + 3 * i, 3 * take));
+        }
+        i += take, j += take;
+      }
     }
+    const double error = max_error_of(dec, pos, rest, count);
     out.max_error = error;
     if (options_.bits != 0 || all_zero || out.present == 0 || error <= options_.max_error || q.bits >= 24) break;
     ++q.bits;  // float rounding pushed past the target: one more bit
