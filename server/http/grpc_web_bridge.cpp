@@ -241,7 +241,7 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
   }
 
   void OnDone(const grpc::Status& status) override {
-    const std::shared_ptr<BridgeCall> keep = std::move(self_);
+    std::shared_ptr<BridgeCall> keep = std::move(self_);
     {
       std::lock_guard lock(mutex_);
       read_finished_ = true;
@@ -253,9 +253,17 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
       events_ = {};
       events.on_end(encode_trailer_frame(status, context_.GetServerTrailingMetadata()));
     }
-    std::lock_guard lock(inflight_->mutex);
-    inflight_->calls.erase(id_);
-    if (inflight_->calls.empty()) inflight_->idle.notify_all();
+    // When nothing else holds this call, it is destroyed here, its
+    // ClientContext with it, before it stops counting as in flight: a server
+    // shutting down after wait_idle() must not race a gRPC thread still
+    // tearing the call down (it aborted in gRPC's ref counting, ~1 run in 10
+    // of the HTTPS reload test on two busy cores). Only locals after this.
+    const std::shared_ptr<GrpcWebBridge::Inflight> inflight = inflight_;
+    const std::uint64_t id = id_;
+    keep.reset();
+    std::lock_guard lock(inflight->mutex);
+    inflight->calls.erase(id);
+    if (inflight->calls.empty()) inflight->idle.notify_all();
   }
 
  private:
