@@ -74,7 +74,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   } else {
     slot.values.resize(3 * count);
   }
-  // Branch-free, so that the compiler vectorises it; a bad delta is named
+  // No branch per value (one flag for the whole range): a bad delta is named
   // afterwards, on the slow path.
   const Vec3* pos = positions.data() + a;
   const Vec3* rest = rest_.data() + a;
@@ -94,9 +94,10 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
     std::uint8_t* flags = slot.changed.data();
     for (std::size_t i = 0; i < count; ++i) {
       const Vec3 d = pos[i] - rest[i];
-      const double moved = std::max(std::max(std::abs(d.x() - key[3 * i]), std::abs(d.y() - key[3 * i + 1])), std::abs(d.z() - key[3 * i + 2]));
-      const double since_last =
-          std::max(std::max(std::abs(d.x() - last[3 * i]), std::abs(d.y() - last[3 * i + 1])), std::abs(d.z() - last[3 * i + 2]));
+      const double moved =
+          std::max(std::max(std::abs(d.x() - key[3 * i]), std::abs(d.y() - key[3 * i + 1])), std::abs(d.z() - key[3 * i + 2]));
+      const double since_last = std::max(std::max(std::abs(d.x() - last[3 * i]), std::abs(d.y() - last[3 * i + 1])),
+                                         std::abs(d.z() - last[3 * i + 2]));
       flags[i] = moved > tolerance ? 1 : 0;
       changed += flags[i];
       moved_since_last += since_last > tolerance ? 1 : 0;

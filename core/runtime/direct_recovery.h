@@ -14,7 +14,10 @@
 // its largest ring, as structure of arrays (ring slot × lane), so that a
 // block's frames are computed lane-parallel with SIMD and no integer
 // division. Ring indices are renumbered into the traversal's own order (base
-// vertices, then nodes as processed), so ring reads mostly hit recent writes.
+// vertices, then nodes as processed), so ring reads mostly hit recent writes;
+// the kernel prefetches a few blocks ahead the ring rows that do not (coarse
+// nodes, jumps of the Morton curve) and the output lines, which are scattered
+// into the caller's order. Threads meet between phases at a spinning barrier.
 //
 // Precision: positions, weights and offsets are float32, relative to an
 // origin near the pose (the rest base centroid, moved in whole steps of the
