@@ -74,37 +74,35 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   } else {
     slot.values.resize(3 * count);
   }
-  // No branch per value (one flag for the whole range): a bad delta is named
-  // afterwards, on the slow path.
+  // One pass over the positions: the staged floats and, against the keyframe
+  // and the previous frame, what moved. No branch per value (one flag for
+  // the whole range): a bad delta is named afterwards, on the slow path.
   const Vec3* pos = positions.data() + a;
   const Vec3* rest = rest_.data() + a;
   float* staged = slot.values.data();
+  const float* key = keyframe_.data() + 3 * a;
+  const float* last = (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a;
+  std::uint8_t* flags = slot.changed.data();
+  const bool compare = !force_;
   bool plausible = true;
-  for (std::size_t i = 0; i < count; ++i)
-    for (int k = 0; k < 3; ++k) {
-      const double d = pos[i][k] - rest[i][k];
-      plausible &= std::abs(d) <= kMaxDeltaMagnitude;  // false for NaN and ±∞ too
-      staged[3 * i + k] = static_cast<float>(d);
-    }
-  if (!plausible) throw_bad_delta(pos, rest, a, count);
   std::size_t changed = 0, moved_since_last = 0;
-  if (!force_) {
-    const float* key = keyframe_.data() + 3 * a;
-    const float* last = (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a;
-    std::uint8_t* flags = slot.changed.data();
-    for (std::size_t i = 0; i < count; ++i) {
-      const Vec3 d = pos[i] - rest[i];
-      const double moved =
-          std::max(std::max(std::abs(d.x() - key[3 * i]), std::abs(d.y() - key[3 * i + 1])), std::abs(d.z() - key[3 * i + 2]));
-      const double since_last = std::max(std::max(std::abs(d.x() - last[3 * i]), std::abs(d.y() - last[3 * i + 1])),
-                                         std::abs(d.z() - last[3 * i + 2]));
+  for (std::size_t i = 0; i < count; ++i) {
+    const Vec3 d = pos[i] - rest[i];
+    double moved = 0.0, since_last = 0.0;
+    for (int k = 0; k < 3; ++k) {
+      plausible &= std::abs(d[k]) <= kMaxDeltaMagnitude;  // false for NaN and ±∞ too
+      staged[3 * i + k] = static_cast<float>(d[k]);
+      moved = std::max(moved, std::abs(d[k] - key[3 * i + k]));
+      since_last = std::max(since_last, std::abs(d[k] - last[3 * i + k]));
+    }
+    if (compare) {
       flags[i] = moved > tolerance ? 1 : 0;
       changed += flags[i];
       moved_since_last += since_last > tolerance ? 1 : 0;
     }
-  } else {
-    changed = count;
   }
+  if (!plausible) throw_bad_delta(pos, rest, a, count);
+  if (!compare) changed = count;
   const bool dense = force_ || static_cast<double>(changed) > options_.dense_fraction * static_cast<double>(count);
   if (dense) std::fill(slot.changed.begin(), slot.changed.end(), std::uint8_t{1});
   out.kind = dense ? EncodedChunk::Kind::kDense : changed ? EncodedChunk::Kind::kSparse : EncodedChunk::Kind::kAbsent;
