@@ -18,6 +18,7 @@
 #include "runtime/direct_recovery.h"
 #include "runtime/procedural_motion.h"
 #include "support/test_meshes.h"
+#include "util/buffer_pool.h"
 
 namespace filigree {
 namespace {
@@ -142,6 +143,31 @@ TEST(DirectRecovery, ModelIsSharedReadOnlyAcrossDeformers) {
   a.deform(twist);
   b.deform(twist);
   EXPECT_EQ(a.deform(bend).positions, alone);
+}
+
+TEST(DirectRecovery, DeformersBorrowTheirScratchForAFrameAndHoldNoneBetween) {
+  // A session between frames holds no recovery scratch: it is lent by the
+  // model for one deform() and comes back; refused frames borrow nothing.
+  auto h = std::make_shared<const Hierarchy>(preprocess(test::shipped_mesh("bunny_small.obj"), with_base(150)));
+  const auto model = DeformerModel::create(h);
+  Deformer a(model), b(model);
+  const Pose bend = procedural_pose(h->base_mesh().positions, Motion::kBend, 1.0);
+  std::vector<Vec3> out(h->vertex_count());
+  EXPECT_EQ(model->recovery_scratch().free_buffers(), 0u);
+  a.deform(bend, out);
+  EXPECT_EQ(a.memory_bytes(), 0u) << "a T = 0 deformer keeps nothing between frames";
+  EXPECT_EQ(model->recovery_scratch().free_buffers(), 1u);
+  const std::vector<Vec3> first = out;
+  b.deform(bend, out);  // the same buffer, taken and given back
+  EXPECT_EQ(model->recovery_scratch().free_buffers(), 1u);
+  EXPECT_EQ(out, first) << "borrowed scratch does not change results";
+  Pose wrong = bend;
+  wrong.positions[0].x() = std::nan("");
+  EXPECT_THROW(a.deform(wrong, out), PoseError);
+  std::vector<Vec3> short_out(3);
+  EXPECT_THROW(a.deform(bend, short_out), std::invalid_argument);
+  EXPECT_EQ(model->recovery_scratch().free_buffers(), 1u) << "nothing lent out after refused frames";
+  EXPECT_EQ(a.memory_bytes(), 0u);
 }
 
 }  // namespace

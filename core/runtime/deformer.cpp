@@ -15,6 +15,7 @@
 #include "runtime/direct_recovery.h"
 #include "runtime/regions.h"
 #include "runtime/rotation_interpolation.h"
+#include "util/buffer_pool.h"
 
 namespace filigree {
 namespace {
@@ -130,6 +131,26 @@ DeformResult Deformer::deform(const Pose& pose) {
   return r;
 }
 
+namespace {
+
+// Direct recovery's scratch, borrowed from the model for one frame and given
+// back however the frame ends.
+class LentScratch {
+ public:
+  LentScratch(const DeformerModel& model, RecoveryWorkspace& ws) : pool_(model.recovery_scratch()), ws_(ws) {
+    if (ws_.xyzw.capacity() == 0) ws_.xyzw = pool_.take(model.recovery().scratch_floats());
+  }
+  ~LentScratch() { pool_.give(std::exchange(ws_.xyzw, {})); }
+  LentScratch(const LentScratch&) = delete;
+  LentScratch& operator=(const LentScratch&) = delete;
+
+ private:
+  BufferPool<float>& pool_;
+  RecoveryWorkspace& ws_;
+};
+
+}  // namespace
+
 FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   const Hierarchy& h = model_->hierarchy();
   validate_pose(pose, h.base_vertices.size());
@@ -138,6 +159,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
                                 std::to_string(h.vertex_count()));
   const auto start = Clock::now();
   const DirectRecovery& recovery = model_->recovery();
+  const LentScratch scratch(*model_, s_->workspace);
   FrameStats stats;
   stats.threshold = options_.threshold;
 

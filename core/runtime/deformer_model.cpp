@@ -3,6 +3,7 @@
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/direct_recovery.h"
+#include "util/buffer_pool.h"
 
 namespace filigree {
 
@@ -18,7 +19,10 @@ std::shared_ptr<const DeformerModel> DeformerModel::create(std::shared_ptr<const
 }
 
 DeformerModel::DeformerModel(std::shared_ptr<const Hierarchy> h)
-    : h_(std::move(h)), recovery_(std::make_unique<const DirectRecovery>(*h_)) {}
+    : h_(std::move(h)),
+      recovery_(std::make_unique<const DirectRecovery>(*h_)),
+      // A few frames' worth: as many as deformers of this mesh compute at once.
+      recovery_scratch_(std::make_unique<BufferPool<float>>(4)) {}
 
 DeformerModel::~DeformerModel() = default;
 

@@ -21,6 +21,8 @@ namespace filigree {
 struct Hierarchy;
 struct CotangentLaplacian;
 class DirectRecovery;
+template <class T>
+class BufferPool;
 
 class DeformerModel {
  public:
@@ -41,7 +43,11 @@ class DeformerModel {
   const std::vector<Vec3>& differential_coordinates() const;
   // Per vertex: the base-order corners of its MAPS face (thesis §3.1.2).
   const std::vector<std::array<Index, 3>>& maps_corners() const;
-  // Heap bytes held now, excluding the hierarchy (lazy parts once built).
+  // Direct recovery's scratch, lent to a deformer for one frame at a time
+  // (thread-safe): an idle deformer, a session between frames, holds none.
+  BufferPool<float>& recovery_scratch() const { return *recovery_scratch_; }
+  // Heap bytes held now, excluding the hierarchy (lazy parts once built) and
+  // the scratch lent out.
   std::size_t memory_bytes() const;
 
  private:
@@ -51,6 +57,7 @@ class DeformerModel {
 
   std::shared_ptr<const Hierarchy> h_;
   std::unique_ptr<const DirectRecovery> recovery_;
+  std::unique_ptr<BufferPool<float>> recovery_scratch_;
   mutable std::once_flag optimisation_once_;
   mutable std::unique_ptr<const Optimisation> optimisation_;
   mutable std::atomic<bool> optimisation_built_{false};  // lets memory_bytes() look without building

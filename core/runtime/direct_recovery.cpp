@@ -386,7 +386,7 @@ void DirectRecovery::recover(std::span<const Vec3> base, RecoveryWorkspace& ws, 
   if (out.size() != slot_of_vertex_.size())
     throw std::invalid_argument("output has room for " + std::to_string(out.size()) + " vertices, the mesh has " +
                                 std::to_string(slot_of_vertex_.size()));
-  ws.xyzw.resize(4 * (base_count_ + vertex_of_slot_.size()));
+  ws.xyzw.resize(scratch_floats());
   float* p = ws.xyzw.data();
   ws.origin = origin_for(base);
   for (std::size_t i = 0; i < base_count_; ++i) {

@@ -74,6 +74,8 @@ class DirectRecovery {
   static constexpr std::size_t kTileVertices = 4096;
 
   std::size_t vertex_count() const { return slot_of_vertex_.size(); }
+  // Floats a RecoveryWorkspace holds during recover().
+  std::size_t scratch_floats() const { return 4 * (base_count_ + vertex_of_slot_.size()); }
   std::size_t node_count() const { return node_count_; }
   std::size_t partitions() const { return partitions_; }
   std::size_t blocks() const { return segment_blocks_.back(); }
