@@ -784,6 +784,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     return true;
   } catch (const std::exception& e) {
     give_back();
+    assets_->frames->give(std::exchange(frame_, {}));  // no part reads it: none runs during a compute
     // A compute failure must not take the server down; the session keeps
     // its last frame and logs why.
     spdlog::error("session={} event=compute_failed error=\"{}\"", record_.id, e.what());

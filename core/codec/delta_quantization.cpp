@@ -55,15 +55,19 @@ DecodeFn pick_decode() {
   __builtin_cpu_init();
   return __builtin_cpu_supports("sse4.1") ? decode_values_sse41 : decode_values_baseline;
 }
-const DecodeFn kDecodeValues = pick_decode();
+// Chosen on first use, so that no static initialiser can see it unset.
+void dispatch_decode(const DecodeArgs& a) {
+  static const DecodeFn chosen = pick_decode();
+  chosen(a);
+}
 #else
-void kDecodeValues(const DecodeArgs& a) { decode_values(a); }
+void dispatch_decode(const DecodeArgs& a) { decode_values(a); }
 #endif
 
 }  // namespace
 
 void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
-  kDecodeValues({values.data(), out.data(), std::min(values.size(), out.size()), min, range, max_level(bits)});
+  dispatch_decode({values.data(), out.data(), std::min(values.size(), out.size()), min, range, max_level(bits)});
 }
 
 double DeltaQuantization::half_step() const { return double{range} / max_level(bits) / 2.0; }

@@ -15,7 +15,7 @@ template <class T>
 class BufferPool {
  public:
   // Keeps at most `max_free` buffers between uses; more given back are freed.
-  explicit BufferPool(std::size_t max_free) : max_free_(max_free) {}
+  explicit BufferPool(std::size_t max_free) : max_free_(max_free) { free_.reserve(max_free_); }
   BufferPool(const BufferPool&) = delete;
   BufferPool& operator=(const BufferPool&) = delete;
 
@@ -37,8 +37,10 @@ class BufferPool {
     return buffer;
   }
 
-  // Returns a buffer for later take()s (an empty one is ignored).
-  void give(std::vector<T>&& buffer) {
+  // Returns a buffer for later take()s (an empty one is ignored). Never
+  // throws (room for max_free buffers is reserved): callers give back from
+  // destructors and from paths that must not fail.
+  void give(std::vector<T>&& buffer) noexcept {
     if (buffer.capacity() == 0) return;
     std::vector<T> dropped;  // freed outside the lock
     std::lock_guard lock(mutex_);

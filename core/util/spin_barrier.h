@@ -35,9 +35,9 @@ class SpinBarrier {
   }
 
  private:
-  // About 50 µs of spinning (a pause is ~65 cycles on recent x86) before
-  // sleeping: longer than a wake-up costs, short enough that a partner
-  // descheduled for another process wastes little.
+  // Tens of microseconds of spinning before sleeping (a pause takes 10–150
+  // cycles, by processor): longer than a wake-up costs, short enough that a
+  // partner descheduled for another process wastes little.
   static constexpr int kSpins = 2048;
   static void pause() {
 #if defined(__x86_64__) || defined(__i386__)

@@ -257,7 +257,10 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
     // ClientContext with it, before it stops counting as in flight: a server
     // shutting down after wait_idle() must not race a gRPC thread still
     // tearing the call down (it aborted in gRPC's ref counting, ~1 run in 10
-    // of the HTTPS reload test on two busy cores). Only locals after this.
+    // of the HTTPS reload test on two busy cores). When the HTTP side still
+    // holds it, it goes on an io thread (joined by HttpServer::shutdown) or
+    // with the io_context's handlers (destroyed after that): ordered before
+    // the server is gone either way. Only locals after this.
     const std::shared_ptr<GrpcWebBridge::Inflight> inflight = inflight_;
     const std::uint64_t id = id_;
     keep.reset();
