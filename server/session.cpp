@@ -163,7 +163,7 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
     quantize_part_of(*f, c);
     encode_part_of(*f, c);
   }
-  assets_->frames->give(std::exchange(frame_, {}));
+  release_frame();
   publish(*f);
 }
 
@@ -556,6 +556,8 @@ void Session::maybe_compute_locked() {
   scheduler_.post(*lane_, [this] { compute_task(); });
 }
 
+void Session::release_frame() { assets_->frames->give(std::exchange(frame_, {})); }
+
 void Session::compute_task() {
   auto f = std::make_unique<InFlight>();
   {
@@ -630,7 +632,7 @@ void Session::part_task(InFlight* f, std::size_t c) {
   {
     std::lock_guard lock(mutex_);
     if (--positions_busy_ == 0) {
-      assets_->frames->give(std::exchange(frame_, {}));  // read by no one until the next compute
+      release_frame();
       maybe_compute_locked();  // the next frame may compute now
     }
   }
@@ -784,7 +786,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     return true;
   } catch (const std::exception& e) {
     give_back();
-    assets_->frames->give(std::exchange(frame_, {}));  // no part reads it: none runs during a compute
+    release_frame();  // no part reads it: none runs during a compute
     // A compute failure must not take the server down; the session keeps
     // its last frame and logs why.
     spdlog::error("session={} event=compute_failed error=\"{}\"", record_.id, e.what());

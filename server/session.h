@@ -206,6 +206,9 @@ class Session {
   void start_encode_locked();
   // Posts a compute if a change waits and frame_ is free (mutex_ held).
   void maybe_compute_locked();
+  // Hands frame_ back to the mesh's pool: only when nothing reads it until
+  // the next compute (every part quantized, or the compute failed).
+  void release_frame();
   void compute_task();
   // Part c of a frame's encoding: chunk c, or the single buffer (c ==
   // chunk_count). Quantizing reads frame_; encoding does not.
@@ -253,7 +256,7 @@ class Session {
   FrameScheduler& scheduler_;
   std::shared_ptr<FrameScheduler::Lane> lane_;
   Pose scratch_pose_;        // compute_frame's buffers (one compute at a time)
-  std::vector<Vec3> frame_;  // positions of the frame computed last
+  std::vector<Vec3> frame_;  // positions of the frame computed last, from compute to quantization (empty between)
   FrameEncoder encoder_;
   std::unique_ptr<InFlight> computed_;  // computed, waiting for the encoder
   std::unique_ptr<InFlight> encoding_;  // being encoded
