@@ -6,6 +6,8 @@
 
 #include <grpcpp/generic/generic_stub.h>
 
+#include "filigree/call_metadata.h"
+
 namespace filigree::soak {
 
 namespace {
@@ -25,8 +27,7 @@ std::string random_hex(std::size_t digits) {
 
 void prepare(grpc::ClientContext& context, const std::string& session_id, const std::string& token) {
   context.set_deadline(std::chrono::system_clock::now() + kDeadline);
-  if (!token.empty()) context.AddMetadata("x-filigree-token", token);
-  context.AddMetadata("x-session-id", session_id);
+  set_session_metadata(context, session_id, token);
 }
 
 // A Drive stream with one pose: its status once the server ends it.

@@ -8,11 +8,19 @@ namespace filigree::soak {
 
 using Clock = std::chrono::steady_clock;
 
+namespace {
+std::vector<Vec3> to_vec3(const std::vector<float>& xyz) {
+  std::vector<Vec3> out(xyz.size() / 3);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+  return out;
+}
+}  // namespace
+
 PacedDriver::PacedDriver(Client& client, const SessionHandle& session, std::string name, double rate_hz, double phase,
                          Failures& failures)
     : client_(client), session_(session), name_(std::move(name)),
       period_(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / rate_hz))), phase_(phase), failures_(failures),
-      base_rest_(session.mesh.base_positions.begin(), session.mesh.base_positions.end()) {}
+      base_rest_(to_vec3(session.mesh.base_positions)) {}
 
 PacedDriver::~PacedDriver() {
   stop_posing();
@@ -32,12 +40,10 @@ void PacedDriver::start() {
 }
 
 std::vector<float> PacedDriver::pose(std::uint64_t id) const {
-  std::vector<Vec3> rest(base_rest_.size() / 3);
-  for (std::size_t i = 0; i < rest.size(); ++i) rest[i] = Vec3(base_rest_[3 * i], base_rest_[3 * i + 1], base_rest_[3 * i + 2]);
   // A whole-body bend going back and forth (about a 4 s cycle at 30 Hz):
   // every base vertex moves every frame, the heaviest case for the encoder.
   const double t = 0.5 + 0.5 * std::sin(0.05 * static_cast<double>(id) + phase_);
-  const Pose p = procedural_pose(rest, Motion::kBend, t);
+  const Pose p = procedural_pose(base_rest_, Motion::kBend, t);
   std::vector<float> out;
   out.reserve(3 * p.positions.size());
   for (const Vec3& v : p.positions)

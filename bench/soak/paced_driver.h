@@ -33,6 +33,7 @@
 
 #include "bench/soak/failures.h"
 #include "filigree/client.h"
+#include "mesh/tri_mesh.h"
 
 namespace filigree::soak {
 
@@ -75,7 +76,7 @@ class PacedDriver {
   const double phase_;
   Failures& failures_;
   std::unique_ptr<Driver> driver_;
-  std::vector<double> base_rest_;  // for the motion
+  std::vector<Vec3> base_rest_;  // for the motion, made once
 
   // The newest pose id handed to send(): set before send(), so a frame can
   // never legitimately name a larger one.

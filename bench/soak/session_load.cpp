@@ -9,24 +9,16 @@ namespace {
 
 std::string driver_name(int index) { return "soak-driver-" + std::to_string(index); }
 
-// The driver's pose named in a frame's changes (0: it changed nothing there).
-std::uint64_t pose_in_changes(const v1::Frame& frame, const std::string& name) {
-  for (const v1::Change& c : frame.changes())
-    if (c.client_name() == name) return c.pose_id();
-  return 0;
-}
-
-// The end's unary calls go through the raw stub with a deadline (the
-// library's take none): a server that died or hangs must fail the soak, not
-// stall it (a CloseSession to a killed server was seen to wait forever). The
-// end's deadline, and at least 2 s for each call once it has passed.
+// The end's unary calls go through the raw stub with the end's deadline (at
+// least 2 s for each call once it has passed), not the library's fixed call
+// timeout: a server that died or hangs must fail the soak by its end, not
+// stall it (a CloseSession to a killed server was seen to wait forever).
 void prepare(grpc::ClientContext& context, const SessionHandle& s, const std::string& token,
              std::chrono::steady_clock::time_point deadline) {
   const auto left = std::max<std::chrono::steady_clock::duration>(deadline - std::chrono::steady_clock::now(),
                                                                    std::chrono::seconds(2));
   context.set_deadline(std::chrono::system_clock::now() + left);
-  context.AddMetadata("x-filigree-token", token);
-  context.AddMetadata("x-session-id", s.session_id);
+  set_session_metadata(context, s.session_id, token);
 }
 
 std::string describe(const grpc::Status& status) {

@@ -2,6 +2,12 @@
 
 namespace filigree::soak {
 
+std::uint64_t pose_in_changes(const v1::Frame& frame, const std::string& name) {
+  for (const v1::Change& c : frame.changes())
+    if (c.client_name() == name) return c.pose_id();
+  return 0;
+}
+
 using Clock = std::chrono::steady_clock;
 
 const char* to_string(WatcherKind kind) {
@@ -95,9 +101,7 @@ bool SoakWatcher::take(const v1::Frame& f, FrameDecoder& decoder, std::uint64_t 
   } catch (const std::exception& e) {
     failures_.add(name_ + ": frame " + std::to_string(f.version()) + " does not decode: " + e.what());
   }
-  std::uint64_t driver_pose = 0;
-  for (const v1::Change& c : f.changes())
-    if (c.client_name() == driver_name_) driver_pose = c.pose_id();
+  const std::uint64_t driver_pose = pose_in_changes(f, driver_name_);
   {
     std::lock_guard lock(mutex_);
     ++stats_.frames;

@@ -29,6 +29,9 @@
 
 namespace filigree::soak {
 
+// The pose of client `name` that `frame` includes, from its changes (0: none).
+std::uint64_t pose_in_changes(const v1::Frame& frame, const std::string& name);
+
 enum class WatcherKind { kNormal, kSlow, kReconnecting };
 const char* to_string(WatcherKind kind);
 
