@@ -127,13 +127,15 @@ grpc::Status sessions_quota_exhausted(const ApiKey& key) {
 
 grpc::Status FiligreeService::admit_upload(const ApiKey& key, std::shared_ptr<void>* pending) {
   pending->reset();
-  // Uploads admitted but not yet sessions take a place too: concurrent
-  // uploads of one key cannot all pass the same check.
-  const std::uint64_t held = registry_.holdings(key.name).sessions;
-  if (key.quota.sessions != 0 && held >= key.quota.sessions)
-    return sessions_quota_exhausted(key);
-  std::shared_ptr<void> place = uploading_.take(key.name, key.quota.sessions == 0 ? 0 : key.quota.sessions - held);
-  if (!place) return sessions_quota_exhausted(key);
+  std::shared_ptr<void> place;
+  if (key.quota.sessions != 0) {
+    // Uploads admitted but not yet sessions take a place too: concurrent
+    // uploads of one key cannot all pass the same check.
+    const std::uint64_t held = registry_.holdings(key.name).sessions;
+    if (held >= key.quota.sessions) return sessions_quota_exhausted(key);
+    place = uploading_.take(key.name, key.quota.sessions - held);
+    if (!place) return sessions_quota_exhausted(key);
+  }
   if (!ledger_.admit_upload(key.name, key.quota.uploads_per_minute))
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' made its quota of " +
                                                       std::to_string(key.quota.uploads_per_minute) + " uploads in the last minute"};
