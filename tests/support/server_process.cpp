@@ -69,24 +69,19 @@ void ServerProcess::kill_now() {
   pid_ = -1;
 }
 
-void ServerProcess::pause() {
+void ServerProcess::pause() { signal_and_wait(SIGSTOP, WUNTRACED); }
+
+void ServerProcess::resume() { signal_and_wait(SIGCONT, WCONTINUED); }
+
+void ServerProcess::signal_and_wait(int signal, int wait_for) {
   if (pid_ <= 0) return;
-  kill(pid_, SIGSTOP);
-  // kill() only sends it: wait until the process has stopped (or ended), so
-  // that nothing it does after this call is a race with the stop.
+  kill(pid_, signal);
+  // kill() only sends it: wait until the process has stopped or continued (or
+  // ended), so that nothing it does after this call is a race with the signal.
   int status = 0;
-  while (waitpid(pid_, &status, WUNTRACED) < 0 && errno == EINTR) {
+  while (waitpid(pid_, &status, wait_for) < 0 && errno == EINTR) {
   }
   if (WIFEXITED(status) || WIFSIGNALED(status)) pid_ = -1;  // it ended instead (reaped now)
-}
-
-void ServerProcess::resume() {
-  if (pid_ <= 0) return;
-  kill(pid_, SIGCONT);
-  int status = 0;
-  while (waitpid(pid_, &status, WCONTINUED) < 0 && errno == EINTR) {
-  }
-  if (WIFEXITED(status) || WIFSIGNALED(status)) pid_ = -1;
 }
 
 int ServerProcess::terminate() {

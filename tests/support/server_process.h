@@ -33,6 +33,7 @@ class ServerProcess {
   void resume();
 
  private:
+  void signal_and_wait(int signal, int wait_for);
   int pid_ = -1;
   std::string address_;
   std::string http_address_;
