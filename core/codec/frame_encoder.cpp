@@ -88,14 +88,16 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   std::size_t changed = 0, moved_since_last = 0;
   for (std::size_t i = 0; i < count; ++i) {
     const Vec3 d = pos[i] - rest[i];
-    double moved = 0.0, since_last = 0.0;
     for (int k = 0; k < 3; ++k) {
       plausible &= std::abs(d[k]) <= kMaxDeltaMagnitude;  // false for NaN and ±∞ too
       staged[3 * i + k] = static_cast<float>(d[k]);
-      moved = std::max(moved, std::abs(d[k] - key[3 * i + k]));
-      since_last = std::max(since_last, std::abs(d[k] - last[3 * i + k]));
     }
-    if (compare) {
+    if (compare) {  // a forced keyframe sends everything: nothing to compare
+      double moved = 0.0, since_last = 0.0;
+      for (int k = 0; k < 3; ++k) {
+        moved = std::max(moved, std::abs(d[k] - key[3 * i + k]));
+        since_last = std::max(since_last, std::abs(d[k] - last[3 * i + k]));
+      }
       flags[i] = moved > tolerance ? 1 : 0;
       changed += flags[i];
       moved_since_last += since_last > tolerance ? 1 : 0;
