@@ -779,9 +779,10 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       if (region.empty()) overlays.mutable_region_of()->Resize(static_cast<int>(h.vertex_count()), 0);
       overlays.set_region_count(regions);
       const CutState& cut = deformer_->cut_state();
-      for (FaceId face = 0; face < h.faces.size(); ++face)
+      h.for_each_face([&](FaceId face, const Triangle& t) {
         if (cut.face_alive(face))
-          for (Index v : h.faces[face]) overlays.add_cut_faces(v);
+          for (Index v : t) overlays.add_cut_faces(v);
+      });
     }
     return true;
   } catch (const std::exception& e) {

@@ -21,9 +21,9 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   a->rest.mutable_positions()->Reserve(static_cast<int>(3 * h.vertex_count()));
   for (const Vec3& p : h.rest_positions)
     for (int k = 0; k < 3; ++k) a->rest.add_positions(static_cast<float>(p[k]));
-  a->rest.mutable_faces()->Reserve(static_cast<int>(3 * h.original_face_count));
-  for (FaceId f = 0; f < h.original_face_count; ++f)
-    for (Index v : h.faces[f]) a->rest.add_faces(v);
+  a->rest.mutable_faces()->Reserve(static_cast<int>(3 * h.original_face_count()));
+  for (const Triangle& f : h.original_faces)
+    for (Index v : f) a->rest.add_faces(v);
   a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
   // Frames: a few in flight at once. Staging: two frames' chunks, enough for
   // one encoding while the next frame quantizes.

@@ -103,10 +103,10 @@ TEST_P(CutTest, TheFullCutIsEveryNodeRecovered) {
   CutState full = CutState::full(h_);
   EXPECT_EQ(full.recovered_count(), by_nodes.recovered_count());
   EXPECT_EQ(full.alive_face_count(), by_nodes.alive_face_count());
-  for (FaceId f = 0; f < h_.faces.size(); ++f) ASSERT_EQ(full.face_alive(f), by_nodes.face_alive(f)) << "face " << f;
+  for (FaceId f = 0; f < h_.face_count(); ++f) ASSERT_EQ(full.face_alive(f), by_nodes.face_alive(f)) << "face " << f;
   EXPECT_EQ(full.mesh().faces, by_nodes.mesh().faces);
   // A cut that never changed holds no per-node counts.
-  EXPECT_LE(full.memory_bytes(), (h_.node_count() + h_.faces.size()) / 8 + 64);
+  EXPECT_LE(full.memory_bytes(), (h_.node_count() + h_.face_count()) / 8 + 64);
 
   // The same random walk down and up from both: the same answers throughout.
   std::mt19937 rng(7);
@@ -292,7 +292,7 @@ TEST_P(CutTest, UpdatedCutKeepsItsRegionsExactAndItsStateBounded) {
   }
   // T = 0 holds about two bits per node and vertex, one per face.
   AdaptiveCut direct(h_, laplacian_, 0.0);
-  EXPECT_LE(direct.memory_bytes(), mesh_.vertex_count() / 2 + h_.faces.size() / 8 + 256);
+  EXPECT_LE(direct.memory_bytes(), mesh_.vertex_count() / 2 + h_.face_count() / 8 + 256);
   EXPECT_EQ(direct.state().recovered_count(), h_.node_count());
 }
 
@@ -311,7 +311,7 @@ TEST_P(CutTest, ThresholdChangesResetOrKeepTheCut) {
   EXPECT_EQ(cut.state().recovered_count(), h_.node_count());
   EXPECT_EQ(cut.regions().count(), 0u);
   EXPECT_EQ(cut.update(bent, eval, moves), 0u);
-  EXPECT_LE(cut.memory_bytes(), mesh_.vertex_count() / 2 + h_.faces.size() / 8 + 256);
+  EXPECT_LE(cut.memory_bytes(), mesh_.vertex_count() / 2 + h_.face_count() / 8 + 256);
   // T = ∞: the empty cut, one region per component of the removed vertices.
   cut.set_threshold(AdaptiveCut::kInfinity);
   EXPECT_EQ(cut.state().recovered_count(), 0u);

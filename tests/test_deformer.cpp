@@ -166,7 +166,7 @@ TEST_F(DeformerTest, InfiniteThresholdIsTheWholeMeshDirichletSolve) {
       }
     }
     entries.emplace_back(i, i, diagonal);
-    const Triangle& t = h_->faces[h_->base_faces[h_->maps_face[v]]];
+    const Triangle t = h_->face(h_->base_faces[h_->maps_face[v]]);
     const Vec3 bary = h_->maps_bary[v].cast<double>();
     int lead = 0;
     bary.maxCoeff(&lead);

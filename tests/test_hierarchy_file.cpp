@@ -1,6 +1,7 @@
 // The hierarchy file: bit-identical round trips, and every kind of damage
 // turned into an error that says what is wrong.
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -54,8 +55,8 @@ void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const c
 
 void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   expect_same_bytes(a.rest_positions, b.rest_positions, "rest_positions");
-  expect_same_bytes(a.faces, b.faces, "faces");
-  EXPECT_EQ(a.original_face_count, b.original_face_count);
+  expect_same_bytes(a.original_faces, b.original_faces, "original_faces");
+  expect_same_bytes(a.created_corners, b.created_corners, "created_corners");
   expect_same_bytes(a.node_vertex, b.node_vertex, "node_vertex");
   expect_same_bytes(a.node_closed, b.node_closed, "node_closed");
   expect_same_bytes(a.ring_offsets, b.ring_offsets, "ring_offsets");
@@ -63,7 +64,6 @@ void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   expect_same_bytes(a.ring_weights, b.ring_weights, "ring_weights");
   expect_same_bytes(a.node_offset, b.node_offset, "node_offset");
   expect_same_bytes(a.removed_faces, b.removed_faces, "removed_faces");
-  expect_same_bytes(a.created_faces, b.created_faces, "created_faces");
   expect_same_bytes(a.parent_offsets, b.parent_offsets, "parent_offsets");
   expect_same_bytes(a.parents, b.parents, "parents");
   expect_same_bytes(a.child_offsets, b.child_offsets, "child_offsets");
@@ -126,10 +126,10 @@ TEST_F(HierarchyFileTest, FloatFieldsRoundTripBitExact) {
 TEST_F(HierarchyFileTest, MemoryBytesIsTheSumOfTheArrays) {
   // A loaded hierarchy allocates exactly; count by hand what each array holds.
   const Hierarchy h = deserialize_hierarchy(*bytes_);
-  const std::size_t n = h.vertex_count(), nodes = h.node_count(), faces = h.faces.size();
-  const std::size_t slots = h.ring_vertices.size(), created = faces - h.original_face_count, edges = h.children.size();
+  const std::size_t n = h.vertex_count(), nodes = h.node_count(), original = h.original_face_count();
+  const std::size_t slots = h.ring_vertices.size(), created = h.created_corners.size(), edges = h.children.size();
   const std::size_t expected = n * (24 + 4 + 12 + 4)               // rest_positions, maps_face, maps_bary, vertex_node
-                               + faces * 12 + created * 4          // faces, created_faces
+                               + original * 12 + created * 3       // original_faces, created_corners
                                + nodes * (4 + 1 + 12)              // node_vertex, node_closed, node_offset
                                + (nodes + 1) * 4 * 3               // ring, parent and child offsets
                                + slots * (4 + 4 + 4)               // ring_vertices, ring_weights, removed_faces
@@ -270,7 +270,7 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   EXPECT_NE(msg.find("corrupt: invalid hierarchy"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.faces[3][1] = static_cast<Index>(forged.vertex_count());
+  forged.original_faces[3][1] = static_cast<Index>(forged.vertex_count());
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("face 3"), std::string::npos) << msg;
 
@@ -320,19 +320,63 @@ TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
   ++h.parents[0];
   EXPECT_NE(message(h).find("parent and child lists disagree"), std::string::npos) << message(h);
   h = *hierarchy_;
-  h.created_faces.back() = 0;
-  EXPECT_NE(message(h).find("created face list"), std::string::npos) << message(h);
+  h.created_corners.back() = {0, 1, 1};
+  EXPECT_NE(message(h).find("corners outside its ring"), std::string::npos) << message(h);
   h = *hierarchy_;
   h.vertex_node[h.base_vertices[0]] = 0;
   EXPECT_NE(message(h).find("names a node that did not remove it"), std::string::npos) << message(h);
   h = *hierarchy_;
   h.base_faces.pop_back();
   EXPECT_NE(message(h).find("base face count"), std::string::npos) << message(h);
-  h = *hierarchy_;
+}
+
+TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
+  const Hierarchy& h = *hierarchy_;
+  // Every face in id order, as for_each_face visits them and face() finds them.
+  std::vector<Triangle> all;
+  h.for_each_face([&](FaceId f, const Triangle& t) {
+    ASSERT_EQ(f, all.size());
+    all.push_back(t);
+  });
+  ASSERT_EQ(all.size(), h.face_count());
+  ASSERT_GT(all.size(), h.original_face_count());
+  for (FaceId f = 0; f < all.size(); ++f) ASSERT_EQ(h.face(f), all[f]) << "face " << f;
+  std::size_t checked = 0;
+  for (NodeId k = 0; k < h.node_count(); ++k) {
+    const auto ring = h.ring(k);
+    // Created faces join ring vertices, and their creator is k.
+    for (FaceId f : h.created_faces_of(k)) {
+      ASSERT_EQ(h.creator(f), k) << "face " << f;
+      for (Index c : all[f]) ASSERT_NE(std::find(ring.begin(), ring.end(), c), ring.end()) << "face " << f;
+    }
+    // Slot i of the fan is (v, ring[i], ring[i+1]), up to rotation, whoever made it.
+    const auto removed = h.removed_faces_of(k);
+    for (std::size_t i = 0; i < removed.size(); ++i) {
+      const Triangle t = h.removed_face(k, i);
+      ASSERT_EQ(t, all[removed[i]]) << "node " << k << " slot " << i;
+      const Triangle fan{h.node_vertex[k], ring[i], ring[(i + 1) % ring.size()]};
+      const bool rotated = t == fan || t == Triangle{fan[1], fan[2], fan[0]} || t == Triangle{fan[2], fan[0], fan[1]};
+      ASSERT_TRUE(rotated) << "node " << k << " slot " << i;
+      checked += removed[i] >= h.original_face_count() ? 1 : 0;
+    }
+  }
+  EXPECT_GT(checked, 0u);  // some removed faces were made by children
+  EXPECT_EQ(h.creator(0), kNone);
+  EXPECT_THROW((void)h.creator(static_cast<FaceId>(h.face_count())), std::out_of_range);
+
+  // Corners of triangles a builder made: the stored ones back, and a face
+  // that is not a triangle of its node's ring refused.
+  std::vector<Triangle> created(all.begin() + static_cast<std::ptrdiff_t>(h.original_face_count()), all.end());
+  const std::vector<RingCorners> corners = ring_corners(h, created);
+  EXPECT_EQ(corners, h.created_corners);
   const NodeId k = 3;
-  h.faces[h.created_faces_of(k)[0]][0] = h.node_vertex[k];  // the removed vertex is not in its own ring
-  EXPECT_NE(message(h).find("not a triangle of its ring"), std::string::npos) << message(h);
-  EXPECT_THROW(serialize_hierarchy(h), HierarchyError);
+  created[h.first_created_face(k) - h.original_face_count()][0] = h.node_vertex[k];  // not in its own ring
+  try {
+    (void)ring_corners(h, created);
+    ADD_FAILURE() << "no error";
+  } catch (const HierarchyError& e) {
+    EXPECT_NE(std::string(e.what()).find("not a triangle of its ring"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(HierarchyFileTest, MissingFileIsAnError) {

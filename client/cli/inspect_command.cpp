@@ -30,11 +30,11 @@ void add_inspect_command(CLI::App& app) {
     std::printf("file          %s (format v%u, %.1f MiB, loaded and validated in %.1f ms)\n", path->c_str(), info.version,
                 static_cast<double>(info.file_size) / (1024.0 * 1024.0), load_ms);
     std::printf("mesh hash     %s\n", hash_to_hex(h.mesh_hash).c_str());
-    std::printf("original      %zu vertices, %u faces\n", h.vertex_count(), h.original_face_count);
+    std::printf("original      %zu vertices, %zu faces\n", h.vertex_count(), h.original_face_count());
     std::printf("base          %zu vertices, %zu faces\n", h.base_vertices.size(), h.base_faces.size());
     std::printf("nodes         %zu (%zu on the boundary), depth %zu, largest ring %zu\n", h.node_count(), boundary_nodes,
                 h.depth(), max_ring);
-    std::printf("faces stored  %zu (original + created by removals)\n", h.faces.size());
+    std::printf("faces stored  %zu (original + created by removals)\n", h.face_count());
     // What one more vertex costs a server (the loaded arrays) and a cache directory.
     const double n = static_cast<double>(std::max<std::size_t>(h.vertex_count(), 1));
     std::printf("size          %.1f bytes/vertex in memory (%.1f MiB), %.1f bytes/vertex on disk\n",

@@ -7,7 +7,7 @@
 namespace filigree {
 
 CutState::CutState(const Hierarchy& h)
-    : h_(&h), recovered_(h.node_count(), false), face_alive_(h.faces.size(), false) {
+    : h_(&h), recovered_(h.node_count(), false), face_alive_(h.face_count(), false) {
   for (FaceId f : h.base_faces) face_alive_[f] = true;
   alive_faces_ = h.base_faces.size();
 }
@@ -19,9 +19,9 @@ CutState CutState::full(const Hierarchy& h) {
   CutState cut(h);
   cut.recovered_.assign(h.node_count(), true);
   cut.recovered_count_ = h.node_count();
-  cut.face_alive_.assign(h.faces.size(), false);
-  std::fill_n(cut.face_alive_.begin(), h.original_face_count, true);
-  cut.alive_faces_ = h.original_face_count;
+  cut.face_alive_.assign(h.face_count(), false);
+  std::fill_n(cut.face_alive_.begin(), h.original_face_count(), true);
+  cut.alive_faces_ = h.original_face_count();
   return cut;
 }
 
@@ -90,11 +90,9 @@ TriMesh CutState::mesh(std::vector<Index>* original_ids) const {
     if (original_ids) original_ids->push_back(v);
   }
   m.faces.reserve(alive_faces_);
-  for (FaceId f = 0; f < h_->faces.size(); ++f) {
-    if (!face_alive_[f]) continue;
-    const Triangle& t = h_->faces[f];
-    m.faces.push_back({local[t[0]], local[t[1]], local[t[2]]});
-  }
+  h_->for_each_face([&](FaceId f, const Triangle& t) {
+    if (face_alive_[f]) m.faces.push_back({local[t[0]], local[t[1]], local[t[2]]});
+  });
   return m;
 }
 

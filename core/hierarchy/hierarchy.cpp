@@ -301,10 +301,37 @@ std::size_t bytes_of(const std::vector<T>& v) {
 
 }  // namespace
 
+Triangle Hierarchy::removed_face(NodeId k, std::size_t i) const {
+  const FaceId f = removed_faces_of(k)[i];
+  if (f < original_faces.size()) return original_faces[f];
+  // Validation guarantees one of k's children created it.
+  for (NodeId c : children_of(k))
+    if (f >= first_created_face(c) && f < first_created_face(c) + ring_size(c) - 2) return created_face(c, f - first_created_face(c));
+  throw HierarchyError("invalid hierarchy: node " + str(k) + " removes face " + str(f) + ", made by none of its children");
+}
+
+NodeId Hierarchy::creator(FaceId f) const {
+  if (f < original_faces.size()) return kNone;
+  if (f >= face_count()) throw std::out_of_range("face " + str(f) + " out of range");
+  // The last node whose first created face is ≤ f (first_created_face ascends).
+  std::size_t lo = 0, hi = node_count();
+  while (hi - lo > 1) {
+    const std::size_t mid = (lo + hi) / 2;
+    (first_created_face(static_cast<NodeId>(mid)) <= f ? lo : hi) = mid;
+  }
+  return static_cast<NodeId>(lo);
+}
+
+Triangle Hierarchy::face(FaceId f) const {
+  if (f < original_faces.size()) return original_faces[f];
+  const NodeId k = creator(f);
+  return created_face(k, f - first_created_face(k));
+}
+
 TriMesh Hierarchy::original_mesh() const {
   TriMesh m;
   m.positions = rest_positions;
-  m.faces.assign(faces.begin(), faces.begin() + original_face_count);
+  m.faces = original_faces;
   return m;
 }
 
@@ -315,12 +342,16 @@ TriMesh Hierarchy::base_mesh() const {
     local[base_vertices[i]] = i;
     m.positions.push_back(rest_positions[base_vertices[i]]);
   }
-  for (FaceId f : base_faces) m.faces.push_back({local[faces[f][0]], local[faces[f][1]], local[faces[f][2]]});
+  m.faces.reserve(base_faces.size());
+  for (FaceId f : base_faces) {
+    const Triangle t = face(f);
+    m.faces.push_back({local[t[0]], local[t[1]], local[t[2]]});
+  }
   return m;
 }
 
 Vec3 Hierarchy::maps_position(Index i, const std::vector<Vec3>& positions) const {
-  const Triangle& t = faces[base_faces[maps_face[i]]];
+  const Triangle t = face(base_faces[maps_face[i]]);
   const Vec3 b = maps_bary[i].cast<double>();
   return b[0] * positions[t[0]] + b[1] * positions[t[1]] + b[2] * positions[t[2]];
 }
@@ -336,9 +367,9 @@ std::size_t Hierarchy::depth() const {
 }
 
 std::size_t Hierarchy::memory_bytes() const {
-  return bytes_of(rest_positions) + bytes_of(faces) + bytes_of(node_vertex) + bytes_of(node_closed) + bytes_of(ring_offsets) +
+  return bytes_of(rest_positions) + bytes_of(original_faces) + bytes_of(created_corners) + bytes_of(node_vertex) + bytes_of(node_closed) + bytes_of(ring_offsets) +
          bytes_of(ring_vertices) + bytes_of(ring_weights) + bytes_of(node_offset) + bytes_of(removed_faces) +
-         bytes_of(created_faces) + bytes_of(parent_offsets) + bytes_of(parents) + bytes_of(child_offsets) + bytes_of(children) +
+         bytes_of(parent_offsets) + bytes_of(parents) + bytes_of(child_offsets) + bytes_of(children) +
          bytes_of(base_vertices) + bytes_of(base_faces) + bytes_of(maps_face) + bytes_of(maps_bary) + bytes_of(vertex_node);
 }
 
@@ -356,6 +387,8 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
     try {
       if (concurrently) concurrently();
       copy_into(h.rest_positions, s.rest_positions);
+      copy_into(h.original_faces, s.original_faces);
+      copy_into(h.created_corners, s.created_corners);
       copy_into(h.node_vertex, s.node_vertex);
       copy_into(h.node_closed, s.node_closed);
       copy_into(h.ring_offsets, s.ring_offsets);
@@ -379,20 +412,6 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
 
     const Checked c = check(s);
     const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
-    const Index original = static_cast<Index>(s.original_faces.size());
-    h.original_face_count = original;
-    // Faces: the original ones, then each node's corners looked up in its ring.
-    reserve_exact(h.faces, c.face_count);
-    h.faces.assign(s.original_faces.begin(), s.original_faces.end());
-    for (std::size_t k = 0; k < nodes; ++k) {
-      const Index* ring = s.ring_vertices.data() + s.ring_offsets[k];
-      const std::size_t first = first_created(s.ring_offsets, 0, k), count = s.ring_offsets[k + 1] - s.ring_offsets[k] - 2;
-      for (const RingCorners& t : s.created_corners.subspan(first, count)) h.faces.push_back({ring[t[0]], ring[t[1]], ring[t[2]]});
-    }
-    reserve_exact(h.created_faces, c.face_count - original);
-    h.created_faces.resize(c.face_count - original);
-    std::iota(h.created_faces.begin(), h.created_faces.end(), original);
-
     derive_parents(s.child_offsets, s.children, nodes, h.parent_offsets, h.parents);
     reserve_exact(h.vertex_node, n);
     h.vertex_node.assign(n, kNone);
@@ -407,52 +426,35 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
   return h;
 }
 
-StoredHierarchy stored_view(const Hierarchy& h, std::vector<RingCorners>& corners) {
+StoredHierarchy stored_view(const Hierarchy& h) {
+  check_offsets(h.ring_offsets, h.node_count(), h.ring_vertices.size(), "ring");
+  return {h.rest_positions, h.original_faces, h.created_corners, h.node_vertex, h.node_closed, h.ring_offsets, h.ring_vertices,
+          h.ring_weights, h.node_offset, h.removed_faces, h.child_offsets, h.children, h.maps_face, h.maps_bary};
+}
+
+std::vector<RingCorners> ring_corners(const Hierarchy& h, std::span<const Triangle> created) {
   const std::size_t nodes = h.node_count();
   const std::size_t slots = h.ring_vertices.size();
   check_offsets(h.ring_offsets, nodes, slots, "ring");
   check_ring_sizes(h.ring_offsets);
-  if (h.original_face_count > h.faces.size() || h.faces.size() - h.original_face_count != slots - 2 * nodes)
-    fail("faces: " + str(h.faces.size()) + ", " + str(h.original_face_count) + " original and " + str(slots - 2 * nodes) + " made by the rings");
-  if (h.created_faces.size() != h.faces.size() - h.original_face_count) fail("created face list has the wrong length");
-  for (std::size_t i = 0; i < h.created_faces.size(); ++i)
-    if (h.created_faces[i] != h.original_face_count + i) fail("created face list is not the faces in creation order");
-  if (h.node_closed.size() != nodes) fail("per-node arrays differ in length");
-
-  corners.resize(slots - 2 * nodes);
+  if (created.size() != slots - 2 * nodes) fail("created faces: " + str(created.size()) + ", the rings make " + str(slots - 2 * nodes));
+  std::vector<RingCorners> corners(created.size());
   for (std::size_t k = 0; k < nodes; ++k) {
     const auto ring = h.ring(static_cast<NodeId>(k));
     const std::size_t first = h.ring_offsets[k] - 2 * k;
     for (std::size_t j = first; j < first + ring.size() - 2; ++j) {
-      const Triangle& t = h.faces[h.original_face_count + j];
       for (int c = 0; c < 3; ++c) {
-        const auto at = std::find(ring.begin(), ring.end(), t[c]);
-        if (at == ring.end())
-          fail("node " + str(k) + " creates face " + str(h.original_face_count + j) + ", not a triangle of its ring");
+        const auto at = std::find(ring.begin(), ring.end(), created[j][c]);
+        if (at == ring.end()) fail("node " + str(k) + " creates face " + str(j) + " of its removals, not a triangle of its ring");
         corners[j][c] = static_cast<std::uint8_t>(at - ring.begin());
       }
     }
   }
-  return {h.rest_positions,
-          {h.faces.data(), h.original_face_count},
-          corners,
-          h.node_vertex,
-          h.node_closed,
-          h.ring_offsets,
-          h.ring_vertices,
-          h.ring_weights,
-          h.node_offset,
-          h.removed_faces,
-          h.child_offsets,
-          h.children,
-          h.maps_face,
-          h.maps_bary};
+  return corners;
 }
 
 void validate_hierarchy(const Hierarchy& h) {
-  std::vector<RingCorners> corners;
-  const StoredHierarchy s = stored_view(h, corners);
-  const Checked c = check(s);
+  const Checked c = check(stored_view(h));
   const std::size_t n = h.vertex_count(), nodes = h.node_count();
 
   if (h.vertex_node.size() != n) fail("per-vertex arrays do not have one entry per vertex");

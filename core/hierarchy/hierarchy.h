@@ -6,15 +6,17 @@
 //
 // Compact (format v2, issue 10): 32-bit indices, float32 wherever the value
 // is relative to a local frame (see each field for why that is precise
-// enough), and nothing stored that the rest determines. A few arrays are
-// *derived* (vertex_node, parents, created_faces, base_vertices, base_faces):
-// kept in memory because callers index them, never stored in the file, and
-// rebuilt by hierarchy_from() when a file is loaded.
+// enough), faces created by removals as 3-byte ring corners (in memory as
+// in the file), and nothing stored that the rest determines. A few arrays are
+// *derived* (vertex_node, parents, base_vertices, base_faces): kept in
+// memory because callers index them, never stored in the file, and rebuilt
+// by hierarchy_from() when a file is loaded.
 
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <ranges>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -47,10 +49,10 @@ struct Hierarchy {
   // ---- The original mesh (rest pose), in input order. Double: the identity
   // pose must give back the rest mesh within 1e-9 of the bbox diagonal.
   std::vector<Vec3> rest_positions;  // n
-  // Every face that ever existed: [0, original_face_count) is the original
-  // mesh, in input order; later faces were created by removals, in order.
-  std::vector<Triangle> faces;
-  Index original_face_count = 0;
+  // Every face that ever existed, numbered: [0, original_face_count()) the
+  // original mesh in input order, then the faces created by removals, in
+  // order (face()). Only the original ones are stored as triangles.
+  std::vector<Triangle> original_faces;
 
   // ---- Nodes. Node k is the k-th vertex removal. A node's parents were
   // removed after it (they deleted faces it created) and must be recovered
@@ -77,11 +79,12 @@ struct Hierarchy {
   // last slot holds kNone. They return on recovery.
   std::vector<FaceId> removed_faces;
   // Faces created by the removal (the hole's triangulation; they go on
-  // recovery): a ring of r vertices leaves a hole of r corners, so node k
-  // created exactly r − 2 faces, ids original_face_count + ring_offsets[k] − 2k
-  // onwards. Derived: this is just that list of ids, kept so that
-  // created_faces_of() is a span.
-  std::vector<FaceId> created_faces;
+  // recovery), as corners in its ring: a ring of r vertices leaves a hole of
+  // r corners, so node k created exactly r − 2 faces, ids
+  // original_face_count() + ring_offsets[k] − 2k onwards (created_faces_of),
+  // stored here at index ring_offsets[k] − 2k onwards. 3 bytes a face
+  // instead of a 12-byte triangle.
+  std::vector<RingCorners> created_corners;
   // Dependency edges (thesis Fig. 3.9): parents[k] deleted a face that k
   // created. Children are stored; parents are derived (their inverse).
   std::vector<Index> parent_offsets;  // N+1
@@ -92,10 +95,10 @@ struct Hierarchy {
   // ---- Base mesh: the vertices never removed and the faces alive at the end
   // (derived).
   std::vector<Index> base_vertices;  // original ids, ascending; base order = this order
-  std::vector<FaceId> base_faces;    // ids into `faces`, ascending
+  std::vector<FaceId> base_faces;    // face ids, ascending
 
   // ---- MAPS parameterisation (thesis §3.1.2): vertex i lies at
-  // Σ_c maps_bary[i][c] · x(faces[base_faces[maps_face[i]]][c]) on the base mesh.
+  // Σ_c maps_bary[i][c] · x(face(base_faces[maps_face[i]])[c]) on the base mesh.
   // Float32: barycentrics in [0, 1]; rounding moves the point by ~1e-7 of
   // its base triangle, far below the parameterisation's own distortion.
   std::vector<Index> maps_face;
@@ -115,8 +118,37 @@ struct Hierarchy {
   std::span<const FaceId> removed_faces_of(NodeId k) const {
     return {removed_faces.data() + ring_offsets[k], ring_size(k) - (node_closed[k] ? 0 : 1)};
   }
-  std::span<const FaceId> created_faces_of(NodeId k) const {
-    return {created_faces.data() + ring_offsets[k] - 2 * std::size_t{k}, ring_size(k) - 2};
+  // Ids of the faces node k created, ascending.
+  std::ranges::iota_view<FaceId, FaceId> created_faces_of(NodeId k) const {
+    const FaceId first = first_created_face(k);
+    return {first, static_cast<FaceId>(first + ring_size(k) - 2)};
+  }
+  FaceId first_created_face(NodeId k) const {
+    return static_cast<FaceId>(original_faces.size() + ring_offsets[k] - 2 * std::size_t{k});
+  }
+  std::size_t original_face_count() const { return original_faces.size(); }
+  std::size_t face_count() const { return original_faces.size() + created_corners.size(); }
+  // The j-th face node k created (j < ring_size(k) − 2).
+  Triangle created_face(NodeId k, std::size_t j) const {
+    const RingCorners& c = created_corners[ring_offsets[k] - 2 * std::size_t{k} + j];
+    const Index* r = ring_vertices.data() + ring_offsets[k];
+    return {r[c[0]], r[c[1]], r[c[2]]};
+  }
+  // The face in slot i of node k's fan (i < removed_faces_of(k).size()):
+  // an original face, or one its children created (searched among them).
+  Triangle removed_face(NodeId k, std::size_t i) const;
+  // The node that created face f, kNone for an original face; O(log nodes).
+  NodeId creator(FaceId f) const;
+  // Any face: O(1) for an original face, O(log nodes) for a created one.
+  // To visit every face, for_each_face() is linear.
+  Triangle face(FaceId f) const;
+  // Calls fn(f, face(f)) for every face, ascending.
+  template <class Fn>
+  void for_each_face(Fn&& fn) const {
+    FaceId f = 0;
+    for (const Triangle& t : original_faces) fn(f++, t);
+    for (NodeId k = 0; k < node_count(); ++k)
+      for (std::size_t j = 0; j + 2 < ring_size(k); ++j) fn(f++, created_face(k, j));
   }
   std::span<const NodeId> parents_of(NodeId k) const { return span_of(parents, parent_offsets, k); }
   std::span<const NodeId> children_of(NodeId k) const { return span_of(children, child_offsets, k); }
@@ -140,8 +172,8 @@ struct Hierarchy {
 };
 
 // The arrays a hierarchy is made of, as read-only views: exactly what the
-// file stores (hierarchy_file.h), laid out as in a Hierarchy except that
-// created faces are RingCorners. Everything else is derived from these.
+// file stores (hierarchy_file.h), laid out as in a Hierarchy. Everything else
+// is derived from these.
 struct StoredHierarchy {
   std::span<const Vec3> rest_positions;
   std::span<const Triangle> original_faces;
@@ -173,17 +205,22 @@ struct HierarchyError : std::runtime_error {
 void validate_hierarchy(const StoredHierarchy& s);
 
 // Validates `s` and builds the hierarchy from it: its arrays copied, the
-// derived ones (faces from corners, created_faces, parents, base, vertex_node)
-// computed. mesh_hash, build and nothing else are left to the caller.
+// derived ones (parents, base, vertex_node) computed. mesh_hash, build and
+// nothing else are left to the caller.
 // `concurrently` (if any) is called once, alongside the checks: on a helper
 // thread for a large hierarchy on a machine with a second core (the file
 // loader computes the payload's checksum there). Throws HierarchyError.
 Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& concurrently = {});
 
-// The stored view of `h`; its created faces are encoded into `corners`.
-// Throws HierarchyError if `h` cannot be stored (a created face that is not a
-// triangle of its node's ring, array sizes that do not fit together).
-StoredHierarchy stored_view(const Hierarchy& h, std::vector<RingCorners>& corners);
+// The stored view of `h` (its arrays, no copy). Throws HierarchyError if the
+// ring offsets are not valid.
+StoredHierarchy stored_view(const Hierarchy& h);
+
+// The corners of `created` (every face the removals created, in order) in
+// their nodes' rings, as created_corners holds them: for a builder that
+// made them as triangles. Throws HierarchyError if one is not a triangle
+// of its node's ring or the count does not fit the rings.
+std::vector<RingCorners> ring_corners(const Hierarchy& h, std::span<const Triangle> created);
 
 // validate_hierarchy(stored_view(h)), then checks that every derived array
 // equals its derivation.

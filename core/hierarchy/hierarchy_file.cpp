@@ -102,8 +102,8 @@ Header make_header(const Hierarchy& h, const StoredHierarchy& s) {
   hd.payload_size = size;
   hd.payload_hash = hasher.digest();
   hd.vertex_count = static_cast<std::uint32_t>(h.rest_positions.size());
-  hd.face_count = static_cast<std::uint32_t>(h.faces.size());
-  hd.original_face_count = h.original_face_count;
+  hd.face_count = static_cast<std::uint32_t>(h.face_count());
+  hd.original_face_count = static_cast<std::uint32_t>(h.original_face_count());
   hd.node_count = static_cast<std::uint32_t>(h.node_vertex.size());
   hd.section_count = kSectionCount;
   return hd;
@@ -170,8 +170,7 @@ class SectionReader {
 }  // namespace
 
 std::string serialize_hierarchy(const Hierarchy& h) {
-  std::vector<RingCorners> corners;
-  const StoredHierarchy s = stored_view(h, corners);
+  const StoredHierarchy s = stored_view(h);
   const Header hd = make_header(h, s);
   std::string out;
   out.reserve(sizeof hd + hd.payload_size);
@@ -181,8 +180,7 @@ std::string serialize_hierarchy(const Hierarchy& h) {
 }
 
 void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path) {
-  std::vector<RingCorners> corners;
-  const StoredHierarchy s = stored_view(h, corners);
+  const StoredHierarchy s = stored_view(h);
   const Header hd = make_header(h, s);
   // Write to a temporary name, then rename: a crash never leaves half a file
   // under the real name, and a loader never maps a file being written.

@@ -46,7 +46,6 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
 
   Hierarchy h;
   h.rest_positions = mesh.positions;
-  h.original_face_count = static_cast<Index>(mesh.faces.size());
   h.mesh_hash = hash_mesh(mesh);
 
   // The differential coordinates are not stored: the runtime derives them

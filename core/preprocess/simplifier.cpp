@@ -83,6 +83,7 @@ class Simplifier {
     point_bary_.assign(n, Vec3::Zero());
     removed_.assign(n, false);
     out_.vertex_node.assign(n, kNone);
+    out_.original_faces = mesh.faces;  // face ids: the input's, then add_face's
   }
 
   void run() {
@@ -273,6 +274,8 @@ class Simplifier {
     std::vector<FaceId> created;
     for (const auto& t : p.tris) {
       created.push_back(mesh_.add_face({r[t[0]], r[t[1]], r[t[2]]}));
+      // Ring corners, as the hierarchy keeps created faces (a ring has ≤ kMaxRingSize vertices).
+      out_.created_corners.push_back({static_cast<std::uint8_t>(t[0]), static_cast<std::uint8_t>(t[1]), static_cast<std::uint8_t>(t[2])});
       face_points_.emplace_back();
       face_creator_.push_back(node);
     }
@@ -288,7 +291,6 @@ class Simplifier {
     // the next r − 2 ids (add_face numbers faces in order).
     out_.removed_faces.insert(out_.removed_faces.end(), p.ring.fan.begin(), p.ring.fan.end());
     if (!p.ring.closed) out_.removed_faces.push_back(kNone);
-    out_.created_faces.insert(out_.created_faces.end(), created.begin(), created.end());
 
     // MAPS: v and every point in its fan move into the new triangles through
     // the same planar map (thesis §3.1.2).
@@ -312,7 +314,6 @@ class Simplifier {
   // Base mesh, MAPS coordinates relative to it, parent lists.
   void finish() {
     const std::size_t n = mesh_.positions().size();
-    out_.faces = mesh_.faces();
     out_.base_vertices.clear();
     for (Index v = 0; v < n; ++v)
       if (!removed_[v]) out_.base_vertices.push_back(v);

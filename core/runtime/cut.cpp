@@ -108,25 +108,21 @@ void AdaptiveCut::set_threshold(double threshold) {
 }
 
 double AdaptiveCut::evaluate(NodeId k, Index v, const std::vector<Vec3>& x) const {
-  std::span<const FaceId> faces;
-  if (cut_.can_recover(k)) {
-    faces = h_.created_faces_of(k);
-  } else if (cut_.can_remove(k)) {
-    faces = h_.removed_faces_of(k);
-  } else {
-    return -1.0;
-  }
+  // The patch: the faces k's recovery would delete, or its removal would.
+  const bool recover = cut_.can_recover(k);
+  if (!recover && !cut_.can_remove(k)) return -1.0;
+  const std::size_t count = recover ? h_.ring_size(k) - 2 : h_.removed_faces_of(k).size();
   const auto& p = h_.rest_positions;
   PatchFace local[kPatchFaces];
   std::vector<PatchFace> heap;
   PatchFace* patch = local;
-  if (faces.size() > kPatchFaces) {
-    heap.resize(faces.size());
+  if (count > kPatchFaces) {
+    heap.resize(count);
     patch = heap.data();
   }
   double stretch_sum = 0.0, area_sum = 0.0, bend = 0.0, edge_sum = 0.0;
-  for (std::size_t i = 0; i < faces.size(); ++i) {
-    const Triangle& t = h_.faces[faces[i]];
+  for (std::size_t i = 0; i < count; ++i) {
+    const Triangle t = recover ? h_.created_face(k, i) : h_.removed_face(k, i);
     PatchFace& f = patch[i];
     f.v[0] = t[0], f.v[1] = t[1], f.v[2] = t[2];
     f.rest_normal = (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]);
@@ -135,9 +131,9 @@ double AdaptiveCut::evaluate(NodeId k, Index v, const std::vector<Vec3>& x) cons
   }
   // Normal difference (thesis §3.3.2, eq. 3.8) on edges shared inside the
   // patch: the change of the dihedral angle, weighed by the rest edge length.
-  for (std::size_t i = 0; i < faces.size(); ++i) {
+  for (std::size_t i = 0; i < count; ++i) {
     const PatchFace& t = patch[i];
-    for (std::size_t j = i + 1; j < faces.size(); ++j) {
+    for (std::size_t j = i + 1; j < count; ++j) {
       const PatchFace& s = patch[j];
       for (int c = 0; c < 3; ++c) {
         const Index a = t.v[c], b = t.v[(c + 1) % 3];
@@ -185,35 +181,39 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
     if (node[i] != kNone) cut_.prefetch(node[i]);
   }
   std::uint16_t frontier[kScoreBlock];
-  std::span<const FaceId> faces[kScoreBlock];
   std::size_t m = 0;
   for (std::size_t i = 0; i < count; ++i) {
     out[i] = -1.0f;
     const NodeId k = node[i];
-    if (k == kNone) continue;
-    if (cut_.can_recover(k)) {
-      faces[m] = h_.created_faces_of(k);
-    } else if (cut_.can_remove(k)) {
-      faces[m] = h_.removed_faces_of(k);
-    } else {
-      continue;
-    }
+    if (k == kNone || !(cut_.can_recover(k) || cut_.can_remove(k))) continue;
+    __builtin_prefetch(&h_.ring_offsets[k]);
+    __builtin_prefetch(&laplacian_.offsets[vertex[i]]);
     frontier[m++] = static_cast<std::uint16_t>(i);
   }
+  // A patch's corners are k's vertex and its ring; a removal's faces may be
+  // its children's, found through their ring offsets.
   for (std::size_t j = 0; j < m; ++j) {
-    __builtin_prefetch(faces[j].data());
-    __builtin_prefetch(&laplacian_.offsets[vertex[frontier[j]]]);
-  }
-  for (std::size_t j = 0; j < m; ++j) {
-    for (FaceId f : faces[j]) __builtin_prefetch(&h_.faces[f]);
+    const NodeId k = node[frontier[j]];
+    __builtin_prefetch(h_.ring(k).data());
+    if (cut_.can_recover(k)) {
+      __builtin_prefetch(&h_.created_corners[h_.first_created_face(k) - h_.original_face_count()]);
+    } else {
+      __builtin_prefetch(h_.removed_faces_of(k).data());
+      __builtin_prefetch(&h_.child_offsets[k]);
+    }
     __builtin_prefetch(&laplacian_.neighbors[laplacian_.offsets[vertex[frontier[j]]]]);
   }
-  for (std::size_t j = 0; j < m; ++j)
-    for (FaceId f : faces[j])
-      for (Index c : h_.faces[f]) {
-        __builtin_prefetch(&h_.rest_positions[c]);
-        __builtin_prefetch(&x[c]);
-      }
+  for (std::size_t j = 0; j < m; ++j) {
+    const NodeId k = node[frontier[j]];
+    __builtin_prefetch(&h_.rest_positions[vertex[frontier[j]]]);
+    __builtin_prefetch(&x[vertex[frontier[j]]]);
+    for (Index c : h_.ring(k)) {
+      __builtin_prefetch(&h_.rest_positions[c]);
+      __builtin_prefetch(&x[c]);
+    }
+    if (!cut_.can_recover(k))
+      for (NodeId c : h_.children_of(k)) __builtin_prefetch(&h_.ring_offsets[c]);
+  }
   for (std::size_t j = 0; j < m; ++j) {
     const std::size_t i = frontier[j];
     out[i] = static_cast<float>(evaluate(node[i], vertex[i], x));

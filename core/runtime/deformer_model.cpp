@@ -31,13 +31,9 @@ const DeformerModel::Optimisation& DeformerModel::optimisation() const {
     const Hierarchy& h = *h_;
     auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.original_mesh()), {}, {}});
     o->delta = o->laplacian.apply(h.rest_positions);
-    std::vector<Index> base_local(h.vertex_count(), kNone);
-    for (Index i = 0; i < h.base_vertices.size(); ++i) base_local[h.base_vertices[i]] = i;
+    const TriMesh base = h.base_mesh();  // its faces in base order, with base-order corners
     o->maps_corners.resize(h.vertex_count());
-    for (Index v = 0; v < h.vertex_count(); ++v) {
-      const Triangle& t = h.faces[h.base_faces[h.maps_face[v]]];
-      o->maps_corners[v] = {base_local[t[0]], base_local[t[1]], base_local[t[2]]};
-    }
+    for (Index v = 0; v < h.vertex_count(); ++v) o->maps_corners[v] = base.faces[h.maps_face[v]];
     optimisation_ = std::move(o);
     optimisation_built_.store(true, std::memory_order_release);
   });
