@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "codec/delta_codec.h"
+#include "codec/delta_staging.h"
 
 namespace filigree {
 namespace {
@@ -23,14 +24,8 @@ namespace {
   throw std::logic_error("an implausible delta that is not there");
 }
 
-// max |decoded − (pos − rest)| over a range: one running maximum per axis,
-// so the three do not wait on each other.
-double max_error_of(const float* dec, const Vec3* pos, const Vec3* rest, std::size_t count) {
-  double e[3] = {0.0, 0.0, 0.0};
-  for (std::size_t i = 0; i < count; ++i)
-    for (int k = 0; k < 3; ++k) e[k] = std::max(e[k], std::abs(double{dec[3 * i + k]} - (pos[i][k] - rest[i][k])));
-  return std::max({e[0], e[1], e[2]});
-}
+// Vertices per block of the staging pass: its per-coordinate masks stay in L1.
+constexpr std::size_t kStageBlock = 512;
 
 }  // namespace
 
@@ -86,21 +81,19 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   const bool compare = !force_;
   bool plausible = true;
   std::size_t changed = 0, moved_since_last = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const Vec3 d = pos[i] - rest[i];
-    for (int k = 0; k < 3; ++k) {
-      plausible &= std::abs(d[k]) <= kMaxDeltaMagnitude;  // false for NaN and ±∞ too
-      staged[3 * i + k] = static_cast<float>(d[k]);
+  std::uint8_t from_key[3 * kStageBlock], from_last[3 * kStageBlock];
+  for (std::size_t b = 0; b < count; b += kStageBlock) {
+    const std::size_t n = std::min(kStageBlock, count - b), o = 3 * b;
+    if (!compare) {
+      plausible &= stage_deltas(pos[b].data(), rest[b].data(), 3 * n, staged + o);
+      continue;
     }
-    if (compare) {  // a forced keyframe sends everything: nothing to compare
-      double moved = 0.0, since_last = 0.0;
-      for (int k = 0; k < 3; ++k) {
-        moved = std::max(moved, std::abs(d[k] - key[3 * i + k]));
-        since_last = std::max(since_last, std::abs(d[k] - last[3 * i + k]));
-      }
-      flags[i] = moved > tolerance ? 1 : 0;
-      changed += flags[i];
-      moved_since_last += since_last > tolerance ? 1 : 0;
+    plausible &= stage_and_compare_deltas(pos[b].data(), rest[b].data(), key + o, last + o, tolerance, 3 * n, staged + o, from_key, from_last);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint8_t moved = from_key[3 * i] | from_key[3 * i + 1] | from_key[3 * i + 2];
+      flags[b + i] = moved;
+      changed += moved;
+      moved_since_last += from_last[3 * i] | from_last[3 * i + 1] | from_last[3 * i + 2];
     }
   }
   if (!plausible) throw_bad_delta(pos, rest, a, count);
@@ -129,8 +122,13 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
 
   // Only the present deltas, in order (in place: j ≤ i).
   if (!dense) {
-    for (std::size_t i = 0, j = 0; i < count; ++i)
-      if (slot.changed[i]) std::copy_n(&slot.values[3 * i], 3, &slot.values[3 * j++]);
+    // Branch-free: every vertex is copied down, j advances past present ones.
+    float* v = slot.values.data();
+    for (std::size_t i = 0, j = 0; i < count; ++i) {
+      const float x = v[3 * i], y = v[3 * i + 1], z = v[3 * i + 2];
+      v[3 * j] = x, v[3 * j + 1] = y, v[3 * j + 2] = z;
+      j += slot.changed[i];
+    }
     slot.values.resize(3 * static_cast<std::size_t>(out.present));
   }
   const bool all_zero = std::all_of(slot.values.begin(), slot.values.end(), [](float v) { return v == 0.0f; });
@@ -162,7 +160,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
         i += take, j += take;
       }
     }
-    const double error = max_error_of(dec, pos, rest, count);
+    const double error = max_delta_error(dec, pos->data(), rest->data(), 3 * count);
     out.max_error = error;
     if (options_.bits != 0 || all_zero || out.present == 0 || error <= options_.max_error || q.bits >= 24) break;
     ++q.bits;  // float rounding pushed past the target: one more bit
