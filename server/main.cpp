@@ -111,6 +111,9 @@ int main(int argc, char** argv) {
   app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
   app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
   app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
+  app.add_option("--peer-ca", tls.peer_ca,
+                 "CA bundle (PEM) the other replicas' certificates chain to, for calls this replica forwards to them "
+                 "over TLS (default: the system CA store)");
   std::string api_keys_path;
   app.add_option("--api-keys", api_keys_path,
                  "File of API keys (NAME SHA256 [quotas]; `filigree api-key` makes one): CreateSession and "
@@ -231,6 +234,8 @@ int main(int argc, char** argv) {
     grpc::ServerBuilder builder;
     int port = 0;
     builder.AddListeningPort(listen, server_credentials(tls), &port);
+    // Checked at start too: a wrong --peer-ca fails here, not on the first forwarded call.
+    const std::shared_ptr<grpc::ChannelCredentials> peers = peer_credentials(tls);
     builder.SetMaxReceiveMessageSize(max_message_mib << 20);
     builder.SetMaxSendMessageSize(max_message_mib << 20);
     // gRPC allows SO_REUSEPORT by default: a second server started on the same
@@ -258,7 +263,8 @@ int main(int argc, char** argv) {
       // would reach the same service around --tls-client-ca.
       http_options.tls = {tls.cert, tls.key, tls.client_ca, std::chrono::seconds(tls.refresh_seconds)};
       // Replicas: a browser's calls go to the replica that serves the session.
-      if (redis) http_options.route = [router = std::make_shared<ReplicaRouter>(registry)](const std::string& id) {
+      if (redis)
+        http_options.route = [router = std::make_shared<ReplicaRouter>(registry, peers)](const std::string& id) {
         return router->channel_for(id);
       };
       grpc::ChannelArguments channel_args;  // the server enforces --max-message-mib

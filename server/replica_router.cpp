@@ -11,7 +11,8 @@
 
 namespace filigree::server {
 
-ReplicaRouter::ReplicaRouter(SessionRegistry& registry) : registry_(registry) {}
+ReplicaRouter::ReplicaRouter(SessionRegistry& registry, std::shared_ptr<grpc::ChannelCredentials> credentials)
+    : registry_(registry), credentials_(std::move(credentials)) {}
 
 std::shared_ptr<grpc::Channel> ReplicaRouter::channel_for(const std::string& session_id) {
   if (!registry_.store().shared()) return nullptr;
@@ -34,7 +35,7 @@ std::shared_ptr<grpc::Channel> ReplicaRouter::channel_for(const std::string& ses
     args.SetMaxReceiveMessageSize(-1);  // SessionInfo of a large mesh; the owner enforces its limits
     args.SetMaxSendMessageSize(-1);
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // its own connection, not one shared by equal channels
-    channel = grpc::CreateCustomChannel(where.address, grpc::InsecureChannelCredentials(), args);
+    channel = grpc::CreateCustomChannel(where.address, credentials_, args);
   }
   return channel;
 }

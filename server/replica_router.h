@@ -11,6 +11,7 @@
 #include <string>
 
 #include <grpcpp/channel.h>
+#include <grpcpp/security/credentials.h>
 
 namespace filigree::server {
 
@@ -18,13 +19,16 @@ class SessionRegistry;
 
 class ReplicaRouter {
  public:
-  explicit ReplicaRouter(SessionRegistry& registry);
+  // `credentials`: how to reach the other replicas (peer_credentials() in
+  // tls_files.h): plaintext, or TLS as they serve it.
+  ReplicaRouter(SessionRegistry& registry, std::shared_ptr<grpc::ChannelCredentials> credentials);
   // nullptr: serve it here. Never throws (a store error serves it here,
   // where the call then fails with its own clear status).
   std::shared_ptr<grpc::Channel> channel_for(const std::string& session_id);
 
  private:
   SessionRegistry& registry_;
+  const std::shared_ptr<grpc::ChannelCredentials> credentials_;
   std::mutex mutex_;
   std::map<std::string, std::shared_ptr<grpc::Channel>> channels_;  // by "address#connection"
 };

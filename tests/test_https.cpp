@@ -36,6 +36,8 @@
 
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "server/http/http_server.h"
+#include "support/https_client.h"
+#include "support/pki.h"
 
 namespace filigree {
 namespace {
@@ -46,41 +48,15 @@ namespace net = boost::asio;
 namespace ssl = boost::asio::ssl;
 namespace fs = std::filesystem;
 using tcp = net::ip::tcp;
+using test::client_context;
+using test::Frames;
+using test::get;
+using test::grpc_web_request;
+using test::HttpsClient;
+using test::parse_frames;
+using test::run;
 
 // ------------------------------------------------------------ certificates
-
-// A throwaway PKI in `dir`, made with the openssl CLI (EC keys: fast).
-class Pki {
- public:
-  explicit Pki(fs::path dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
-
-  void ca(const std::string& name) {
-    openssl("req -x509 -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -days 1 -subj /CN=" + name +
-            " -keyout " + name + ".key -out " + name + ".pem");
-  }
-
-  // NAME.pem (signed by CA, with `serial`) and NAME.key; `server`: for
-  // localhost and 127.0.0.1, else a client certificate.
-  void leaf(const std::string& name, const std::string& ca, int serial, bool server = true) {
-    openssl("req -newkey ec -pkeyopt ec_paramgen_curve:prime256v1 -nodes -subj /CN=" + name + " -keyout " + name +
-            ".key -out " + name + ".csr");
-    std::ofstream(dir_ / (name + ".ext"))
-        << (server ? "subjectAltName=DNS:localhost,IP:127.0.0.1\nextendedKeyUsage=serverAuth\n"
-                   : "extendedKeyUsage=clientAuth\n");
-    openssl("x509 -req -in " + name + ".csr -CA " + ca + ".pem -CAkey " + ca + ".key -set_serial " +
-            std::to_string(serial) + " -days 1 -out " + name + ".pem -extfile " + name + ".ext");
-  }
-
-  fs::path operator/(const std::string& file) const { return dir_ / file; }
-
- private:
-  void openssl(const std::string& args) {
-    const std::string command = "cd '" + dir_.string() + "' && openssl " + args + " >openssl.log 2>&1";
-    ASSERT_EQ(std::system(command.c_str()), 0) << command;
-  }
-
-  fs::path dir_;
-};
 
 // Replaces `to` by a copy of `from` at once (a rename), as a deployment would.
 void install(const fs::path& from, const fs::path& to) {
@@ -94,142 +70,6 @@ void write_file(const fs::path& p, const std::string& bytes) {
   std::ofstream(tmp, std::ios::binary) << bytes;
   fs::rename(tmp, p);
 }
-
-// ------------------------------------------------------------ gRPC-Web wire format
-
-std::string frame_bytes(std::uint8_t flags, const std::string& payload) {
-  std::string out(1, static_cast<char>(flags));
-  const auto n = static_cast<std::uint32_t>(payload.size());
-  for (int s : {24, 16, 8, 0}) out += static_cast<char>((n >> s) & 0xff);
-  return out + payload;
-}
-
-struct Frames {
-  std::vector<std::string> messages;
-  std::string trailer;  // "grpc-status:0\r\n…"
-  bool well_formed = true;
-};
-
-Frames parse_frames(std::string body) {
-  Frames out;
-  while (!body.empty()) {
-    if (body.size() < 5 || !out.trailer.empty()) return out.well_formed = false, out;
-    std::uint32_t n = 0;
-    for (int i = 1; i < 5; ++i) n = (n << 8) | static_cast<std::uint8_t>(body[i]);
-    if (body.size() < 5 + std::size_t(n)) return out.well_formed = false, out;
-    const std::string payload = body.substr(5, n);
-    if (static_cast<std::uint8_t>(body[0]) == 0x80)
-      out.trailer = payload;
-    else
-      out.messages.push_back(payload);
-    body.erase(0, 5 + std::size_t(n));
-  }
-  out.well_formed = out.well_formed && !out.trailer.empty();
-  return out;
-}
-
-bhttp::request<bhttp::string_body> grpc_web_request(const std::string& method, const google::protobuf::Message& message) {
-  bhttp::request<bhttp::string_body> req{bhttp::verb::post, "/filigree.v1.Filigree/" + method, 11};
-  req.set(bhttp::field::host, "localhost");
-  req.set(bhttp::field::content_type, "application/grpc-web+proto");
-  req.set("x-grpc-web", "1");
-  req.body() = frame_bytes(0, message.SerializeAsString());
-  req.prepare_payload();
-  return req;
-}
-
-bhttp::request<bhttp::string_body> get(const std::string& target) {
-  bhttp::request<bhttp::string_body> req{bhttp::verb::get, target, 11};
-  req.set(bhttp::field::host, "localhost");
-  return req;
-}
-
-// ------------------------------------------------------------ clients
-
-// Runs one asynchronous operation to completion with a 30 s timeout on the
-// TCP stream, so that a test fails rather than hangs.
-template <class Lowest, class Start>
-beast::error_code run(net::io_context& ioc, Lowest& lowest, Start start) {
-  beast::error_code result;
-  lowest.expires_after(std::chrono::seconds(30));
-  start([&result](beast::error_code ec, auto&&...) { result = ec; });
-  ioc.restart();
-  ioc.run();
-  return result;
-}
-
-// A client TLS context: trusts `ca` (none: trusts nothing), presents
-// `cert`/`key` if given.
-std::unique_ptr<ssl::context> client_context(const std::optional<fs::path>& ca, const std::optional<fs::path>& cert = {},
-                                             const std::optional<fs::path>& key = {}) {
-  auto ctx = std::make_unique<ssl::context>(ssl::context::tls_client);
-  if (ca) ctx->load_verify_file(ca->string());
-  ctx->set_verify_mode(ssl::verify_peer);
-  if (cert) ctx->use_certificate_chain_file(cert->string());
-  if (key) ctx->use_private_key_file(key->string(), ssl::context::pem);
-  return ctx;
-}
-
-// One HTTPS connection (keep-alive: several exchanges), verifying the server
-// as "localhost" like a browser would.
-class HttpsClient {
- public:
-  // Connects and completes the handshake; throws std::runtime_error with the
-  // reason if either fails.
-  HttpsClient(const std::string& address, ssl::context& ctx) : stream_(ioc_, ctx) {
-    const auto colon = address.rfind(':');
-    tcp::resolver resolver(ioc_);
-    const auto endpoints = resolver.resolve(address.substr(0, colon), address.substr(colon + 1));
-    auto& lowest = beast::get_lowest_layer(stream_);
-    beast::error_code ec = run(ioc_, lowest, [&](auto handler) { lowest.async_connect(endpoints, handler); });
-    if (ec) throw std::runtime_error("connect: " + ec.message());
-    SSL_set_tlsext_host_name(stream_.native_handle(), "localhost");
-    stream_.set_verify_callback(ssl::host_name_verification("localhost"));
-    ec = run(ioc_, lowest, [&](auto handler) { stream_.async_handshake(ssl::stream_base::client, handler); });
-    if (ec) throw std::runtime_error("handshake: " + ec.message());
-  }
-
-  bhttp::response<bhttp::string_body> exchange(const bhttp::request<bhttp::string_body>& req) {
-    auto& lowest = beast::get_lowest_layer(stream_);
-    beast::error_code ec = run(ioc_, lowest, [&](auto handler) { bhttp::async_write(stream_, req, handler); });
-    if (ec) throw std::runtime_error("write: " + ec.message());
-    bhttp::response_parser<bhttp::string_body> parser;
-    parser.body_limit(64u << 20);
-    ec = run(ioc_, lowest, [&](auto handler) { bhttp::async_read(stream_, buffer_, parser, handler); });
-    if (ec) throw std::runtime_error("read: " + ec.message());
-    return parser.release();
-  }
-
-  // How the server ended the connection, read after its last response:
-  // net::error::eof after a TLS close_notify.
-  beast::error_code read_end() {
-    char byte;
-    auto& lowest = beast::get_lowest_layer(stream_);
-    return run(ioc_, lowest, [&](auto handler) { stream_.async_read_some(net::buffer(&byte, 1), handler); });
-  }
-
-  // The server certificate's serial number and common name.
-  long serial() {
-    X509* cert = SSL_get1_peer_certificate(stream_.native_handle());
-    if (!cert) return -1;
-    const long serial = ASN1_INTEGER_get(X509_get_serialNumber(cert));
-    X509_free(cert);
-    return serial;
-  }
-  std::string common_name() {
-    X509* cert = SSL_get1_peer_certificate(stream_.native_handle());
-    if (!cert) return {};
-    char name[256] = {};
-    X509_NAME_get_text_by_NID(X509_get_subject_name(cert), NID_commonName, name, sizeof name);
-    X509_free(cert);
-    return name;
-  }
-
- private:
-  net::io_context ioc_;
-  beast::ssl_stream<beast::tcp_stream> stream_;
-  beast::flat_buffer buffer_;
-};
 
 // ------------------------------------------------------------ the fake service
 
@@ -269,8 +109,8 @@ class HttpsTest : public ::testing::Test {
     pki_.emplace(scratch_ / "pki");
     pki_->ca("test-ca");
     pki_->ca("other-ca");
-    pki_->leaf("server-1", "test-ca", kFirstSerial);
-    pki_->leaf("server-2", "test-ca", kSecondSerial);
+    pki_->issue("server-1", "test-ca", test::kLoopbackServer, kFirstSerial);
+    pki_->issue("server-2", "test-ca", test::kLoopbackServer, kSecondSerial);
     install(*pki_ / "server-1.pem", cert_path());
     install(*pki_ / "server-1.key", key_path());
 
@@ -317,7 +157,7 @@ class HttpsTest : public ::testing::Test {
   }
 
   fs::path scratch_;
-  std::optional<Pki> pki_;
+  std::optional<test::Pki> pki_;
   FakeFiligree service_;
   std::unique_ptr<grpc::Server> grpc_server_;
   std::unique_ptr<server::http::HttpServer> http_;
@@ -510,7 +350,7 @@ TEST_F(HttpsTest, ReplacedFilesArePickedUpByThemselvesAndBadOnesAreNot) {
   EXPECT_EQ(client->serial(), kSecondSerial);
   expect_index(*client);
 
-  pki_->leaf("server-3", "test-ca", kThirdSerial);
+  pki_->issue("server-3", "test-ca", test::kLoopbackServer, kThirdSerial);
   install(*pki_ / "server-3.key", key_path());
   install(*pki_ / "server-3.pem", cert_path());
   EXPECT_EQ(connect()->serial(), kThirdSerial);
@@ -520,8 +360,8 @@ TEST_F(HttpsTest, ReplacedFilesArePickedUpByThemselvesAndBadOnesAreNot) {
 
 TEST_F(HttpsTest, MutualTlsRequiresAClientCertificateOfTheClientCa) {
   pki_->ca("client-ca");
-  pki_->leaf("browser", "client-ca", 7, /*server=*/false);
-  pki_->leaf("stranger", "other-ca", 8, /*server=*/false);
+  pki_->issue("browser", "client-ca", test::kClient, 7);
+  pki_->issue("stranger", "other-ca", test::kClient, 8);
   start(std::chrono::seconds(3600), (*pki_ / "client-ca.pem").string());
 
   auto with_cert = client_context(*pki_ / "test-ca.pem", *pki_ / "browser.pem", *pki_ / "browser.key");

@@ -14,17 +14,15 @@
 #include <vector>
 
 #include <arpa/inet.h>
-#include <fcntl.h>
 #include <netinet/in.h>
-#include <spawn.h>
 #include <sys/socket.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include "filigree/client.h"
 #include "server/state/redis_client.h"
 #include "server/state/session_store.h"
 #include "support/child_process.h"
+#include "support/pki.h"
 #include "support/server_process.h"
 #include "support/server_run.h"
 #include "support/store_errors.h"
@@ -46,47 +44,6 @@ using test::store_error;
 
 bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
-// Runs the openssl command with `args` in `dir`, its output to openssl.log
-// there; throws with that log if it fails.
-void openssl(const fs::path& dir, std::vector<std::string> args) {
-  args.insert(args.begin(), "openssl");
-  std::vector<char*> argv;
-  for (auto& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  const std::string log = (dir / "openssl.log").string();
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
-  posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
-  posix_spawn_file_actions_addchdir_np(&actions, dir.c_str());
-  pid_t pid = 0;
-  const int rc = posix_spawnp(&pid, "openssl", &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) throw std::runtime_error("cannot run openssl");
-  int status = 0;
-  waitpid(pid, &status, 0);
-  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    std::ifstream in(log);
-    throw std::runtime_error("openssl " + args[1] + " failed:\n" + std::string(std::istreambuf_iterator<char>(in), {}));
-  }
-}
-
-// A CA (NAME.pem, NAME.key) in `dir`.
-void make_ca(const fs::path& dir, const std::string& name) {
-  openssl(dir, {"req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-days", "1",
-                "-keyout", name + ".key", "-out", name + ".pem", "-subj", "/CN=filigree test " + name, "-addext",
-                "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign"});
-}
-
-// A certificate NAME.pem with its key NAME.key, signed by CA `ca`, with the extensions `extensions`.
-void make_cert(const fs::path& dir, const std::string& name, const std::string& ca, const std::string& extensions) {
-  std::ofstream(dir / (name + ".ext")) << extensions << "\n";
-  openssl(dir, {"req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-keyout", name + ".key",
-                "-out", name + ".csr", "-subj", "/CN=" + name});
-  openssl(dir, {"x509", "-req", "-in", name + ".csr", "-CA", ca + ".pem", "-CAkey", ca + ".key", "-CAcreateserial",
-                "-days", "1", "-out", name + ".pem", "-extfile", name + ".ext"});
-}
-
 // Certificates for every test, made once: the CA Redis' certificate chains to,
 // Redis' own (valid for 127.0.0.1 and redis.test), a client certificate from
 // the same CA, and another CA with a client certificate of its own.
@@ -103,11 +60,12 @@ class Certificates {
     char tmpl[] = "/tmp/filigree-redis-tls-certs-XXXXXX";
     if (!mkdtemp(tmpl)) throw std::runtime_error("mkdtemp failed");
     dir_ = tmpl;
-    make_ca(dir_, "ca");
-    make_ca(dir_, "other-ca");
-    make_cert(dir_, "redis", "ca", "subjectAltName=IP:127.0.0.1,DNS:redis.test\nextendedKeyUsage=serverAuth");
-    make_cert(dir_, "client", "ca", "extendedKeyUsage=clientAuth");
-    make_cert(dir_, "stranger", "other-ca", "extendedKeyUsage=clientAuth");
+    test::Pki pki(dir_);
+    pki.ca("ca");
+    pki.ca("other-ca");
+    pki.issue("redis", "ca", "subjectAltName=IP:127.0.0.1,DNS:redis.test\nextendedKeyUsage=serverAuth");
+    pki.issue("client", "ca", test::kClient);
+    pki.issue("stranger", "other-ca", test::kClient);
   }
   ~Certificates() {
     std::error_code ec;
