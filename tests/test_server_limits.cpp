@@ -1,12 +1,16 @@
 // filigree-server's bounds on what outside clients may hold, end to end over
 // gRPC: --max-memory (idle sessions are evicted before an upload is refused;
 // sessions in use stay and keep working) and --upload-timeout (a stalled
-// upload ends with DEADLINE_EXCEEDED; other calls go on).
+// upload ends with DEADLINE_EXCEEDED; other calls go on); and how the client
+// library's streams end when the server goes away.
 
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
+#include <future>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -199,6 +203,50 @@ TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
   EXPECT_EQ(driver->unacknowledged(), 0u) << "the frame of pose 4 acknowledges it and those before";
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
+}
+
+TEST_F(LimitsTest, StreamsCancelledWhileWaitingToReconnectEndCancelled) {
+  Server server(data_dir_, {});
+  const Upload made = upload(*server.stub);
+  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
+  Client client(server.process->address());
+  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
+  // A backoff far longer than the test: once the server is gone both streams
+  // wait, and only their cancel ends the wait.
+  std::promise<void> watcher_waits, driver_waits;
+  Reconnect slow;
+  slow.first_backoff = slow.max_backoff = std::chrono::minutes(10);
+  Reconnect for_watcher = slow, for_driver = slow;
+  for_watcher.on_reconnect = [&](const grpc::Status&, int attempt) {
+    if (attempt == 1) watcher_waits.set_value();
+  };
+  for_driver.on_reconnect = [&](const grpc::Status&, int attempt) {
+    if (attempt == 1) driver_waits.set_value();
+  };
+  auto watcher = client.watch(mesh.session_id, made.created.viewer_token(), 0, for_watcher);
+  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "cancelled", for_driver);
+  // Both streams work: the driver's pose comes back to both.
+  ASSERT_TRUE(driver->send(1, mesh.base_positions));
+  std::optional<v1::Frame> frame;
+  while ((frame = driver->read()) && frame->pose_id() < 1) {
+  }
+  ASSERT_TRUE(frame.has_value());
+  while ((frame = watcher->read()) && frame->version() < 1) {
+  }
+  ASSERT_TRUE(frame.has_value());
+
+  std::thread watching([&] { EXPECT_FALSE(watcher->read().has_value()); });
+  std::thread driving([&] { EXPECT_FALSE(driver->read().has_value()); });
+  server.process->kill_now();
+  EXPECT_EQ(watcher_waits.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  EXPECT_EQ(driver_waits.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
+  watcher->cancel();
+  driver->cancel();
+  watching.join();
+  driving.join();
+  // Why they ended is the cancel, not the outage they were waiting out.
+  EXPECT_EQ(watcher->finish().error_code(), grpc::StatusCode::CANCELLED) << watcher->finish().error_message();
+  EXPECT_EQ(driver->finish().error_code(), grpc::StatusCode::CANCELLED) << driver->finish().error_message();
 }
 
 }  // namespace

@@ -135,7 +135,7 @@ std::optional<v1::Frame> Driver::read() {
     {
       std::lock_guard lock(mutex_);
       if (status_) return std::nullopt;
-      stream = stream_.get();  // replaced only by this thread (reconnect_after)
+      stream = stream_.get();  // replaced only by this thread (open, below)
     }
     v1::Frame frame;
     if (stream->Read(&frame)) {
@@ -156,25 +156,14 @@ std::optional<v1::Frame> Driver::read() {
       broken_ = true;
       status = stream_->Finish();
     }
-    if (!reconnect_after(status)) {
-      bool by_us;
-      {
-        std::lock_guard lock(cancel_mutex_);
-        by_us = cancelled_;
-      }
+    if (auto ended = reconnect_.wait_to_reconnect(status, cancel_mutex_, cancelled_cv_, cancelled_)) {
       std::lock_guard lock(mutex_);
-      // Cancelled during a reconnection wait: that is why it ended, not the outage.
-      status_ = by_us && status.error_code() != grpc::StatusCode::OK ? grpc::Status::CANCELLED : status;
+      status_ = std::move(*ended);
       return std::nullopt;
     }
+    std::unique_lock lock(mutex_);
+    open(lock);
   }
-}
-
-bool Driver::reconnect_after(const grpc::Status& status) {
-  if (!reconnect_.wait_to_reconnect(status, cancel_mutex_, cancelled_cv_, cancelled_)) return false;
-  std::unique_lock lock(mutex_);
-  open(lock);
-  return true;
 }
 
 bool Driver::writes_done() {

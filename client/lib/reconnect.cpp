@@ -27,17 +27,19 @@ std::chrono::milliseconds ReconnectSchedule::next(const grpc::Status& status, bo
   return wait;
 }
 
-bool ReconnectSchedule::wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
-                                          const bool& cancelled) {
+std::optional<grpc::Status> ReconnectSchedule::wait_to_reconnect(const grpc::Status& status, std::mutex& mutex,
+                                                                 std::condition_variable& cv, const bool& cancelled) {
+  const auto end = [&](bool by_us) { return by_us && !status.ok() ? grpc::Status::CANCELLED : status; };
   bool by_us;
   {
     std::lock_guard lock(mutex);
     by_us = cancelled;
   }
   const std::chrono::milliseconds wait = next(status, by_us);  // calls on_reconnect: not under the lock
-  if (wait.count() < 0) return false;
+  if (wait.count() < 0) return end(by_us);
   std::unique_lock lock(mutex);
-  return !cv.wait_for(lock, wait, [&] { return cancelled; });
+  if (cv.wait_for(lock, wait, [&] { return cancelled; })) return end(true);
+  return std::nullopt;
 }
 
 }  // namespace filigree

@@ -55,15 +55,13 @@ std::optional<v1::Frame> Watcher::read() {
       return frame;
     }
     const grpc::Status status = stream_->Finish();  // gRPC's rule: Finish once Read failed
-    if (!reconnect_after(status)) status_ = status;
+    if (auto ended = reconnect_.wait_to_reconnect(status, mutex_, cancelled_cv_, cancelled_)) {
+      status_ = std::move(*ended);
+    } else {
+      open();
+    }
   }
   return std::nullopt;
-}
-
-bool Watcher::reconnect_after(const grpc::Status& status) {
-  if (!reconnect_.wait_to_reconnect(status, mutex_, cancelled_cv_, cancelled_)) return false;
-  open();
-  return true;
 }
 
 void Watcher::cancel() {

@@ -82,9 +82,6 @@ class Driver {
   void open(std::unique_lock<std::mutex>& lock);
   // Remembers request_ as unacknowledged and writes it.
   bool write();
-  // After `status` ended the stream: waits the backoff and reopens it, or
-  // returns false (no reconnection for this status, cancelled, given up).
-  bool reconnect_after(const grpc::Status& status);
 
   v1::Filigree::Stub& stub_;
   const std::string session_id_, token_, client_name_;

@@ -6,6 +6,7 @@
 #include <condition_variable>
 #include <functional>
 #include <mutex>
+#include <optional>
 
 #include <grpcpp/support/status.h>
 
@@ -37,9 +38,12 @@ class ReconnectSchedule {
   // After `status` ended the stream: whether to try again (on_reconnect is
   // called), then the backoff: a wait that a cancel ends at once (`cancelled`
   // is read under `mutex`; the canceller sets it under `mutex` and notifies
-  // `cv`). True: reopen the stream now; false: it ends for good.
-  bool wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
-                         const bool& cancelled);
+  // `cv`). nullopt: reopen the stream now. Else the stream ends for good,
+  // with this status: CANCELLED when the client cancelled (before or during
+  // the wait) a stream that did not end OK, as that is why it ended; else
+  // `status`.
+  std::optional<grpc::Status> wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
+                                                const bool& cancelled);
   // A frame arrived: the next failure starts over at first_backoff.
   void reset() { attempt_ = 0; }
   void disable() { policy_.enabled = false; }

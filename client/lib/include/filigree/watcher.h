@@ -50,9 +50,6 @@ class Watcher {
   Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token, Routing routing);
   // Opens the stream (again) from last_version_ (a Watch) or the request (a clip).
   void open();
-  // After `status` ended the stream: waits the backoff and reopens it, or
-  // returns false (no reconnection for this status, cancelled, given up).
-  bool reconnect_after(const grpc::Status& status);
 
   v1::Filigree::Stub& stub_;
   const std::string token_;
