@@ -205,6 +205,32 @@ TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
   EXPECT_TRUE(driver->finish().ok());
 }
 
+TEST_F(LimitsTest, ADriverWhoseFramesNobodyReadsKeepsAtMostItsBoundOfPoses) {
+  Server server(data_dir_, {});
+  const Upload made = upload(*server.stub);
+  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
+  Client client(server.process->address());
+  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
+  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "unread");
+  // Partial poses (each needs the ones before it) and no read(): nothing is acknowledged.
+  const std::uint64_t sent = Driver::kMaxUnacknowledged + 50;
+  const std::vector<std::uint32_t> one{0};
+  for (std::uint64_t id = 1; id <= sent; ++id) {
+    const float x = 0.001f * static_cast<float>(id % 100);
+    const std::vector<float> moved{x, x, x};
+    ASSERT_TRUE(driver->send_partial(id, one, moved)) << id;
+  }
+  EXPECT_EQ(driver->unacknowledged(), Driver::kMaxUnacknowledged);
+  // Reading catches up: the frame of the last pose acknowledges them all.
+  std::optional<v1::Frame> frame;
+  while ((frame = driver->read()) && frame->pose_id() < sent) {
+  }
+  ASSERT_TRUE(frame.has_value());
+  EXPECT_EQ(driver->unacknowledged(), 0u);
+  driver->writes_done();
+  EXPECT_TRUE(driver->finish().ok());
+}
+
 TEST_F(LimitsTest, StreamsCancelledWhileWaitingToReconnectEndCancelled) {
   Server server(data_dir_, {});
   const Upload made = upload(*server.stub);

@@ -7,8 +7,6 @@
 namespace filigree {
 namespace {
 
-// Poses kept for re-sending (Driver::unacknowledged()), at most.
-constexpr std::size_t kMaxUnacknowledged = 4096;
 // Acknowledged requests kept for send() to reuse.
 constexpr std::size_t kSpareRequests = 2;
 
@@ -74,9 +72,7 @@ bool Driver::write() {
     // it follows need no re-sending (joint poses stay: they are merged apart).
     const bool full_positions = !request_.has_joints() && request_.indices_size() == 0;
     if (full_positions) std::erase_if(unacknowledged_, [](const v1::DriveRequest& r) { return !r.has_joints(); });
-    // Bounded, for a driver whose frames nobody reads (nothing acknowledges):
-    // past it the oldest go, and a reconnection could not re-send them.
-    if (unacknowledged_.size() >= kMaxUnacknowledged) unacknowledged_.pop_front();
+    if (unacknowledged_.size() >= kMaxUnacknowledged) unacknowledged_.pop_front();  // the bound (driver.h)
     // Kept by moving, and request_ continues with an acknowledged message's
     // buffers: no pose-sized allocation per send once warm.
     unacknowledged_.push_back(std::move(request_));

@@ -69,6 +69,10 @@ class Driver {
   // Poses sent that no frame has acknowledged yet (they would be re-sent
   // after a reconnection). A full pose makes the poses before it moot.
   std::size_t unacknowledged() const;
+  // At most this many are kept, for a driver whose frames nobody reads
+  // (nothing acknowledges them): past it the oldest go, and a reconnection
+  // could not re-send them.
+  static constexpr std::size_t kMaxUnacknowledged = 4096;
 
   // writes_done() if needed, discards unread frames, and returns the call's
   // status (OK when the stream ended normally). Later calls return the same.
