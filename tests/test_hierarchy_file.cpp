@@ -64,8 +64,6 @@ void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   expect_same_bytes(a.ring_weights, b.ring_weights, "ring_weights");
   expect_same_bytes(a.node_offset, b.node_offset, "node_offset");
   expect_same_bytes(a.removed_faces, b.removed_faces, "removed_faces");
-  expect_same_bytes(a.parent_offsets, b.parent_offsets, "parent_offsets");
-  expect_same_bytes(a.parents, b.parents, "parents");
   expect_same_bytes(a.child_offsets, b.child_offsets, "child_offsets");
   expect_same_bytes(a.children, b.children, "children");
   expect_same_bytes(a.base_vertices, b.base_vertices, "base_vertices");
@@ -131,9 +129,9 @@ TEST_F(HierarchyFileTest, MemoryBytesIsTheSumOfTheArrays) {
   const std::size_t expected = n * (24 + 4 + 12 + 4)               // rest_positions, maps_face, maps_bary, vertex_node
                                + original * 12 + created * 3       // original_faces, created_corners
                                + nodes * (4 + 1 + 12)              // node_vertex, node_closed, node_offset
-                               + (nodes + 1) * 4 * 3               // ring, parent and child offsets
+                               + (nodes + 1) * 4 * 2               // ring and child offsets
                                + slots * (4 + 4 + 4)               // ring_vertices, ring_weights, removed_faces
-                               + edges * 4 * 2                     // children, parents
+                               + edges * 4                         // children
                                + (h.base_vertices.size() + h.base_faces.size()) * 4;
   EXPECT_EQ(h.memory_bytes(), expected);
   EXPECT_EQ(created, slots - 2 * nodes);  // each ring of r vertices made r − 2 faces
@@ -317,9 +315,6 @@ TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
     return "no error";
   };
   Hierarchy h = *hierarchy_;
-  ++h.parents[0];
-  EXPECT_NE(message(h).find("parent and child lists disagree"), std::string::npos) << message(h);
-  h = *hierarchy_;
   h.created_corners.back() = {0, 1, 1};
   EXPECT_NE(message(h).find("corners outside its ring"), std::string::npos) << message(h);
   h = *hierarchy_;

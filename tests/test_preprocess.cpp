@@ -11,6 +11,7 @@
 #include "geometry/cotangent_laplacian.h"
 #include "geometry/ring_frame.h"
 #include "hierarchy/cut_state.h"
+#include "hierarchy/node_parents.h"
 #include "hierarchy/hierarchy.h"
 #include "mesh/mesh_validation.h"
 #include "preprocess/preprocess.h"
@@ -64,9 +65,11 @@ class PreprocessTest : public ::testing::TestWithParam<Case> {
     options.base_vertices = GetParam().base_vertices;
     options.threads = 2;
     h_ = preprocess(mesh_, options);
+    parents_ = node_parents(h_);
   }
   TriMesh mesh_;
   Hierarchy h_;
+  NodeParents parents_;
 };
 
 TEST_P(PreprocessTest, ReachesTheTargetAndKeepsTopologyInTheBase) {
@@ -78,7 +81,7 @@ TEST_P(PreprocessTest, ReachesTheTargetAndKeepsTopologyInTheBase) {
 }
 
 TEST_P(PreprocessTest, RecoveringEveryNodeGivesBackTheOriginalTriangles) {
-  CutState cut(h_);
+  CutState cut(h_, parents_);
   for (NodeId k : recovery_order(h_)) cut.recover(k);
   std::vector<Index> ids;
   const TriMesh full = cut.mesh(&ids);
@@ -90,7 +93,7 @@ TEST_P(PreprocessTest, RecoveringEveryNodeGivesBackTheOriginalTriangles) {
 
 TEST_P(PreprocessTest, EveryIntermediateCutIsAManifoldWithTheOriginalTopology) {
   const Topology original = topology_of(mesh_, "original");
-  CutState cut(h_);
+  CutState cut(h_, parents_);
   const std::vector<NodeId> order = recovery_order(h_);
   const std::size_t step = std::max<std::size_t>(order.size() / 150, 1);
   for (std::size_t i = 0; i < order.size(); ++i) {
@@ -107,7 +110,7 @@ TEST_P(PreprocessTest, EveryIntermediateCutIsAManifoldWithTheOriginalTopology) {
 TEST_P(PreprocessTest, RandomCutsAreManifoldAndRecoverableNodesHaveTheirRing) {
   const Topology original = topology_of(mesh_, "original");
   std::mt19937 rng(12345);
-  CutState cut(h_);
+  CutState cut(h_, parents_);
   const std::size_t moves = std::min<std::size_t>(4 * h_.node_count(), 6000);
   std::size_t checked_rings = 0;
   std::vector<NodeId> candidates;
@@ -140,18 +143,19 @@ TEST_P(PreprocessTest, RandomCutsAreManifoldAndRecoverableNodesHaveTheirRing) {
   }
   EXPECT_GT(checked_rings, h_.node_count());
   // Recovering a node whose parent is missing, or removing one never recovered, is refused.
-  CutState empty(h_);
+  CutState empty(h_, parents_);
   NodeId with_parent = 0;
-  while (with_parent < h_.node_count() && h_.parents_of(with_parent).empty()) ++with_parent;
+  while (with_parent < h_.node_count() && parents_.of(with_parent).empty()) ++with_parent;
   ASSERT_LT(with_parent, h_.node_count());
   EXPECT_THROW(empty.recover(with_parent), std::logic_error);
   EXPECT_THROW(empty.remove(0), std::logic_error);
 }
 
 TEST_P(PreprocessTest, ParentsWereRemovedAfterTheirChildren) {
+  ASSERT_EQ(parents_.offsets.size(), h_.node_count() + 1);
   std::size_t edges = 0;
   for (NodeId k = 0; k < h_.node_count(); ++k) {
-    for (NodeId p : h_.parents_of(k)) {
+    for (NodeId p : parents_.of(k)) {
       EXPECT_GT(p, k);
       const auto kids = h_.children_of(p);
       EXPECT_TRUE(std::find(kids.begin(), kids.end(), k) != kids.end());
@@ -159,6 +163,7 @@ TEST_P(PreprocessTest, ParentsWereRemovedAfterTheirChildren) {
     }
   }
   EXPECT_GT(edges, 0u);
+  EXPECT_EQ(edges, h_.children.size());  // every child edge, once each way
   EXPECT_GT(h_.depth(), 1u);
 }
 

@@ -6,17 +6,20 @@
 
 namespace filigree {
 
-CutState::CutState(const Hierarchy& h)
-    : h_(&h), recovered_(h.node_count(), false), face_alive_(h.face_count(), false) {
+CutState::CutState(const Hierarchy& h, const NodeParents& parents) : CutState(h, &parents) {}
+
+CutState::CutState(const Hierarchy& h, const NodeParents* parents)
+    : h_(&h), p_(parents), recovered_(h.node_count(), false), face_alive_(h.face_count(), false) {
+  if (parents && parents->offsets.size() != h.node_count() + 1) throw std::invalid_argument("a cut's parents are another hierarchy's");
   for (FaceId f : h.base_faces) face_alive_[f] = true;
   alive_faces_ = h.base_faces.size();
 }
 
-CutState CutState::full(const Hierarchy& h) {
+CutState CutState::full(const Hierarchy& h, const NodeParents* parents) {
   // Every node recovered is the original mesh: a node's recovery kills the
   // faces it created and no original face stays deleted, so the alive faces
   // are exactly the original ones (tests compare it with node-by-node recovery).
-  CutState cut(h);
+  CutState cut(h, parents);
   cut.recovered_.assign(h.node_count(), true);
   cut.recovered_count_ = h.node_count();
   cut.face_alive_.assign(h.face_count(), false);
@@ -25,8 +28,13 @@ CutState CutState::full(const Hierarchy& h) {
   return cut;
 }
 
+std::span<const NodeId> CutState::parents_of(NodeId k) const {
+  if (!p_) throw std::logic_error("a cut made without the hierarchy's parents cannot change");
+  return p_->of(k);
+}
+
 bool CutState::parents_recovered(NodeId k) const {
-  const auto parents = h_->parents_of(k);
+  const auto parents = parents_of(k);
   return std::all_of(parents.begin(), parents.end(), [&](NodeId p) { return recovered_[p]; });
 }
 
@@ -42,13 +50,14 @@ void CutState::count_blockers() {
     if (recovered_[k]) {
       for (NodeId c : h_->children_of(k)) n += recovered_[c] ? 1 : 0;
     } else {
-      for (NodeId p : h_->parents_of(k)) n += recovered_[p] ? 0 : 1;
+      for (NodeId p : parents_of(k)) n += recovered_[p] ? 0 : 1;
     }
     blockers_[k] = n;
   }
 }
 
 void CutState::recover(NodeId k) {
+  (void)parents_of(k);  // throws before any change if this cut cannot change
   if (!can_recover(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be recovered: already recovered or a parent is not");
   if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = false;
@@ -59,10 +68,11 @@ void CutState::recover(NodeId k) {
   // k's children are not recovered (k was not): one parent fewer missing.
   // k's parents are recovered: one recovered child more.
   for (NodeId c : h_->children_of(k)) --blockers_[c];
-  for (NodeId p : h_->parents_of(k)) ++blockers_[p];
+  for (NodeId p : parents_of(k)) ++blockers_[p];
 }
 
 void CutState::remove(NodeId k) {
+  (void)parents_of(k);
   if (!can_remove(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be removed: not recovered or a child is");
   if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = false;
@@ -71,7 +81,7 @@ void CutState::remove(NodeId k) {
   recovered_[k] = false;
   --recovered_count_;
   for (NodeId c : h_->children_of(k)) ++blockers_[c];
-  for (NodeId p : h_->parents_of(k)) --blockers_[p];
+  for (NodeId p : parents_of(k)) --blockers_[p];
 }
 
 bool CutState::vertex_present(Index v) const {

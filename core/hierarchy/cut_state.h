@@ -6,15 +6,19 @@
 #include <vector>
 
 #include "hierarchy/hierarchy.h"
+#include "hierarchy/node_parents.h"
 
 namespace filigree {
 
 class CutState {
  public:
-  // Starts at the empty cut (the base mesh). `h` must outlive the CutState.
-  explicit CutState(const Hierarchy& h);
-  // The full cut (the original mesh) in O(n), without recovering node by node.
-  static CutState full(const Hierarchy& h);
+  // Starts at the empty cut (the base mesh). `h` and `parents`
+  // (node_parents(h)) must outlive the CutState.
+  CutState(const Hierarchy& h, const NodeParents& parents);
+  // The full cut (the original mesh) in O(n), without recovering node by
+  // node. Without `parents` it can be read but not changed: recover(),
+  // remove() and can_recover() then throw std::logic_error.
+  static CutState full(const Hierarchy& h, const NodeParents* parents = nullptr);
 
   bool recovered(NodeId k) const { return recovered_[k]; }
   // Not recovered and every parent recovered.
@@ -56,11 +60,14 @@ class CutState {
   std::size_t memory_bytes() const;
 
  private:
+  CutState(const Hierarchy& h, const NodeParents* parents);
+  std::span<const NodeId> parents_of(NodeId k) const;
   bool parents_recovered(NodeId k) const;
   bool child_recovered(NodeId k) const;
   void count_blockers();
 
   const Hierarchy* h_;
+  const NodeParents* p_;  // null: a full cut that is only read
   std::vector<bool> recovered_;
   // Per node, made on the first change (a cut that never changes, such as
   // T = 0's full one, needs none): for a recovered node its recovered

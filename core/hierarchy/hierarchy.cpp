@@ -6,7 +6,6 @@
 #include <cstdint>
 #include <cstring>
 #include <exception>
-#include <numeric>
 #include <sstream>
 #include <thread>
 #include <type_traits>
@@ -267,33 +266,6 @@ void copy_into(std::vector<T>& out, std::span<const T> in) {
   }
 }
 
-// Parents are the inverse of children: a counting sort keeps them ascending.
-// Its counters and slots are scattered: each is prefetched kAhead edges
-// early (1.25M vertices: 45 → 30 ms).
-void derive_parents(std::span<const Index> child_offsets, std::span<const NodeId> children, std::size_t nodes,
-                    std::vector<Index>& parent_offsets, std::vector<NodeId>& parents) {
-  constexpr std::size_t kAhead = 16;
-  const std::size_t edges = children.size();
-  reserve_exact(parent_offsets, nodes + 1);
-  parent_offsets.assign(nodes + 1, 0);
-  for (std::size_t i = 0; i < edges; ++i) {
-    if (i + kAhead < edges) __builtin_prefetch(&parent_offsets[children[i + kAhead] + 1], 1);
-    ++parent_offsets[children[i] + 1];
-  }
-  for (std::size_t k = 0; k < nodes; ++k) parent_offsets[k + 1] += parent_offsets[k];
-  reserve_exact(parents, edges);
-  parents.resize(edges);
-  std::vector<Index> fill(parent_offsets.begin(), parent_offsets.end() - 1);
-  std::size_t i = 0;
-  for (std::size_t k = 0; k < nodes; ++k) {
-    for (; i < child_offsets[k + 1]; ++i) {
-      if (i + 2 * kAhead < edges) __builtin_prefetch(&fill[children[i + 2 * kAhead]], 1);
-      if (i + kAhead < edges) __builtin_prefetch(&parents[fill[children[i + kAhead]]], 1);
-      parents[fill[children[i]]++] = static_cast<NodeId>(k);
-    }
-  }
-}
-
 template <class T>
 std::size_t bytes_of(const std::vector<T>& v) {
   return v.capacity() * sizeof(T);
@@ -357,10 +329,12 @@ Vec3 Hierarchy::maps_position(Index i, const std::vector<Vec3>& positions) const
 }
 
 std::size_t Hierarchy::depth() const {
+  // Parents have larger ids: in descending order a node's chain is final
+  // when it is reached, and it lengthens its children's.
   std::vector<std::size_t> d(node_count(), 1);
   std::size_t deepest = 0;
   for (std::size_t k = node_count(); k-- > 0;) {
-    for (NodeId p : parents_of(static_cast<NodeId>(k))) d[k] = std::max(d[k], d[p] + 1);
+    for (NodeId c : children_of(static_cast<NodeId>(k))) d[c] = std::max(d[c], d[k] + 1);
     deepest = std::max(deepest, d[k]);
   }
   return deepest;
@@ -369,7 +343,7 @@ std::size_t Hierarchy::depth() const {
 std::size_t Hierarchy::memory_bytes() const {
   return bytes_of(rest_positions) + bytes_of(original_faces) + bytes_of(created_corners) + bytes_of(node_vertex) + bytes_of(node_closed) + bytes_of(ring_offsets) +
          bytes_of(ring_vertices) + bytes_of(ring_weights) + bytes_of(node_offset) + bytes_of(removed_faces) +
-         bytes_of(parent_offsets) + bytes_of(parents) + bytes_of(child_offsets) + bytes_of(children) +
+         bytes_of(child_offsets) + bytes_of(children) +
          bytes_of(base_vertices) + bytes_of(base_faces) + bytes_of(maps_face) + bytes_of(maps_bary) + bytes_of(vertex_node);
 }
 
@@ -412,7 +386,6 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
 
     const Checked c = check(s);
     const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
-    derive_parents(s.child_offsets, s.children, nodes, h.parent_offsets, h.parents);
     reserve_exact(h.vertex_node, n);
     h.vertex_node.assign(n, kNone);
     for (std::size_t k = 0; k < nodes; ++k) h.vertex_node[s.node_vertex[k]] = static_cast<NodeId>(k);
@@ -462,11 +435,6 @@ void validate_hierarchy(const Hierarchy& h) {
     if (h.vertex_node[h.node_vertex[k]] != k) fail("node " + str(k) + " and its vertex disagree");
   for (std::size_t v = 0; v < n; ++v)
     if (h.vertex_node[v] != kNone && !c.removed_vertices.test(v)) fail("vertex " + str(v) + " names a node that did not remove it");
-
-  std::vector<Index> parent_offsets;
-  std::vector<NodeId> parents;
-  derive_parents(h.child_offsets, h.children, nodes, parent_offsets, parents);
-  if (parent_offsets != h.parent_offsets || parents != h.parents) fail("parent and child lists disagree");
 
   // Base mesh: exactly the never-removed vertices and faces, ascending.
   if (h.base_vertices.size() != n - nodes) fail("base vertex count does not match the removals");

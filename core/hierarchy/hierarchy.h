@@ -8,15 +8,15 @@
 // is relative to a local frame (see each field for why that is precise
 // enough), faces created by removals as 3-byte ring corners (in memory as
 // in the file), and nothing stored that the rest determines. A few arrays are
-// *derived* (vertex_node, parents, base_vertices, base_faces): kept in
-// memory because callers index them, never stored in the file, and rebuilt
-// by hierarchy_from() when a file is loaded.
+// *derived* (vertex_node, base_vertices, base_faces): kept in memory
+// because callers index them, never stored in the file, and rebuilt by
+// hierarchy_from() when a file is loaded. Parents are derived only by what
+// needs them (hierarchy/node_parents.h).
 
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <limits>
-#include <ranges>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -37,6 +37,23 @@ inline constexpr Index kNone = std::numeric_limits<Index>::max();
 using RingCorners = std::array<std::uint8_t, 3>;
 // So a ring has at most this many vertices (preprocessing stops at 32).
 inline constexpr std::size_t kMaxRingSize = 255;
+
+// Consecutive face ids [first, last): iterable, indexable. (Not
+// std::ranges::iota_view: the fuzzing build's clang cannot compile
+// libstdc++ 12's ranges.)
+struct FaceIdRange {
+  struct iterator {
+    FaceId f;
+    FaceId operator*() const { return f; }
+    iterator& operator++() { return ++f, *this; }
+    bool operator==(const iterator&) const = default;
+  };
+  FaceId first = 0, last = 0;
+  iterator begin() const { return {first}; }
+  iterator end() const { return {last}; }
+  std::size_t size() const { return last - first; }
+  FaceId operator[](std::size_t i) const { return static_cast<FaceId>(first + i); }
+};
 
 // How the hierarchy was built (stored in the file, shown by `inspect`).
 struct BuildInfo {
@@ -85,10 +102,8 @@ struct Hierarchy {
   // stored here at index ring_offsets[k] − 2k onwards. 3 bytes a face
   // instead of a 12-byte triangle.
   std::vector<RingCorners> created_corners;
-  // Dependency edges (thesis Fig. 3.9): parents[k] deleted a face that k
-  // created. Children are stored; parents are derived (their inverse).
-  std::vector<Index> parent_offsets;  // N+1
-  std::vector<NodeId> parents;
+  // Dependency edges (thesis Fig. 3.9): k's children created faces that k
+  // deleted. Their inverse, the parents, is node_parents() (node_parents.h).
   std::vector<Index> child_offsets;  // N+1
   std::vector<NodeId> children;
 
@@ -119,7 +134,7 @@ struct Hierarchy {
     return {removed_faces.data() + ring_offsets[k], ring_size(k) - (node_closed[k] ? 0 : 1)};
   }
   // Ids of the faces node k created, ascending.
-  std::ranges::iota_view<FaceId, FaceId> created_faces_of(NodeId k) const {
+  FaceIdRange created_faces_of(NodeId k) const {
     const FaceId first = first_created_face(k);
     return {first, static_cast<FaceId>(first + ring_size(k) - 2)};
   }
@@ -150,7 +165,6 @@ struct Hierarchy {
     for (NodeId k = 0; k < node_count(); ++k)
       for (std::size_t j = 0; j + 2 < ring_size(k); ++j) fn(f++, created_face(k, j));
   }
-  std::span<const NodeId> parents_of(NodeId k) const { return span_of(parents, parent_offsets, k); }
   std::span<const NodeId> children_of(NodeId k) const { return span_of(children, child_offsets, k); }
 
   // The original mesh.
@@ -205,7 +219,7 @@ struct HierarchyError : std::runtime_error {
 void validate_hierarchy(const StoredHierarchy& s);
 
 // Validates `s` and builds the hierarchy from it: its arrays copied, the
-// derived ones (parents, base, vertex_node) computed. mesh_hash, build and
+// derived ones (base, vertex_node) computed. mesh_hash, build and
 // nothing else are left to the caller.
 // `concurrently` (if any) is called once, alongside the checks: on a helper
 // thread for a large hierarchy on a machine with a second core (the file

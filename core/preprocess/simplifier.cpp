@@ -311,7 +311,7 @@ class Simplifier {
     out_.vertex_node[v] = node;
   }
 
-  // Base mesh, MAPS coordinates relative to it, parent lists.
+  // Base mesh and MAPS coordinates relative to it.
   void finish() {
     const std::size_t n = mesh_.positions().size();
     out_.base_vertices.clear();
@@ -338,15 +338,6 @@ class Simplifier {
         for (int c = 0; c < 3; ++c) out_.maps_bary[v][c] = t[c] == v ? 1.0f : 0.0f;
       }
     }
-    // Parents: invert the child lists (counting sort keeps them ascending).
-    const std::size_t nodes = out_.node_vertex.size();
-    out_.parent_offsets.assign(nodes + 1, 0);
-    for (NodeId c : out_.children) ++out_.parent_offsets[c + 1];
-    for (std::size_t k = 0; k < nodes; ++k) out_.parent_offsets[k + 1] += out_.parent_offsets[k];
-    out_.parents.assign(out_.children.size(), 0);
-    std::vector<Index> fill(out_.parent_offsets.begin(), out_.parent_offsets.end() - 1);
-    for (NodeId k = 0; k < nodes; ++k)
-      for (NodeId c : out_.children_of(k)) out_.parents[fill[c]++] = k;
   }
 
   const SimplifyOptions& opt_;

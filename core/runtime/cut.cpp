@@ -53,8 +53,8 @@ constexpr std::size_t kPatchFaces = 64;
 
 }  // namespace
 
-AdaptiveCut::AdaptiveCut(const Hierarchy& h, const CotangentLaplacian& laplacian, double threshold)
-    : h_(h), laplacian_(laplacian), cut_(h), recoverable_(place_), removable_(place_) {
+AdaptiveCut::AdaptiveCut(const Hierarchy& h, const NodeParents& parents, const CotangentLaplacian& laplacian, double threshold)
+    : h_(h), parents_(parents), laplacian_(laplacian), cut_(h, parents), recoverable_(place_), removable_(place_) {
   reset(threshold);
 }
 
@@ -80,13 +80,13 @@ void AdaptiveCut::reset(double threshold) {
   regions_ = Regions{};
   const std::size_t n = h_.vertex_count();
   if (threshold == kInfinity) {
-    cut_ = CutState(h_);
+    cut_ = CutState(h_, parents_);
     in_cut_.assign(n, false);
     for (Index v : h_.base_vertices) in_cut_[v] = true;
     regions_ = find_regions(laplacian_, in_cut_);
     return;
   }
-  cut_ = CutState::full(h_);
+  cut_ = CutState::full(h_, &parents_);
   in_cut_.assign(n, true);
   if (!adaptive()) return;
   // The full cut: exactly the nodes without children may leave it, and none
@@ -242,7 +242,7 @@ void AdaptiveCut::place(NodeId k) {
 
 void AdaptiveCut::place_around(NodeId k) {
   place(k);
-  for (NodeId p : h_.parents_of(k)) place(p);
+  for (NodeId p : parents_.of(k)) place(p);
   for (NodeId c : h_.children_of(k)) place(c);
 }
 

@@ -40,7 +40,7 @@ struct Deformer::Optimised {
   std::vector<Eigen::Quaterniond> base_q;
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
-      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.laplacian(), o.threshold),
+      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.node_parents(), m.laplacian(), o.threshold),
         solver(m.laplacian(), m.differential_coordinates()), positions(m.hierarchy().rest_positions) {
     cut.reset(o.threshold);
   }

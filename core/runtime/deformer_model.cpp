@@ -2,6 +2,7 @@
 
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
+#include "hierarchy/node_parents.h"
 #include "runtime/direct_recovery.h"
 #include "util/buffer_pool.h"
 
@@ -46,8 +47,17 @@ const std::vector<Vec3>& DeformerModel::differential_coordinates() const { retur
 
 const std::vector<std::array<Index, 3>>& DeformerModel::maps_corners() const { return optimisation().maps_corners; }
 
+const NodeParents& DeformerModel::node_parents() const {
+  std::call_once(parents_once_, [this] {
+    parents_ = std::make_unique<const NodeParents>(filigree::node_parents(*h_));
+    parents_built_.store(true, std::memory_order_release);
+  });
+  return *parents_;
+}
+
 std::size_t DeformerModel::memory_bytes() const {
   std::size_t bytes = recovery_->memory_bytes();
+  if (parents_built_.load(std::memory_order_acquire)) bytes += parents_->memory_bytes();
   if (optimisation_built_.load(std::memory_order_acquire)) {
     const Optimisation& o = *optimisation_;
     bytes += o.laplacian.offsets.capacity() * sizeof(Index) + o.laplacian.neighbors.capacity() * sizeof(Index) +

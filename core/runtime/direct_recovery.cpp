@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "hierarchy/hierarchy.h"
+#include "hierarchy/node_parents.h"
 #include "mesh/vertex_order.h"
 #include "util/spin_barrier.h"
 
@@ -244,11 +245,12 @@ void kRecoverBlocks(const Layout& t, std::size_t first, std::size_t end, float* 
 DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
     : base_count_(h.base_vertices.size()), node_count_(h.node_count()), base_vertices_(h.base_vertices) {
   const std::size_t n_nodes = h.node_count();
+  const NodeParents parents = node_parents(h);  // for the layout only
   // Level = 1 + the deepest parent's level. Parents have larger ids (they
   // were removed later), so one descending pass sees them first.
   std::vector<std::uint32_t> level(n_nodes, 0);
   for (std::size_t k = n_nodes; k-- > 0;)
-    for (NodeId p : h.parents_of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
+    for (NodeId p : parents.of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
 
   // Tiles: runs of kTileVertices consecutive vertices along a Morton curve
   // (for the service's sessions, whose vertex order is that curve, runs of
@@ -270,8 +272,8 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
   for (std::size_t k = n_nodes; k-- > 0;) {
     tile[k] = static_cast<std::uint32_t>(rank[h.node_vertex[k]] / kTileVertices);
     part[k] = static_cast<std::uint32_t>(tile[k] * partitions_ / tiles);
-    for (NodeId p : h.parents_of(static_cast<NodeId>(k))) phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u));
-    for (NodeId p : h.parents_of(static_cast<NodeId>(k)))
+    for (NodeId p : parents.of(static_cast<NodeId>(k))) phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u));
+    for (NodeId p : parents.of(static_cast<NodeId>(k)))
       if (part[p] == part[k] && phase[p] == phase[k]) tile[k] = std::max(tile[k], tile[p]);
   }
   const std::size_t phases = n_nodes ? *std::max_element(phase.begin(), phase.end()) + 1 : 1;
