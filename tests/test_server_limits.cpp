@@ -9,6 +9,8 @@
 #include <filesystem>
 #include <future>
 #include <memory>
+#include <optional>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -63,6 +65,30 @@ std::vector<std::string> listed(v1::Filigree::Stub& stub) {
 bool has(const std::vector<std::string>& ids, const std::string& id) {
   return std::find(ids.begin(), ids.end(), id) != ids.end();
 }
+
+// Reads `driver`'s frames up to the one that acknowledges pose `id`;
+// nullopt if the stream ended first.
+std::optional<v1::Frame> read_until_pose(Driver& driver, std::uint64_t id) {
+  std::optional<v1::Frame> frame;
+  while ((frame = driver.read()) && frame->pose_id() < id) {
+  }
+  return frame;
+}
+
+// A server with one uploaded session, and a client of it that joined as editor.
+struct JoinedSession {
+  explicit JoinedSession(const std::filesystem::path& data_dir)
+      : server(data_dir, {}), made(upload(*server.stub)), client(server.process->address()) {
+    if (!made.status.ok()) throw std::runtime_error("upload failed: " + made.status.error_message());
+    mesh = client.join(made.created.info().session_id(), editor());
+  }
+  const std::string& editor() const { return made.created.editor_token(); }
+  const std::string& viewer() const { return made.created.viewer_token(); }
+  Server server;
+  Upload made;
+  Client client;
+  SessionMesh mesh;
+};
 
 class LimitsTest : public ::testing::Test {
  protected:
@@ -178,16 +204,12 @@ TEST_F(LimitsTest, AUnaryCallToAFrozenServerEndsAtTheClientsCallTimeout) {
 }
 
 TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
-  Server server(data_dir_, {});
-  const Upload made = upload(*server.stub);
-  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
-  Client client(server.process->address());
-  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
-  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "keeper");
-  const std::vector<float> full = mesh.base_positions;
+  JoinedSession joined(data_dir_);
+  auto driver = joined.client.drive(joined.mesh.session_id, joined.editor(), "keeper");
+  const std::vector<float> full = joined.mesh.base_positions;
   const std::vector<std::uint32_t> one{0};
   const std::vector<float> moved{0.5f, 0.5f, 0.5f};
-  server.process->pause();  // nothing is acknowledged while it is frozen (writes still go out)
+  joined.server.process->pause();  // nothing is acknowledged while it is frozen (writes still go out)
   ASSERT_TRUE(driver->send_partial(1, one, moved));
   ASSERT_TRUE(driver->send_partial(2, one, moved));
   EXPECT_EQ(driver->unacknowledged(), 2u) << "partial poses accumulate";
@@ -195,10 +217,8 @@ TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
   EXPECT_EQ(driver->unacknowledged(), 1u) << "a full pose makes the position poses before it moot";
   ASSERT_TRUE(driver->send_partial(4, one, moved));
   EXPECT_EQ(driver->unacknowledged(), 2u);
-  server.process->resume();
-  std::optional<v1::Frame> frame;
-  while ((frame = driver->read()) && frame->pose_id() < 4) {
-  }
+  joined.server.process->resume();
+  const std::optional<v1::Frame> frame = read_until_pose(*driver, 4);
   ASSERT_TRUE(frame.has_value());
   EXPECT_EQ(driver->unacknowledged(), 0u) << "the frame of pose 4 acknowledges it and those before";
   driver->writes_done();
@@ -206,12 +226,8 @@ TEST_F(LimitsTest, ADriverKeepsOnlyThePosesAReconnectionWouldNeed) {
 }
 
 TEST_F(LimitsTest, ADriverWhoseFramesNobodyReadsKeepsAtMostItsBoundOfPoses) {
-  Server server(data_dir_, {});
-  const Upload made = upload(*server.stub);
-  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
-  Client client(server.process->address());
-  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
-  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "unread");
+  JoinedSession joined(data_dir_);
+  auto driver = joined.client.drive(joined.mesh.session_id, joined.editor(), "unread");
   // Partial poses (each needs the ones before it) and no read(): nothing is acknowledged.
   const std::uint64_t sent = Driver::kMaxUnacknowledged + 50;
   const std::vector<std::uint32_t> one{0};
@@ -222,21 +238,14 @@ TEST_F(LimitsTest, ADriverWhoseFramesNobodyReadsKeepsAtMostItsBoundOfPoses) {
   }
   EXPECT_EQ(driver->unacknowledged(), Driver::kMaxUnacknowledged);
   // Reading catches up: the frame of the last pose acknowledges them all.
-  std::optional<v1::Frame> frame;
-  while ((frame = driver->read()) && frame->pose_id() < sent) {
-  }
-  ASSERT_TRUE(frame.has_value());
+  ASSERT_TRUE(read_until_pose(*driver, sent).has_value());
   EXPECT_EQ(driver->unacknowledged(), 0u);
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
 }
 
 TEST_F(LimitsTest, StreamsCancelledWhileWaitingToReconnectEndCancelled) {
-  Server server(data_dir_, {});
-  const Upload made = upload(*server.stub);
-  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
-  Client client(server.process->address());
-  const SessionMesh mesh = client.join(made.created.info().session_id(), made.created.editor_token());
+  JoinedSession joined(data_dir_);
   // A backoff far longer than the test: once the server is gone both streams
   // wait, and only their cancel ends the wait.
   std::promise<void> watcher_waits, driver_waits;
@@ -249,21 +258,19 @@ TEST_F(LimitsTest, StreamsCancelledWhileWaitingToReconnectEndCancelled) {
   for_driver.on_reconnect = [&](const grpc::Status&, int attempt) {
     if (attempt == 1) driver_waits.set_value();
   };
-  auto watcher = client.watch(mesh.session_id, made.created.viewer_token(), 0, for_watcher);
-  auto driver = client.drive(mesh.session_id, made.created.editor_token(), "cancelled", for_driver);
+  auto watcher = joined.client.watch(joined.mesh.session_id, joined.viewer(), 0, for_watcher);
+  auto driver = joined.client.drive(joined.mesh.session_id, joined.editor(), "cancelled", for_driver);
   // Both streams work: the driver's pose comes back to both.
-  ASSERT_TRUE(driver->send(1, mesh.base_positions));
+  ASSERT_TRUE(driver->send(1, joined.mesh.base_positions));
+  ASSERT_TRUE(read_until_pose(*driver, 1).has_value());
   std::optional<v1::Frame> frame;
-  while ((frame = driver->read()) && frame->pose_id() < 1) {
-  }
-  ASSERT_TRUE(frame.has_value());
   while ((frame = watcher->read()) && frame->version() < 1) {
   }
   ASSERT_TRUE(frame.has_value());
 
   std::thread watching([&] { EXPECT_FALSE(watcher->read().has_value()); });
   std::thread driving([&] { EXPECT_FALSE(driver->read().has_value()); });
-  server.process->kill_now();
+  joined.server.process->kill_now();
   EXPECT_EQ(watcher_waits.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
   EXPECT_EQ(driver_waits.get_future().wait_for(std::chrono::seconds(60)), std::future_status::ready);
   watcher->cancel();
