@@ -930,15 +930,7 @@ grpc::ServerUnaryReactor* FiligreeService::ListSessions(grpc::CallbackServerCont
   if (const grpc::Status status = check_api_key(*context, &keys, &key); !status.ok()) return finish_unary(context, status);
   for (const auto& s : registry_.loaded()) {
     if (key && s->owner() != key->name) continue;  // a key lists its own sessions only
-    auto* e = response->add_sessions();
-    const v1::SessionInfo info = s->info();
-    e->set_session_id(info.session_id());
-    e->set_mesh_hash(info.mesh_hash());
-    e->set_vertex_count(info.rest().vertex_count());
-    e->set_base_vertex_count(static_cast<std::uint32_t>(info.base().original_ids_size()));
-    e->set_version(info.version());
-    e->set_drivers(static_cast<std::uint32_t>(s->drivers()));
-    e->set_watchers(static_cast<std::uint32_t>(s->subscriber_count()));
+    s->describe(*response->add_sessions());
   }
   return finish_unary(context, grpc::Status::OK);
 }

@@ -911,6 +911,20 @@ v1::SessionInfo Session::info() const {
   return info;
 }
 
+void Session::describe(v1::ListSessionsResponse::Entry& entry) const {
+  {
+    std::lock_guard lock(mutex_);
+    entry.set_session_id(record_.id);
+    entry.set_mesh_hash(record_.hierarchy_key.substr(0, 16));
+    entry.set_vertex_count(assets_->rest.vertex_count());
+    entry.set_base_vertex_count(static_cast<std::uint32_t>(assets_->base.original_ids_size()));
+    entry.set_version(record_.version);
+  }
+  // Each takes mutex_ itself.
+  entry.set_drivers(static_cast<std::uint32_t>(drivers()));
+  entry.set_watchers(static_cast<std::uint32_t>(subscriber_count()));
+}
+
 v1::SessionState Session::state(v1::FrameFormat format) {
   // The single buffer may have to be made first (outside the lock).
   std::shared_ptr<const PublishedFrame> single;

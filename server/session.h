@@ -160,6 +160,9 @@ class Session {
   v1::Overlays overlays();
 
   v1::SessionInfo info() const;
+  // Its ListSessions entry: ids, counts, version, streams; no mesh copied
+  // (info() copies the base and rest meshes, 36+ bytes per vertex).
+  void describe(v1::ListSessionsResponse::Entry& entry) const;
   // The merged pose and the current frame in `format` (with its keyframe
   // when chunked and sparse).
   v1::SessionState state(v1::FrameFormat format);

@@ -2,7 +2,7 @@
 // gRPC: --max-memory (idle sessions are evicted before an upload is refused;
 // sessions in use stay and keep working) and --upload-timeout (a stalled
 // upload ends with DEADLINE_EXCEEDED; other calls go on); and how the client
-// library's streams end when the server goes away.
+// library's streams end when the server goes away; what ListSessions says.
 
 #include <algorithm>
 #include <chrono>
@@ -240,6 +240,32 @@ TEST_F(LimitsTest, ADriverWhoseFramesNobodyReadsKeepsAtMostItsBoundOfPoses) {
   // Reading catches up: the frame of the last pose acknowledges them all.
   ASSERT_TRUE(read_until_pose(*driver, sent).has_value());
   EXPECT_EQ(driver->unacknowledged(), 0u);
+  driver->writes_done();
+  EXPECT_TRUE(driver->finish().ok());
+}
+
+TEST_F(LimitsTest, ListSessionsDescribesEachSessionAndItsStreams) {
+  JoinedSession joined(data_dir_);
+  auto driver = joined.client.drive(joined.mesh.session_id, joined.editor(), "lister");
+  ASSERT_TRUE(driver->send(1, joined.mesh.base_positions));
+  ASSERT_TRUE(read_until_pose(*driver, 1).has_value());
+  auto watcher = joined.client.watch(joined.mesh.session_id, joined.viewer());
+  std::optional<v1::Frame> frame;
+  while ((frame = watcher->read()) && frame->version() < 1) {
+  }
+  ASSERT_TRUE(frame.has_value());
+  const auto entries = joined.client.list();
+  ASSERT_EQ(entries.size(), 1u);
+  const auto& e = entries[0];
+  EXPECT_EQ(e.session_id(), joined.mesh.session_id);
+  EXPECT_EQ(e.mesh_hash(), joined.mesh.mesh_hash);
+  EXPECT_EQ(e.vertex_count(), joined.mesh.vertex_count());
+  EXPECT_EQ(e.base_vertex_count(), joined.mesh.base_vertex_count());
+  EXPECT_EQ(e.version(), frame->version());
+  EXPECT_EQ(e.drivers(), 1u);
+  EXPECT_EQ(e.watchers(), 2u);  // streams receiving frames: the watcher's and the driver's
+  watcher->cancel();
+  watcher->finish();
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
 }
