@@ -234,8 +234,12 @@ int main(int argc, char** argv) {
     grpc::ServerBuilder builder;
     int port = 0;
     builder.AddListeningPort(listen, server_credentials(tls), &port);
-    // Checked at start too: a wrong --peer-ca fails here, not on the first forwarded call.
-    const std::shared_ptr<grpc::ChannelCredentials> peers = peer_credentials(tls);
+    // Only replicas serving browsers forward calls to each other. Checked at
+    // start: a wrong --peer-ca fails here, not on the first forwarded call.
+    const bool forwards = redis && !http_listen.empty();
+    if (!forwards && !tls.peer_ca.empty())
+      throw std::runtime_error("--peer-ca is for replicas (--redis) that serve browsers (--http): without both, nothing forwards");
+    const std::shared_ptr<grpc::ChannelCredentials> peers = forwards ? peer_credentials(tls) : nullptr;
     builder.SetMaxReceiveMessageSize(max_message_mib << 20);
     builder.SetMaxSendMessageSize(max_message_mib << 20);
     // gRPC allows SO_REUSEPORT by default: a second server started on the same

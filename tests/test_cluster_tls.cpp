@@ -12,7 +12,9 @@
 #include <string>
 #include <vector>
 
+#include <grpcpp/create_channel.h>
 #include <grpcpp/security/credentials.h>
+#include <grpcpp/support/channel_arguments.h>
 
 #include "filigree/client.h"
 #include "support/child_process.h"
@@ -44,6 +46,8 @@ class ClusterTls : public ::testing::Test {
     pki_->issue("replica-1", "ca", kReplicaExtensions);
     pki_->issue("replica-2", "ca", kReplicaExtensions);
     pki_->issue("engine", "ca", test::kClient);
+    // Signed by the right CA, for another name than the address it is served at.
+    pki_->issue("misnamed", "ca", "subjectAltName=DNS:elsewhere.test\nextendedKeyUsage=serverAuth,clientAuth");
     const int port = test::free_port();
     redis_ = std::make_unique<test::ChildProcess>(
         std::vector<std::string>{"redis-server", "--bind", "127.0.0.1", "--port", std::to_string(port), "--save", "",
@@ -61,24 +65,30 @@ class ClusterTls : public ::testing::Test {
     fs::remove_all(dir_, ec);
   }
 
-  // Replica i (0 or 1), with mutual TLS on both ports, trusting `peer_ca` for the others.
-  void start(int i, const std::string& peer_ca) {
+  // Replica i (0 or 1), with mutual TLS on both ports, trusting `peer_ca` for
+  // the others, serving certificate `cert` (default: its own).
+  void start(int i, const std::string& peer_ca, std::string cert = "") {
     const std::string name = "replica-" + std::to_string(i + 1);
+    if (cert.empty()) cert = name;
     replicas_[i] = std::make_unique<test::ServerProcess>(
         FILIGREE_SERVER_BINARY,
         std::vector<std::string>{"--redis", redis_address_, "--replica-id", name, "--data-dir", (dir_ / name).string(),
-                                 "--tls-cert", (*pki_ / (name + ".pem")).string(), "--tls-key", (*pki_ / (name + ".key")).string(),
+                                 "--tls-cert", (*pki_ / (cert + ".pem")).string(), "--tls-key", (*pki_ / (cert + ".key")).string(),
                                  "--tls-client-ca", (*pki_ / "ca.pem").string(), "--peer-ca", (*pki_ / peer_ca).string()},
         /*http=*/true);
   }
 
-  // An engine's client of replica i, with its client certificate.
-  Client engine(int i) const {
+  // An engine's client of replica i, with its client certificate, expecting
+  // the server's certificate to name `host` (default: the address).
+  Client engine(int i, const std::string& host = "") const {
     grpc::SslCredentialsOptions options;
     options.pem_root_certs = read_file(*pki_ / "ca.pem");
     options.pem_private_key = read_file(*pki_ / "engine.key");
     options.pem_cert_chain = read_file(*pki_ / "engine.pem");
-    return Client(replicas_[i]->address(), grpc::SslCredentials(options));
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(-1);
+    if (!host.empty()) args.SetSslTargetNameOverride(host);
+    return Client(grpc::CreateCustomChannel(replicas_[i]->address(), grpc::SslCredentials(options), args));
   }
 
   // A browser's gRPC-Web GetState over HTTPS to replica i (client
@@ -152,6 +162,19 @@ TEST_F(ClusterTls, AReplicaThatDoesNotTrustTheOtherFailsTheCallAndServesOn) {
   EXPECT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
 }
 
+TEST_F(ClusterTls, AReplicaWhoseCertificateDoesNotNameItsAddressIsNotCalled) {
+  start(0, "ca.pem", "misnamed");  // trusted CA, but not for 127.0.0.1
+  start(1, "ca.pem");
+  Client owner = engine(0, "elsewhere.test");
+  const SessionHandle s = owner.create_session(test::file_bytes(test::shipped_path("bunny_small.obj")), "obj", {}, "engine");
+  ASSERT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
+  const test::Frames frames = browser_get_state(1, s);
+  ASSERT_TRUE(frames.well_formed);
+  EXPECT_TRUE(frames.messages.empty());
+  EXPECT_NE(frames.trailer.find("grpc-status:14"), std::string::npos) << frames.trailer;  // UNAVAILABLE
+  EXPECT_NO_THROW(owner.state(s.session_id, s.viewer_token));
+}
+
 TEST_F(ClusterTls, PeerCaThatCannotServeIsRefusedAtStartSayingWhy) {
   const auto contains = [](const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; };
   // Without TLS there is nothing for it to verify.
@@ -159,10 +182,20 @@ TEST_F(ClusterTls, PeerCaThatCannotServeIsRefusedAtStartSayingWhy) {
   EXPECT_FALSE(plaintext.listened);
   EXPECT_NE(plaintext.status, 0);
   EXPECT_TRUE(contains(plaintext.output, "--peer-ca needs --tls-cert and --tls-key")) << plaintext.output;
+  const std::vector<std::string> tls = {"--tls-cert", (*pki_ / "replica-1.pem").string(), "--tls-key",
+                                        (*pki_ / "replica-1.key").string()};
+  // Nothing forwards without replicas serving browsers: refused, not ignored.
+  std::vector<std::string> alone = tls;
+  alone.insert(alone.end(), {"--peer-ca", (*pki_ / "ca.pem").string()});
+  const test::ServerRun unused = test::run_server(FILIGREE_SERVER_BINARY, alone);
+  EXPECT_FALSE(unused.listened);
+  EXPECT_NE(unused.status, 0);
+  EXPECT_TRUE(contains(unused.output, "--peer-ca is for replicas")) << unused.output;
   // A file that is not there fails now, not on the first forwarded call.
-  const test::ServerRun missing = test::run_server(
-      FILIGREE_SERVER_BINARY, {"--tls-cert", (*pki_ / "replica-1.pem").string(), "--tls-key", (*pki_ / "replica-1.key").string(),
-                               "--peer-ca", (dir_ / "nowhere.pem").string()});
+  std::vector<std::string> replica = tls;
+  replica.insert(replica.end(), {"--redis", redis_address_, "--http", "127.0.0.1:0", "--data-dir", (dir_ / "missing").string(),
+                                 "--peer-ca", (dir_ / "nowhere.pem").string()});
+  const test::ServerRun missing = test::run_server(FILIGREE_SERVER_BINARY, replica);
   EXPECT_FALSE(missing.listened);
   EXPECT_NE(missing.status, 0);
   EXPECT_TRUE(contains(missing.output, "--peer-ca " + (dir_ / "nowhere.pem").string() + " cannot be read")) << missing.output;

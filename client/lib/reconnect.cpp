@@ -10,10 +10,11 @@ std::chrono::milliseconds ReconnectSchedule::next(const grpc::Status& status, bo
   // client did not ask for (a server shutting down); INTERNAL, which is how a
   // proxy's reset shows when the replica behind it dies ("Received RST_STREAM
   // with error code 2") and which the service never ends a stream with.
+  // A client that cancelled wants no further attempt (nor on_reconnect).
   const grpc::StatusCode code = status.error_code();
   const bool gone = code == grpc::StatusCode::UNAVAILABLE || code == grpc::StatusCode::INTERNAL ||
-                    (code == grpc::StatusCode::CANCELLED && !cancelled_by_us);
-  if (!policy_.enabled || !gone) return kEnd;
+                    code == grpc::StatusCode::CANCELLED;
+  if (!policy_.enabled || !gone || cancelled_by_us) return kEnd;
   const auto now = std::chrono::steady_clock::now();
   if (attempt_ == 0) {
     backoff_ = policy_.first_backoff;
@@ -29,7 +30,13 @@ std::chrono::milliseconds ReconnectSchedule::next(const grpc::Status& status, bo
 
 std::optional<grpc::Status> ReconnectSchedule::wait_to_reconnect(const grpc::Status& status, std::mutex& mutex,
                                                                  std::condition_variable& cv, const bool& cancelled) {
-  const auto end = [&](bool by_us) { return by_us && !status.ok() ? grpc::Status::CANCELLED : status; };
+  // The client's cancel is why the stream ended only when the status is one
+  // a cancel or an outage makes; a status the server chose (NOT_FOUND, …)
+  // stays, even if a cancel came after it.
+  const grpc::StatusCode code = status.error_code();
+  const bool outage = code == grpc::StatusCode::UNAVAILABLE || code == grpc::StatusCode::INTERNAL ||
+                      code == grpc::StatusCode::CANCELLED;
+  const auto end = [&](bool by_us) { return by_us && outage ? grpc::Status::CANCELLED : status; };
   bool by_us;
   {
     std::lock_guard lock(mutex);

@@ -16,8 +16,9 @@ class CutState {
   // (node_parents(h)) must outlive the CutState.
   CutState(const Hierarchy& h, const NodeParents& parents);
   // The full cut (the original mesh) in O(n), without recovering node by
-  // node. Without `parents` it can be read but not changed: recover(),
-  // remove() and can_recover() then throw std::logic_error.
+  // node. Without `parents` it can be read but not changed: recover() and
+  // remove() throw std::logic_error (can_recover() is false anyway: every
+  // node is recovered).
   static CutState full(const Hierarchy& h, const NodeParents* parents = nullptr);
 
   bool recovered(NodeId k) const { return recovered_[k]; }

@@ -40,8 +40,8 @@ class ReconnectSchedule {
   // is read under `mutex`; the canceller sets it under `mutex` and notifies
   // `cv`). nullopt: reopen the stream now. Else the stream ends for good,
   // with this status: CANCELLED when the client cancelled (before or during
-  // the wait) a stream that did not end OK, as that is why it ended; else
-  // `status`.
+  // the wait) a stream that ended UNAVAILABLE, INTERNAL or CANCELLED, as the
+  // cancel is why it ended; else `status` (OK, or what the server said).
   std::optional<grpc::Status> wait_to_reconnect(const grpc::Status& status, std::mutex& mutex, std::condition_variable& cv,
                                                 const bool& cancelled);
   // A frame arrived: the next failure starts over at first_backoff.
