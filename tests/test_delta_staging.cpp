@@ -1,6 +1,7 @@
-// The encoder's vectorised passes against plain loops: every length (the
-// vector bodies and their scalar tails), values at the tolerance exactly, and
-// an implausible delta in every position.
+// The encoder's vectorised passes against plain loops, every compiled copy
+// this CPU runs (baseline, AVX2) and the dispatched functions: every length
+// (the vector bodies and their scalar tails), values at the tolerance exactly,
+// and an implausible delta in every position.
 #include "codec/delta_staging.h"
 
 #include <gtest/gtest.h>
@@ -33,7 +34,29 @@ Values random_values(std::size_t n, std::mt19937& rng) {
   return v;
 }
 
-TEST(DeltaStaging, MatchesPlainLoopsAtEveryLength) {
+// The dispatched functions, as a copy of their own.
+const StagingKernels kDispatched{"dispatched", stage_deltas, stage_and_compare_deltas, max_delta_error};
+
+std::vector<StagingKernels> every_copy() {
+  std::vector<StagingKernels> out(staging_kernels().begin(), staging_kernels().end());
+  out.push_back(kDispatched);
+  return out;
+}
+
+TEST(DeltaStaging, EveryCopyThisCpuCanRunIsThere) {
+  ASSERT_GE(staging_kernels().size(), 1u);
+  EXPECT_STREQ(staging_kernels().front().name, "baseline");
+#if defined(__x86_64__) && defined(__GNUC__)
+  // On an AVX2 machine the tests below run the AVX2 copy too.
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx2")) {
+    ASSERT_EQ(staging_kernels().size(), 2u);
+    EXPECT_STREQ(staging_kernels().back().name, "avx2");
+  }
+#endif
+}
+
+void check_matches_plain_loops_at_every_length(const StagingKernels& k) {
   std::mt19937 rng(7);
   const double tolerance = 0x1p-11;  // ≈ 4.9e-4, and exact sums below
   for (std::size_t n = 0; n < 70; ++n) {
@@ -42,9 +65,9 @@ TEST(DeltaStaging, MatchesPlainLoopsAtEveryLength) {
     if (n > 3) v.rest[3] = 0.0, v.key[3] = 0.25f, v.pos[3] = 0.25 + tolerance;
     std::vector<float> staged(n, -1.0f), staged_only(n, -1.0f);
     std::vector<std::uint8_t> from_key(n, 9), from_last(n, 9);
-    ASSERT_TRUE(stage_and_compare_deltas(v.pos.data(), v.rest.data(), v.key.data(), v.last.data(), tolerance, n, staged.data(),
-                                         from_key.data(), from_last.data()));
-    ASSERT_TRUE(stage_deltas(v.pos.data(), v.rest.data(), n, staged_only.data()));
+    ASSERT_TRUE(k.stage_compare(v.pos.data(), v.rest.data(), v.key.data(), v.last.data(), tolerance, n, staged.data(),
+                                from_key.data(), from_last.data()));
+    ASSERT_TRUE(k.stage(v.pos.data(), v.rest.data(), n, staged_only.data()));
     double max_error = 0.0;
     for (std::size_t j = 0; j < n; ++j) {
       const double d = v.pos[j] - v.rest[j];
@@ -58,11 +81,18 @@ TEST(DeltaStaging, MatchesPlainLoopsAtEveryLength) {
       EXPECT_EQ(from_key[3], 0) << n;
     }
     // The error of decoding to `key`, the largest anywhere in the range.
-    EXPECT_EQ(max_delta_error(v.key.data(), v.pos.data(), v.rest.data(), n), max_error) << n;
+    EXPECT_EQ(k.max_error(v.key.data(), v.pos.data(), v.rest.data(), n), max_error) << n;
   }
 }
 
-TEST(DeltaStaging, LargestErrorIsFoundInEveryPosition) {
+TEST(DeltaStaging, MatchesPlainLoopsAtEveryLength) {
+  for (const StagingKernels& k : every_copy()) {
+    SCOPED_TRACE(k.name);
+    check_matches_plain_loops_at_every_length(k);
+  }
+}
+
+void check_largest_error_is_found_in_every_position(const StagingKernels& k) {
   std::mt19937 rng(8);
   for (std::size_t n : {1u, 4u, 5u, 11u, 64u}) {
     for (std::size_t at = 0; at < n; ++at) {
@@ -71,12 +101,19 @@ TEST(DeltaStaging, LargestErrorIsFoundInEveryPosition) {
       for (std::size_t j = 0; j < n; ++j) decoded[j] = static_cast<float>(v.pos[j] - v.rest[j]);
       decoded[at] += 0.5f;  // far above any rounding
       const double expected = std::abs(double{decoded[at]} - (v.pos[at] - v.rest[at]));
-      EXPECT_EQ(max_delta_error(decoded.data(), v.pos.data(), v.rest.data(), n), expected) << n << " " << at;
+      EXPECT_EQ(k.max_error(decoded.data(), v.pos.data(), v.rest.data(), n), expected) << n << " " << at;
     }
   }
 }
 
-TEST(DeltaStaging, ImplausibleDeltasAreReportedWherever) {
+TEST(DeltaStaging, LargestErrorIsFoundInEveryPosition) {
+  for (const StagingKernels& k : every_copy()) {
+    SCOPED_TRACE(k.name);
+    check_largest_error_is_found_in_every_position(k);
+  }
+}
+
+void check_implausible_deltas_are_reported_wherever(const StagingKernels& k) {
   std::mt19937 rng(9);
   const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 2 * kMaxDeltaMagnitude};
   for (std::size_t n : {1u, 3u, 8u, 13u}) {
@@ -86,12 +123,19 @@ TEST(DeltaStaging, ImplausibleDeltasAreReportedWherever) {
         v.pos[at] = b;
         std::vector<float> staged(n);
         std::vector<std::uint8_t> from_key(n), from_last(n);
-        EXPECT_FALSE(stage_deltas(v.pos.data(), v.rest.data(), n, staged.data())) << n << " " << at << " " << b;
-        EXPECT_FALSE(stage_and_compare_deltas(v.pos.data(), v.rest.data(), v.key.data(), v.last.data(), 1e-3, n, staged.data(),
-                                              from_key.data(), from_last.data()))
+        EXPECT_FALSE(k.stage(v.pos.data(), v.rest.data(), n, staged.data())) << n << " " << at << " " << b;
+        EXPECT_FALSE(k.stage_compare(v.pos.data(), v.rest.data(), v.key.data(), v.last.data(), 1e-3, n, staged.data(),
+                                     from_key.data(), from_last.data()))
             << n << " " << at << " " << b;
       }
     }
+  }
+}
+
+TEST(DeltaStaging, ImplausibleDeltasAreReportedWherever) {
+  for (const StagingKernels& k : every_copy()) {
+    SCOPED_TRACE(k.name);
+    check_implausible_deltas_are_reported_wherever(k);
   }
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <vector>
 
 #include "codec/delta_quantization.h"
 
@@ -62,13 +63,6 @@ namespace {
   return out;
 }
 
-struct Kernels {
-  bool (*stage)(const double*, const double*, std::size_t, float*);
-  bool (*stage_compare)(const double*, const double*, const float*, const float*, double, std::size_t, float*, std::uint8_t*,
-                        std::uint8_t*);
-  double (*max_error)(const float*, const double*, const double*, std::size_t);
-};
-
 #define FILIGREE_STAGING_KERNELS(attributes, suffix)                                                                      \
   attributes bool stage_##suffix(const double* p, const double* r, std::size_t n, float* s) { return stage_kernel(p, r, n, s); } \
   attributes bool stage_compare_##suffix(const double* p, const double* r, const float* k, const float* l, double t,           \
@@ -85,21 +79,24 @@ FILIGREE_STAGING_KERNELS([[gnu::target("avx2")]], avx2)
 #endif
 #undef FILIGREE_STAGING_KERNELS
 
-Kernels pick_kernels() {
+std::vector<StagingKernels> runnable_kernels() {
+  std::vector<StagingKernels> out = {{"baseline", stage_baseline, stage_compare_baseline, max_error_baseline}};
 #if defined(__x86_64__) && defined(__GNUC__)
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx2")) return {stage_avx2, stage_compare_avx2, max_error_avx2};
+  if (__builtin_cpu_supports("avx2")) out.push_back({"avx2", stage_avx2, stage_compare_avx2, max_error_avx2});
 #endif
-  return {stage_baseline, stage_compare_baseline, max_error_baseline};
+  return out;
 }
 
-// Chosen on first use, so that no static initialiser can see it unset.
-const Kernels& kernels() {
-  static const Kernels chosen = pick_kernels();
-  return chosen;
-}
+const StagingKernels& kernels() { return staging_kernels().back(); }
 
 }  // namespace
+
+std::span<const StagingKernels> staging_kernels() {
+  // Found on first use, so that no static initialiser can see it unset.
+  static const std::vector<StagingKernels> runnable = runnable_kernels();
+  return runnable;
+}
 
 bool stage_deltas(const double* pos, const double* rest, std::size_t values, float* staged) {
   return kernels().stage(pos, rest, values, staged);

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <span>
 
 namespace filigree {
 
@@ -24,5 +25,18 @@ bool stage_and_compare_deltas(const double* pos, const double* rest, const float
 // max over j < values of |decoded[j] − (pos[j] − rest[j])|, exact (in
 // double), 0 for no values. Every input must be finite.
 double max_delta_error(const float* decoded, const double* pos, const double* rest, std::size_t values);
+
+// One compiled copy of the three passes above, with the same contracts.
+struct StagingKernels {
+  const char* name;  // "baseline", "avx2"
+  bool (*stage)(const double* pos, const double* rest, std::size_t values, float* staged);
+  bool (*stage_compare)(const double* pos, const double* rest, const float* key, const float* last, double tolerance,
+                        std::size_t values, float* staged, std::uint8_t* from_key, std::uint8_t* from_last);
+  double (*max_error)(const float* decoded, const double* pos, const double* rest, std::size_t values);
+};
+
+// Every copy this CPU can run, the one the functions above use last (tests
+// compare them all).
+std::span<const StagingKernels> staging_kernels();
 
 }  // namespace filigree
