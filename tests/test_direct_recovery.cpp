@@ -5,6 +5,8 @@
 
 #include <cmath>
 #include <random>
+#include <thread>
+#include <vector>
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
@@ -12,6 +14,7 @@
 #include "geometry/ring_frame.h"
 #include "hierarchy/cut_state.h"
 #include "hierarchy/hierarchy.h"
+#include "hierarchy/node_parents.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
 #include "runtime/deformer_model.h"
@@ -143,6 +146,22 @@ TEST(DirectRecovery, ModelIsSharedReadOnlyAcrossDeformers) {
   a.deform(twist);
   b.deform(twist);
   EXPECT_EQ(a.deform(bend).positions, alone);
+}
+
+TEST(DirectRecovery, ModelDerivesTheParentsOnceWhenSessionsFirstNeedThemAtOnce) {
+  auto h = std::make_shared<const Hierarchy>(preprocess(test::shipped_mesh("bunny_small.obj"), with_base(150)));
+  const auto model = DeformerModel::create(h);
+  const std::size_t before = model->memory_bytes();  // T = 0 needs no parents
+  // Four threads ask at once, as sessions setting a finite T at the same time would.
+  std::vector<const NodeParents*> seen(4, nullptr);
+  std::vector<std::thread> threads;
+  for (std::size_t t = 0; t < seen.size(); ++t) threads.emplace_back([&, t] { seen[t] = &model->node_parents(); });
+  for (auto& t : threads) t.join();
+  for (const NodeParents* p : seen) EXPECT_EQ(p, seen[0]);
+  const NodeParents expected = node_parents(*h);
+  EXPECT_EQ(seen[0]->offsets, expected.offsets);
+  EXPECT_EQ(seen[0]->parents, expected.parents);
+  EXPECT_EQ(model->memory_bytes(), before + seen[0]->memory_bytes());
 }
 
 TEST(DirectRecovery, DeformersBorrowTheirScratchForAFrameAndHoldNoneBetween) {
