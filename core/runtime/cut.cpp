@@ -181,13 +181,17 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
     if (node[i] != kNone) cut_.prefetch(node[i]);
   }
   std::uint16_t frontier[kScoreBlock];
+  bool recovers[kScoreBlock];  // per frontier entry: its patch is the recovery's (else the removal's)
   std::size_t m = 0;
   for (std::size_t i = 0; i < count; ++i) {
     out[i] = -1.0f;
     const NodeId k = node[i];
-    if (k == kNone || !(cut_.can_recover(k) || cut_.can_remove(k))) continue;
+    if (k == kNone) continue;
+    const bool recover = cut_.can_recover(k);
+    if (!recover && !cut_.can_remove(k)) continue;
     __builtin_prefetch(&h_.ring_offsets[k]);
     __builtin_prefetch(&laplacian_.offsets[vertex[i]]);
+    recovers[m] = recover;
     frontier[m++] = static_cast<std::uint16_t>(i);
   }
   // A patch's corners are k's vertex and its ring; a removal's faces may be
@@ -195,7 +199,7 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
   for (std::size_t j = 0; j < m; ++j) {
     const NodeId k = node[frontier[j]];
     __builtin_prefetch(h_.ring(k).data());
-    if (cut_.can_recover(k)) {
+    if (recovers[j]) {
       __builtin_prefetch(&h_.created_corners[h_.first_created_face(k) - h_.original_face_count()]);
     } else {
       __builtin_prefetch(h_.removed_faces_of(k).data());
@@ -211,7 +215,7 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
       __builtin_prefetch(&h_.rest_positions[c]);
       __builtin_prefetch(&x[c]);
     }
-    if (!cut_.can_recover(k))
+    if (!recovers[j])
       for (NodeId c : h_.children_of(k)) __builtin_prefetch(&h_.ring_offsets[c]);
   }
   for (std::size_t j = 0; j < m; ++j) {
