@@ -56,7 +56,13 @@ TEST(DeltaStaging, EveryCopyThisCpuCanRunIsThere) {
 #endif
 }
 
-void check_matches_plain_loops_at_every_length(const StagingKernels& k) {
+// Each compiled copy, and the dispatched functions.
+class EachCopy : public ::testing::TestWithParam<StagingKernels> {};
+INSTANTIATE_TEST_SUITE_P(DeltaStaging, EachCopy, ::testing::ValuesIn(every_copy()),
+                         [](const ::testing::TestParamInfo<StagingKernels>& info) { return std::string(info.param.name); });
+
+TEST_P(EachCopy, MatchesPlainLoopsAtEveryLength) {
+  const StagingKernels& k = GetParam();
   std::mt19937 rng(7);
   const double tolerance = 0x1p-11;  // ≈ 4.9e-4, and exact sums below
   for (std::size_t n = 0; n < 70; ++n) {
@@ -85,14 +91,8 @@ void check_matches_plain_loops_at_every_length(const StagingKernels& k) {
   }
 }
 
-TEST(DeltaStaging, MatchesPlainLoopsAtEveryLength) {
-  for (const StagingKernels& k : every_copy()) {
-    SCOPED_TRACE(k.name);
-    check_matches_plain_loops_at_every_length(k);
-  }
-}
-
-void check_largest_error_is_found_in_every_position(const StagingKernels& k) {
+TEST_P(EachCopy, LargestErrorIsFoundInEveryPosition) {
+  const StagingKernels& k = GetParam();
   std::mt19937 rng(8);
   for (std::size_t n : {1u, 4u, 5u, 11u, 64u}) {
     for (std::size_t at = 0; at < n; ++at) {
@@ -106,14 +106,8 @@ void check_largest_error_is_found_in_every_position(const StagingKernels& k) {
   }
 }
 
-TEST(DeltaStaging, LargestErrorIsFoundInEveryPosition) {
-  for (const StagingKernels& k : every_copy()) {
-    SCOPED_TRACE(k.name);
-    check_largest_error_is_found_in_every_position(k);
-  }
-}
-
-void check_implausible_deltas_are_reported_wherever(const StagingKernels& k) {
+TEST_P(EachCopy, ImplausibleDeltasAreReportedWherever) {
+  const StagingKernels& k = GetParam();
   std::mt19937 rng(9);
   const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(), 2 * kMaxDeltaMagnitude};
   for (std::size_t n : {1u, 3u, 8u, 13u}) {
@@ -129,13 +123,6 @@ void check_implausible_deltas_are_reported_wherever(const StagingKernels& k) {
             << n << " " << at << " " << b;
       }
     }
-  }
-}
-
-TEST(DeltaStaging, ImplausibleDeltasAreReportedWherever) {
-  for (const StagingKernels& k : every_copy()) {
-    SCOPED_TRACE(k.name);
-    check_implausible_deltas_are_reported_wherever(k);
   }
 }
 
