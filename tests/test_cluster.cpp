@@ -24,6 +24,7 @@
 #include "filigree/client.h"
 #include "server/state/redis_client.h"
 #include "support/cluster.h"
+#include "support/grpc_web_frames.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
 
@@ -371,10 +372,7 @@ std::string grpc_web_call(const std::string& address, const std::string& method,
   a.sin_port = htons(static_cast<std::uint16_t>(std::stoi(address.substr(colon + 1))));
   inet_pton(AF_INET, address.substr(0, colon).c_str(), &a.sin_addr);
   EXPECT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
-  std::string body(5, '\0');
-  body[1] = static_cast<char>(message.size() >> 24), body[2] = static_cast<char>(message.size() >> 16);
-  body[3] = static_cast<char>(message.size() >> 8), body[4] = static_cast<char>(message.size());
-  body += message;
+  const std::string body = test::frame_bytes(0, message);
   const std::string request = "POST /filigree.v1.Filigree/" + method + " HTTP/1.1\r\nHost: " + address +
                               "\r\nContent-Type: application/grpc-web+proto\r\nx-session-id: " + session +
                               "\r\nx-filigree-token: " + token + "\r\nContent-Length: " + std::to_string(body.size()) +
@@ -418,14 +416,13 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   request.set_session_id(s.session_id);
   const std::string body =
       grpc_web_call(cluster.http_address(other), "GetState", s.session_id, s.viewer_token, request.SerializeAsString());
-  ASSERT_GE(body.size(), 5u);
-  ASSERT_EQ(body[0], 0) << "no data frame: " << body;
-  const std::size_t length = (std::size_t(std::uint8_t(body[1])) << 24) | (std::size_t(std::uint8_t(body[2])) << 16) |
-                             (std::size_t(std::uint8_t(body[3])) << 8) | std::size_t(std::uint8_t(body[4]));
+  const test::Frames frames = test::parse_frames(body);
+  ASSERT_TRUE(frames.well_formed) << body;
+  ASSERT_EQ(frames.messages.size(), 1u) << "no data frame: " << body;
   v1::SessionState state;
-  ASSERT_TRUE(state.ParseFromString(body.substr(5, length)));
+  ASSERT_TRUE(state.ParseFromString(frames.messages[0]));
   EXPECT_EQ(state.version(), f->version());
-  EXPECT_NE(body.find("grpc-status:0"), std::string::npos) << body;
+  EXPECT_NE(frames.trailer.find("grpc-status:0"), std::string::npos) << frames.trailer;
   // Through nginx's HTTP port (the shipped configuration's second server block) too.
   const std::string via_lb =
       grpc_web_call(cluster.lb_http(), "GetState", s.session_id, s.viewer_token, request.SerializeAsString());

@@ -24,6 +24,7 @@
 #include <gtest/gtest.h>
 
 #include "filigree/v1/filigree.grpc.pb.h"
+#include "support/grpc_web_frames.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
 
@@ -34,35 +35,14 @@ namespace beast = boost::beast;
 namespace bhttp = boost::beast::http;
 namespace net = boost::asio;
 using tcp = net::ip::tcp;
+using test::Frame;
+using test::frame_bytes;
 using test::ServerProcess;
+using test::take_frame;
 
 using test::file_bytes;
 
 // ------------------------------------------------------------ gRPC-Web wire format
-
-struct Frame {
-  std::uint8_t flags = 0;
-  std::string payload;
-  bool trailer() const { return flags == 0x80; }
-};
-
-std::string frame_bytes(std::uint8_t flags, const std::string& payload) {
-  std::string out(1, static_cast<char>(flags));
-  const auto n = static_cast<std::uint32_t>(payload.size());
-  for (int s : {24, 16, 8, 0}) out += static_cast<char>((n >> s) & 0xff);
-  return out + payload;
-}
-
-// Takes one complete frame off the front of `bytes`, if there is one.
-std::optional<Frame> take_frame(std::string& bytes) {
-  if (bytes.size() < 5) return std::nullopt;
-  std::uint32_t n = 0;
-  for (int i = 1; i < 5; ++i) n = (n << 8) | static_cast<std::uint8_t>(bytes[i]);
-  if (bytes.size() < 5 + std::size_t(n)) return std::nullopt;
-  Frame f{static_cast<std::uint8_t>(bytes[0]), bytes.substr(5, n)};
-  bytes.erase(0, 5 + std::size_t(n));
-  return f;
-}
 
 std::string percent_decode(const std::string& s) {
   std::string out;

@@ -36,25 +36,16 @@
 
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "server/http/http_server.h"
+#include "support/grpc_web_frames.h"
 #include "support/https_client.h"
 #include "support/pki.h"
 
 namespace filigree {
 namespace {
 
-namespace beast = boost::beast;
-namespace bhttp = boost::beast::http;
-namespace net = boost::asio;
-namespace ssl = boost::asio::ssl;
-namespace fs = std::filesystem;
-using tcp = net::ip::tcp;
-using test::client_context;
-using test::Frames;
-using test::get;
-using test::grpc_web_request;
-using test::HttpsClient;
-using test::parse_frames;
-using test::run;
+// The HTTPS client, the gRPC-Web frames, the PKI, and their namespace
+// aliases (beast, bhttp, net, ssl, fs, tcp).
+using namespace test;
 
 // ------------------------------------------------------------ certificates
 
@@ -109,8 +100,8 @@ class HttpsTest : public ::testing::Test {
     pki_.emplace(scratch_ / "pki");
     pki_->ca("test-ca");
     pki_->ca("other-ca");
-    pki_->issue("server-1", "test-ca", test::kLoopbackServer, kFirstSerial);
-    pki_->issue("server-2", "test-ca", test::kLoopbackServer, kSecondSerial);
+    pki_->issue("server-1", "test-ca", kLoopbackServer, kFirstSerial);
+    pki_->issue("server-2", "test-ca", kLoopbackServer, kSecondSerial);
     install(*pki_ / "server-1.pem", cert_path());
     install(*pki_ / "server-1.key", key_path());
 
@@ -157,7 +148,7 @@ class HttpsTest : public ::testing::Test {
   }
 
   fs::path scratch_;
-  std::optional<test::Pki> pki_;
+  std::optional<Pki> pki_;
   FakeFiligree service_;
   std::unique_ptr<grpc::Server> grpc_server_;
   std::unique_ptr<server::http::HttpServer> http_;
@@ -350,7 +341,7 @@ TEST_F(HttpsTest, ReplacedFilesArePickedUpByThemselvesAndBadOnesAreNot) {
   EXPECT_EQ(client->serial(), kSecondSerial);
   expect_index(*client);
 
-  pki_->issue("server-3", "test-ca", test::kLoopbackServer, kThirdSerial);
+  pki_->issue("server-3", "test-ca", kLoopbackServer, kThirdSerial);
   install(*pki_ / "server-3.key", key_path());
   install(*pki_ / "server-3.pem", cert_path());
   EXPECT_EQ(connect()->serial(), kThirdSerial);
@@ -360,8 +351,8 @@ TEST_F(HttpsTest, ReplacedFilesArePickedUpByThemselvesAndBadOnesAreNot) {
 
 TEST_F(HttpsTest, MutualTlsRequiresAClientCertificateOfTheClientCa) {
   pki_->ca("client-ca");
-  pki_->issue("browser", "client-ca", test::kClient, 7);
-  pki_->issue("stranger", "other-ca", test::kClient, 8);
+  pki_->issue("browser", "client-ca", kClient, 7);
+  pki_->issue("stranger", "other-ca", kClient, 8);
   start(std::chrono::seconds(3600), (*pki_ / "client-ca.pem").string());
 
   auto with_cert = client_context(*pki_ / "test-ca.pem", *pki_ / "browser.pem", *pki_ / "browser.key");

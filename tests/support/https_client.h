@@ -1,7 +1,7 @@
 #pragma once
 // An HTTPS client for tests (Boost.Beast over OpenSSL): one kept-alive
-// connection that verifies the server as "localhost", and the gRPC-Web wire
-// format (frames, a unary request) to speak to the browser port.
+// connection that verifies the server as "localhost", and the requests to
+// speak to the browser port (gRPC-Web frames: grpc_web_frames.h).
 
 #include <cstdint>
 #include <filesystem>
@@ -22,6 +22,8 @@
 #include <openssl/ssl.h>
 #include <openssl/x509.h>
 
+#include "support/grpc_web_frames.h"
+
 namespace filigree::test {
 
 namespace beast = boost::beast;
@@ -31,38 +33,7 @@ namespace ssl = boost::asio::ssl;
 namespace fs = std::filesystem;
 using tcp = net::ip::tcp;
 
-// ------------------------------------------------------------ gRPC-Web wire format
-
-inline std::string frame_bytes(std::uint8_t flags, const std::string& payload) {
-  std::string out(1, static_cast<char>(flags));
-  const auto n = static_cast<std::uint32_t>(payload.size());
-  for (int s : {24, 16, 8, 0}) out += static_cast<char>((n >> s) & 0xff);
-  return out + payload;
-}
-
-struct Frames {
-  std::vector<std::string> messages;
-  std::string trailer;  // "grpc-status:0\r\n…"
-  bool well_formed = true;
-};
-
-inline Frames parse_frames(std::string body) {
-  Frames out;
-  while (!body.empty()) {
-    if (body.size() < 5 || !out.trailer.empty()) return out.well_formed = false, out;
-    std::uint32_t n = 0;
-    for (int i = 1; i < 5; ++i) n = (n << 8) | static_cast<std::uint8_t>(body[i]);
-    if (body.size() < 5 + std::size_t(n)) return out.well_formed = false, out;
-    const std::string payload = body.substr(5, n);
-    if (static_cast<std::uint8_t>(body[0]) == 0x80)
-      out.trailer = payload;
-    else
-      out.messages.push_back(payload);
-    body.erase(0, 5 + std::size_t(n));
-  }
-  out.well_formed = out.well_formed && !out.trailer.empty();
-  return out;
-}
+// ------------------------------------------------------------ requests
 
 inline bhttp::request<bhttp::string_body> grpc_web_request(const std::string& method, const google::protobuf::Message& message) {
   bhttp::request<bhttp::string_body> req{bhttp::verb::post, "/filigree.v1.Filigree/" + method, 11};
