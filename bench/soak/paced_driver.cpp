@@ -8,19 +8,11 @@ namespace filigree::soak {
 
 using Clock = std::chrono::steady_clock;
 
-namespace {
-std::vector<Vec3> to_vec3(const std::vector<float>& xyz) {
-  std::vector<Vec3> out(xyz.size() / 3);
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
-  return out;
-}
-}  // namespace
-
 PacedDriver::PacedDriver(Client& client, const SessionHandle& session, std::string name, double rate_hz, double phase,
                          Failures& failures)
     : client_(client), session_(session), name_(std::move(name)),
       period_(std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / rate_hz))), phase_(phase), failures_(failures),
-      base_rest_(to_vec3(session.mesh.base_positions)) {}
+      base_rest_(points_from_xyz(session.mesh.base_positions)) {}
 
 PacedDriver::~PacedDriver() {
   stop_posing();

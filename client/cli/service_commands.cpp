@@ -93,12 +93,6 @@ std::string format_of(const std::string& path) {
   return ext;
 }
 
-std::vector<Vec3> to_vec3(const std::vector<float>& xyz) {
-  std::vector<Vec3> out(xyz.size() / 3);
-  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
-  return out;
-}
-
 std::vector<float> to_floats(const std::vector<Vec3>& v) {
   std::vector<float> out(3 * v.size());
   for (std::size_t i = 0; i < v.size(); ++i)
@@ -108,7 +102,7 @@ std::vector<float> to_floats(const std::vector<Vec3>& v) {
 
 TriMesh rest_mesh(const SessionMesh& m) {
   TriMesh mesh;
-  mesh.positions = to_vec3(m.rest_positions);
+  mesh.positions = points_from_xyz(m.rest_positions);
   mesh.faces.resize(m.rest_faces.size() / 3);
   for (std::size_t f = 0; f < mesh.faces.size(); ++f)
     mesh.faces[f] = {m.rest_faces[3 * f], m.rest_faces[3 * f + 1], m.rest_faces[3 * f + 2]};
@@ -184,7 +178,7 @@ std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh
   if (!a.motion.empty()) {
     const auto motion = parse_motion(a.motion);
     if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
-    const std::vector<Vec3> rest = to_vec3(session.base_positions);
+    const std::vector<Vec3> rest = points_from_xyz(session.base_positions);
     const int n = a.frames > 0 ? a.frames : 120;
     for (int f = 0; f < n; ++f) {
       const double phase = n > 1 ? std::sin(M_PI * f / (n - 1)) : 1.0;
@@ -223,7 +217,7 @@ void drive(const DriveArgs& a) {
         const auto received = Clock::now();
         DecodedFrame d = decoder.decode(*frame);
         std::vector<Vec3> positions;
-        if (!a.output.empty()) positions = to_vec3(d.positions);
+        if (!a.output.empty()) positions = points_from_xyz(d.positions);
         std::lock_guard lock(mutex);
         ++frame_count;
         bytes += d.encoded_bytes;
@@ -304,7 +298,7 @@ void watch(const WatchArgs& a) {
                 static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
                 changes.empty() ? "-" : changes.c_str());
     std::fflush(stdout);
-    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+    if (!a.output.empty()) frames.push_back(points_from_xyz(d.positions));
     if (a.frames > 0 && ++count >= a.frames) {
       watcher->cancel();  // enough: the CANCELLED status below is ours
       enough = true;
@@ -338,7 +332,7 @@ void play(const PlayArgs& a) {
   while (auto frame = stream->read()) {
     const DecodedFrame d = decoder.decode(*frame);
     bytes += d.encoded_bytes;
-    if (!a.output.empty()) frames.push_back(to_vec3(d.positions));
+    if (!a.output.empty()) frames.push_back(points_from_xyz(d.positions));
     if (a.frames > 0 && ++count >= a.frames) stream->cancel();
     std::printf("version %llu  sample %llu  bytes %zu  max_error %.3g\n", static_cast<unsigned long long>(d.version),
                 static_cast<unsigned long long>(d.pose_id), d.encoded_bytes, d.max_error);

@@ -12,4 +12,10 @@ double bounding_box_diagonal(const std::vector<Vec3>& positions) {
   return (hi - lo).norm();
 }
 
+std::vector<Vec3> points_from_xyz(const std::vector<float>& xyz) {
+  std::vector<Vec3> out(xyz.size() / 3);
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = Vec3(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+  return out;
+}
+
 }  // namespace filigree

@@ -27,4 +27,8 @@ struct TriMesh {
 // Length of the diagonal of the axis-aligned bounding box (0 for an empty mesh).
 double bounding_box_diagonal(const std::vector<Vec3>& positions);
 
+// Points from packed x y z floats, the form of the wire and the client
+// library (a trailing partial point is ignored).
+std::vector<Vec3> points_from_xyz(const std::vector<float>& xyz);
+
 }  // namespace filigree
