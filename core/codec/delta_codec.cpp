@@ -152,6 +152,11 @@ void decode_draco(std::string_view bytes, std::uint32_t count, std::span<float> 
 
 }  // namespace
 
+void throw_implausible_delta(double d, std::size_t vertex) {
+  if (!std::isfinite(d)) throw DeltaCodecError("delta of vertex " + std::to_string(vertex) + " is not finite");
+  throw DeltaCodecError("delta of vertex " + std::to_string(vertex) + " is implausibly large (|" + std::to_string(d) + "| > 1e30)");
+}
+
 std::string encode_draco(std::span<const float> values, const DeltaQuantization& q, int speed) {
   if (values.empty()) return {};
   const auto n = static_cast<std::uint32_t>(values.size() / 3);
@@ -192,13 +197,7 @@ EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits)
   for (std::uint32_t i = 0; i < n; ++i) {
     for (int c = 0; c < 3; ++c) {
       const double d = deltas[i][c];
-      if (!std::isfinite(d)) {
-        throw DeltaCodecError("delta " + std::to_string(i) + " is not finite");
-      }
-      if (std::abs(d) > kMaxDeltaMagnitude) {
-        throw DeltaCodecError("delta " + std::to_string(i) + " is implausibly large (|" + std::to_string(d) +
-                              "| > 1e30)");
-      }
+      check_delta(d, i);
       if (d != 0.0) all_zero = false;
       values[3 * static_cast<std::size_t>(i) + c] = static_cast<float>(d);
     }

@@ -15,12 +15,7 @@ namespace {
 // Names the first implausible delta of a range (the check itself is branch-free).
 [[noreturn]] void throw_bad_delta(const Vec3* pos, const Vec3* rest, std::size_t first, std::size_t count) {
   for (std::size_t i = 0; i < count; ++i)
-    for (int k = 0; k < 3; ++k) {
-      const double d = pos[i][k] - rest[i][k];
-      if (!std::isfinite(d)) throw DeltaCodecError("delta of vertex " + std::to_string(first + i) + " is not finite");
-      if (std::abs(d) > kMaxDeltaMagnitude)
-        throw DeltaCodecError("delta of vertex " + std::to_string(first + i) + " is implausibly large");
-    }
+    for (int k = 0; k < 3; ++k) check_delta(pos[i][k] - rest[i][k], first + i);
   throw std::logic_error("an implausible delta that is not there");
 }
 
