@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "codec/delta_quantization.h"
+#include "util/cpu_features.h"
 
 namespace filigree {
 namespace {
@@ -46,14 +47,11 @@ std::vector<StagingKernels> every_copy() {
 TEST(DeltaStaging, EveryCopyThisCpuCanRunIsThere) {
   ASSERT_GE(staging_kernels().size(), 1u);
   EXPECT_STREQ(staging_kernels().front().name, "baseline");
-#if defined(__x86_64__) && defined(__GNUC__)
   // On an AVX2 machine the tests below run the AVX2 copy too.
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx2")) {
+  if (cpu_has_avx2()) {
     ASSERT_EQ(staging_kernels().size(), 2u);
     EXPECT_STREQ(staging_kernels().back().name, "avx2");
   }
-#endif
 }
 
 // Each compiled copy, and the dispatched functions.

@@ -8,6 +8,8 @@
 
 #include <draco/core/quantization_utils.h>
 
+#include "util/cpu_features.h"
+
 namespace filigree {
 namespace {
 
@@ -47,17 +49,13 @@ struct DecodeArgs {
   dequantizer.Init(a.range, a.levels);
   for (std::size_t i = 0; i < a.n; ++i) a.out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(a.values[i] - a.min)) + a.min;
 }
-#if defined(__x86_64__) && defined(__GNUC__)
+#if FILIGREE_X86_TARGETS
 [[gnu::target("sse4.1")]] void decode_values_sse41(const DecodeArgs& a) { decode_values(a); }
 void decode_values_baseline(const DecodeArgs& a) { decode_values(a); }
 using DecodeFn = void (*)(const DecodeArgs&);
-DecodeFn pick_decode() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("sse4.1") ? decode_values_sse41 : decode_values_baseline;
-}
 // Chosen on first use, so that no static initialiser can see it unset.
 void dispatch_decode(const DecodeArgs& a) {
-  static const DecodeFn chosen = pick_decode();
+  static const DecodeFn chosen = cpu_has_sse41() ? decode_values_sse41 : decode_values_baseline;
   chosen(a);
 }
 #else

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "codec/delta_quantization.h"
+#include "util/cpu_features.h"
 
 namespace filigree {
 namespace {
@@ -74,16 +75,15 @@ namespace {
   }
 
 FILIGREE_STAGING_KERNELS(, baseline)
-#if defined(__x86_64__) && defined(__GNUC__)
+#if FILIGREE_X86_TARGETS
 FILIGREE_STAGING_KERNELS([[gnu::target("avx2")]], avx2)
 #endif
 #undef FILIGREE_STAGING_KERNELS
 
 std::vector<StagingKernels> runnable_kernels() {
   std::vector<StagingKernels> out = {{"baseline", stage_baseline, stage_compare_baseline, max_error_baseline}};
-#if defined(__x86_64__) && defined(__GNUC__)
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("avx2")) out.push_back({"avx2", stage_avx2, stage_compare_avx2, max_error_avx2});
+#if FILIGREE_X86_TARGETS
+  if (cpu_has_avx2()) out.push_back({"avx2", stage_avx2, stage_compare_avx2, max_error_avx2});
 #endif
   return out;
 }

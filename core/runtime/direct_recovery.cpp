@@ -11,6 +11,7 @@
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/node_parents.h"
 #include "mesh/vertex_order.h"
+#include "util/cpu_features.h"
 #include "util/spin_barrier.h"
 
 namespace filigree {
@@ -222,7 +223,7 @@ struct Layout {
 
 // The same code compiled for AVX2 (8 float lanes, hardware gathers) where the
 // processor has it, chosen at run time so one binary runs everywhere.
-#if defined(__x86_64__) && defined(__GNUC__)
+#if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] void recover_blocks_avx2(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) {
   recover_blocks(t, first, end, p, o);
 }
@@ -230,11 +231,7 @@ void recover_blocks_baseline(const Layout& t, std::size_t first, std::size_t end
   recover_blocks(t, first, end, p, o);
 }
 using BlocksFn = void (*)(const Layout&, std::size_t, std::size_t, float*, const Output&);
-BlocksFn pick_blocks_fn() {
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("avx2") ? recover_blocks_avx2 : recover_blocks_baseline;
-}
-const BlocksFn kRecoverBlocks = pick_blocks_fn();
+const BlocksFn kRecoverBlocks = cpu_has_avx2() ? recover_blocks_avx2 : recover_blocks_baseline;
 #else
 void kRecoverBlocks(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) { recover_blocks(t, first, end, p, o); }
 #endif

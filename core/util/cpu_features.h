@@ -1,0 +1,34 @@
+#pragma once
+// What the processor can do, for kernels compiled once more for a newer
+// instruction set ([[gnu::target]]) and picked at run time, so that one binary
+// runs on every x86-64. FILIGREE_X86_TARGETS says whether such copies can be
+// compiled here (GCC or clang on x86-64); elsewhere only the baseline copy
+// exists and every check says false.
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define FILIGREE_X86_TARGETS 1
+#else
+#define FILIGREE_X86_TARGETS 0
+#endif
+
+namespace filigree {
+
+inline bool cpu_has_avx2() {
+#if FILIGREE_X86_TARGETS
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2");
+#else
+  return false;
+#endif
+}
+
+inline bool cpu_has_sse41() {
+#if FILIGREE_X86_TARGETS
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("sse4.1");
+#else
+  return false;
+#endif
+}
+
+}  // namespace filigree
