@@ -28,7 +28,7 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   // Frames: a few in flight at once. Staging: two frames' chunks, enough for
   // one encoding while the next frame quantizes.
   a->frames = std::make_shared<BufferPool<Vec3>>(4);
-  const std::size_t chunks = h.vertex_count() / FrameEncoderOptions{}.chunk_vertices + 1;
+  const std::size_t chunks = FrameEncoder::chunk_count(h.vertex_count(), FrameEncoderOptions{}.chunk_vertices);
   a->staging = std::make_shared<BufferPool<float>>(2 * chunks + 2);
   return a;
 }

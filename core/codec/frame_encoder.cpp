@@ -31,7 +31,7 @@ FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions optio
   if (options_.bits == 0 && !(options_.max_error > 0.0 && std::isfinite(options_.max_error)))
     throw std::invalid_argument("automatic quantization needs a positive finite max_error");
   const std::size_t n = rest_.size();
-  chunks_.resize((n + options_.chunk_vertices - 1) / options_.chunk_vertices);
+  chunks_.resize(chunk_count(n, options_.chunk_vertices));
   for (std::size_t c = 0; c < chunks_.size(); ++c) {
     chunks_[c].out.first = static_cast<std::uint32_t>(c * options_.chunk_vertices);
     chunks_[c].out.count = static_cast<std::uint32_t>(std::min<std::size_t>(options_.chunk_vertices, n - c * options_.chunk_vertices));

@@ -66,6 +66,10 @@ class FrameEncoder {
   FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions options);
 
   std::size_t chunk_count() const { return chunks_.size(); }
+  // How many chunks a mesh of `vertices` is split into with `chunk_vertices` (> 0).
+  static std::size_t chunk_count(std::size_t vertices, std::size_t chunk_vertices) {
+    return (vertices + chunk_vertices - 1) / chunk_vertices;
+  }
   std::size_t vertex_count() const { return rest_.size(); }
 
   // Starts a frame; every chunk must then be quantized, encoded, and the
