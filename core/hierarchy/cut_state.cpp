@@ -28,8 +28,12 @@ CutState CutState::full(const Hierarchy& h, const NodeParents* parents) {
   return cut;
 }
 
-std::span<const NodeId> CutState::parents_of(NodeId k) const {
+void CutState::require_parents() const {
   if (!p_) throw std::logic_error("a cut made without the hierarchy's parents cannot change");
+}
+
+std::span<const NodeId> CutState::parents_of(NodeId k) const {
+  require_parents();
   return p_->of(k);
 }
 
@@ -57,7 +61,7 @@ void CutState::count_blockers() {
 }
 
 void CutState::recover(NodeId k) {
-  (void)parents_of(k);  // throws before any change if this cut cannot change
+  require_parents();  // before any change
   if (!can_recover(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be recovered: already recovered or a parent is not");
   if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = false;
@@ -72,7 +76,7 @@ void CutState::recover(NodeId k) {
 }
 
 void CutState::remove(NodeId k) {
-  (void)parents_of(k);
+  require_parents();
   if (!can_remove(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be removed: not recovered or a child is");
   if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = false;

@@ -62,6 +62,7 @@ class CutState {
 
  private:
   CutState(const Hierarchy& h, const NodeParents* parents);
+  void require_parents() const;  // throws std::logic_error for a read-only cut
   std::span<const NodeId> parents_of(NodeId k) const;
   bool parents_recovered(NodeId k) const;
   bool child_recovered(NodeId k) const;
