@@ -682,7 +682,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
         // The handle moves the vertex's MAPS point on the base by the same
         // displacement as the vertex (the point is not exactly at the vertex).
         const Vec3 maps_rest = h.maps_position(v, h.rest_positions);
-        handle_targets.push_back({h.maps_face[v], h.maps_bary[v].cast<double>(), newest->target - h.rest_positions[v] + maps_rest});
+        handle_targets.push_back({h.maps_face[v], h.maps_barycentric(v), newest->target - h.rest_positions[v] + maps_rest});
       }
     }
     for (std::size_t i = 0; i < m; ++i)

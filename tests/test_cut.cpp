@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <optional>
 #include <random>
 #include <set>
 #include <stdexcept>
@@ -76,7 +77,7 @@ class CutTest : public ::testing::TestWithParam<Case> {
     PreprocessOptions options;
     options.base_vertices = GetParam().base_vertices;
     h_ = preprocess(mesh_, options);
-    parents_ = node_parents(h_);
+    graph_.emplace(h_);
     laplacian_ = cotangent_laplacian(mesh_);
   }
   // Regions compared field by field (region_of only where both have it).
@@ -95,24 +96,25 @@ class CutTest : public ::testing::TestWithParam<Case> {
   }
   TriMesh mesh_;
   Hierarchy h_;
-  NodeParents parents_;
+  std::optional<NodeGraph> graph_;  // of h_
   CotangentLaplacian laplacian_;
 };
 
 TEST_P(CutTest, TheFullCutIsEveryNodeRecovered) {
-  CutState by_nodes(h_, parents_);
+  CutState by_nodes(*graph_);
   for (NodeId k : recovery_order(h_)) by_nodes.recover(k);
-  CutState full = CutState::full(h_, &parents_);
+  CutState full = CutState::full(h_, &*graph_);
   EXPECT_EQ(full.recovered_count(), by_nodes.recovered_count());
   EXPECT_EQ(full.alive_face_count(), by_nodes.alive_face_count());
   for (FaceId f = 0; f < h_.face_count(); ++f) ASSERT_EQ(full.face_alive(f), by_nodes.face_alive(f)) << "face " << f;
   EXPECT_EQ(full.mesh().faces, by_nodes.mesh().faces);
   // A cut that never changed holds no per-node counts.
   EXPECT_LE(full.memory_bytes(), (h_.node_count() + h_.face_count()) / 8 + 64);
-  // Without the parents it reads the same and refuses to change, unchanged.
+  // Without the node graph it reads the same and refuses to change, unchanged.
   CutState read_only = CutState::full(h_);
   EXPECT_EQ(read_only.mesh().faces, full.mesh().faces);
-  ASSERT_TRUE(read_only.can_remove(0));  // node 0 has no children: only the missing parents refuse it
+  ASSERT_TRUE(full.can_remove(0));  // node 0 has no children: only the missing graph refuses it
+  EXPECT_FALSE(read_only.can_remove(0));
   EXPECT_THROW(read_only.remove(0), std::logic_error);
   EXPECT_EQ(read_only.recovered_count(), h_.node_count());
   EXPECT_EQ(read_only.mesh().faces, full.mesh().faces);
@@ -286,7 +288,7 @@ TEST_P(CutTest, RotationPrefetchHintsChangeNothing) {
 TEST_P(CutTest, UpdatedCutKeepsItsRegionsExactAndItsStateBounded) {
   const std::vector<Vec3> bent = bent_result(1.0);
   for (double t : {500.0, 2e4, 3e5}) {
-    AdaptiveCut cut(h_, parents_, laplacian_, t);
+    AdaptiveCut cut(*graph_, laplacian_, t);
     EXPECT_EQ(cut.regions().count(), 0u);
     for (int frame = 0; frame < 25; ++frame) {
       cut.update(bent, 64 + h_.node_count() / 8, 16 + h_.node_count() / 64);
@@ -300,7 +302,7 @@ TEST_P(CutTest, UpdatedCutKeepsItsRegionsExactAndItsStateBounded) {
     EXPECT_LE(cut.memory_bytes(), 40 * mesh_.vertex_count() + 4096) << "T = " << t;
   }
   // T = 0 holds about two bits per node and vertex, one per face.
-  AdaptiveCut direct(h_, parents_, laplacian_, 0.0);
+  AdaptiveCut direct(*graph_, laplacian_, 0.0);
   EXPECT_LE(direct.memory_bytes(), mesh_.vertex_count() / 2 + h_.face_count() / 8 + 256);
   EXPECT_EQ(direct.state().recovered_count(), h_.node_count());
 }
@@ -308,7 +310,7 @@ TEST_P(CutTest, UpdatedCutKeepsItsRegionsExactAndItsStateBounded) {
 TEST_P(CutTest, ThresholdChangesResetOrKeepTheCut) {
   const std::vector<Vec3> bent = bent_result(1.0);
   const std::size_t eval = 64 + h_.node_count() / 8, moves = 16 + h_.node_count() / 64;
-  AdaptiveCut cut(h_, parents_, laplacian_, 2e4);
+  AdaptiveCut cut(*graph_, laplacian_, 2e4);
   for (int frame = 0; frame < 5; ++frame) cut.update(bent, eval, moves);
   ASSERT_GT(cut.regions().count(), 0u);
   // Finite to finite keeps the cut.
@@ -335,7 +337,7 @@ TEST_P(CutTest, ThresholdChangesResetOrKeepTheCut) {
 
 TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
   const std::vector<Vec3> bent = bent_result(0.8);
-  AdaptiveCut one(h_, parents_, laplacian_, 2e4), two(h_, parents_, laplacian_, 2e4);
+  AdaptiveCut one(*graph_, laplacian_, 2e4), two(*graph_, laplacian_, 2e4);
   for (int frame = 0; frame < 10; ++frame) {
     const std::size_t eval = 64 + h_.node_count() / 16, moves = 16 + h_.node_count() / 100;
     ASSERT_EQ(one.update(bent, eval, moves, 1), two.update(bent, eval, moves, 2)) << "frame " << frame;
@@ -349,14 +351,14 @@ TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
 // restored, it moves exactly as the original would have.
 TEST_P(CutTest, ARestoredCutContinuesAsTheOriginalWould) {
   const std::size_t eval = 64 + h_.node_count() / 16, moves = 16 + h_.node_count() / 100;
-  AdaptiveCut original(h_, parents_, laplacian_, 2e4);
+  AdaptiveCut original(*graph_, laplacian_, 2e4);
   for (int frame = 0; frame < 6; ++frame) original.update(bent_result(0.2 * frame), eval, moves);
   ASSERT_GT(original.regions().count(), 0u);
   const CutSnapshot snapshot = original.snapshot();
   ASSERT_FALSE(snapshot.empty());
   EXPECT_LT(snapshot.unrecovered.size(), h_.node_count() / 2);
 
-  AdaptiveCut restored(h_, parents_, laplacian_, 2e4), fresh(h_, parents_, laplacian_, 2e4);
+  AdaptiveCut restored(*graph_, laplacian_, 2e4), fresh(*graph_, laplacian_, 2e4);
   restored.restore(snapshot);
   ASSERT_EQ(restored.in_cut(), original.in_cut());
   expect_equal(restored.regions(), original.regions(), "restored");
@@ -381,7 +383,7 @@ TEST_P(CutTest, ARestoredCutContinuesAsTheOriginalWould) {
 }
 
 TEST_P(CutTest, ASnapshotOfAnotherMeshIsRefused) {
-  AdaptiveCut cut(h_, parents_, laplacian_, 2e4);
+  AdaptiveCut cut(*graph_, laplacian_, 2e4);
   CutSnapshot wrong;
   wrong.scores.assign(h_.node_count() + 1, 1.0f);
   EXPECT_THROW(cut.restore(wrong), std::invalid_argument);
@@ -389,12 +391,12 @@ TEST_P(CutTest, ASnapshotOfAnotherMeshIsRefused) {
   CutSnapshot parent_only;
   parent_only.scores.assign(h_.node_count(), 0.0f);
   for (NodeId k = 0; k < h_.node_count() && parent_only.unrecovered.empty(); ++k)
-    if (!h_.children_of(k).empty()) parent_only.unrecovered.push_back(k);
+    if (!graph_->children_of(k).empty()) parent_only.unrecovered.push_back(k);
   ASSERT_FALSE(parent_only.unrecovered.empty());
   EXPECT_THROW(cut.restore(parent_only), std::invalid_argument);
   EXPECT_EQ(cut.state().recovered_count(), h_.node_count());  // left full
   // Without an adaptive T there is nothing to restore.
-  AdaptiveCut direct(h_, parents_, laplacian_, 0.0);
+  AdaptiveCut direct(*graph_, laplacian_, 0.0);
   EXPECT_TRUE(direct.snapshot().empty());
   direct.restore(wrong);
   EXPECT_EQ(direct.state().recovered_count(), h_.node_count());

@@ -3,6 +3,7 @@
 // hierarchy's own recovery order, ring_frame() per node — what the runtime
 // computed before the data-oriented layout.
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <thread>
@@ -14,7 +15,7 @@
 #include "geometry/ring_frame.h"
 #include "hierarchy/cut_state.h"
 #include "hierarchy/hierarchy.h"
-#include "hierarchy/node_parents.h"
+#include "hierarchy/node_graph.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
 #include "runtime/deformer_model.h"
@@ -148,19 +149,22 @@ TEST(DirectRecovery, ModelIsSharedReadOnlyAcrossDeformers) {
   EXPECT_EQ(a.deform(bend).positions, alone);
 }
 
-TEST(DirectRecovery, ModelDerivesTheParentsOnceWhenSessionsFirstNeedThemAtOnce) {
+TEST(DirectRecovery, ModelDerivesTheNodeGraphOnceWhenSessionsFirstNeedItAtOnce) {
   auto h = std::make_shared<const Hierarchy>(preprocess(test::shipped_mesh("bunny_small.obj"), with_base(150)));
   const auto model = DeformerModel::create(h);
-  const std::size_t before = model->memory_bytes();  // T = 0 needs no parents
+  const std::size_t before = model->memory_bytes();  // T = 0 needs no graph
   // Four threads ask at once, as sessions setting a finite T at the same time would.
-  std::vector<const NodeParents*> seen(4, nullptr);
+  std::vector<const NodeGraph*> seen(4, nullptr);
   std::vector<std::thread> threads;
-  for (std::size_t t = 0; t < seen.size(); ++t) threads.emplace_back([&, t] { seen[t] = &model->node_parents(); });
+  for (std::size_t t = 0; t < seen.size(); ++t) threads.emplace_back([&, t] { seen[t] = &model->node_graph(); });
   for (auto& t : threads) t.join();
-  for (const NodeParents* p : seen) EXPECT_EQ(p, seen[0]);
-  const NodeParents expected = node_parents(*h);
-  EXPECT_EQ(seen[0]->offsets, expected.offsets);
-  EXPECT_EQ(seen[0]->parents, expected.parents);
+  for (const NodeGraph* g : seen) EXPECT_EQ(g, seen[0]);
+  const NodeGraph expected(*h);
+  for (NodeId k = 0; k < h->node_count(); ++k) {
+    ASSERT_TRUE(std::ranges::equal(seen[0]->parents_of(k), expected.parents_of(k))) << k;
+    ASSERT_TRUE(std::ranges::equal(seen[0]->children_of(k), expected.children_of(k))) << k;
+    ASSERT_TRUE(std::ranges::equal(seen[0]->removed_faces_of(k), expected.removed_faces_of(k))) << k;
+  }
   EXPECT_EQ(model->memory_bytes(), before + seen[0]->memory_bytes());
 }
 

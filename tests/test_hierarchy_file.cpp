@@ -7,12 +7,15 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <memory>
 
 #include <gtest/gtest.h>
 
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/hierarchy_file.h"
+#include "hierarchy/node_graph.h"
 #include "preprocess/preprocess.h"
+#include "runtime/deformer_model.h"
 #include "support/test_meshes.h"
 #include "util/content_hash.h"
 
@@ -63,14 +66,10 @@ void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   expect_same_bytes(a.ring_vertices, b.ring_vertices, "ring_vertices");
   expect_same_bytes(a.ring_weights, b.ring_weights, "ring_weights");
   expect_same_bytes(a.node_offset, b.node_offset, "node_offset");
-  expect_same_bytes(a.removed_faces, b.removed_faces, "removed_faces");
-  expect_same_bytes(a.child_offsets, b.child_offsets, "child_offsets");
-  expect_same_bytes(a.children, b.children, "children");
   expect_same_bytes(a.base_vertices, b.base_vertices, "base_vertices");
   expect_same_bytes(a.base_faces, b.base_faces, "base_faces");
   expect_same_bytes(a.maps_face, b.maps_face, "maps_face");
   expect_same_bytes(a.maps_bary, b.maps_bary, "maps_bary");
-  expect_same_bytes(a.vertex_node, b.vertex_node, "vertex_node");
   EXPECT_EQ(a.mesh_hash, b.mesh_hash);
   EXPECT_EQ(a.build.build_seconds, b.build.build_seconds);
   EXPECT_EQ(a.build.requested_base_vertices, b.build.requested_base_vertices);
@@ -110,13 +109,13 @@ TEST_F(HierarchyFileTest, MemoryRoundTripIsBitIdentical) {
   EXPECT_NO_THROW(validate_hierarchy(back));
 }
 
-TEST_F(HierarchyFileTest, FloatFieldsRoundTripBitExact) {
-  // float32 fields: stored as they are in memory, no conversion on the way.
+TEST_F(HierarchyFileTest, FloatAndFixedPointFieldsRoundTripBitExact) {
+  // float32 and 16-bit fields: stored as they are in memory, no conversion on the way.
   Hierarchy h = *hierarchy_;
-  h.ring_weights[0] = std::nextafter(h.ring_weights[0], 2.0f);
+  h.ring_weights[0] = static_cast<std::uint16_t>(h.ring_weights[0] + 1);
   h.node_offset[1].x() = std::nextafter(h.node_offset[1].x(), 0.0f);
   h.node_offset[2].z() = 0x1p-140f;  // subnormal
-  h.maps_bary[3] = Vec3f(0.25f, std::nextafter(0.5f, 1.0f), 0.25f);
+  h.maps_bary[3] = {16384, 32769};
   const Hierarchy back = deserialize_hierarchy(serialize_hierarchy(h));
   expect_same_hierarchy(back, h);
 }
@@ -125,13 +124,12 @@ TEST_F(HierarchyFileTest, MemoryBytesIsTheSumOfTheArrays) {
   // A loaded hierarchy allocates exactly; count by hand what each array holds.
   const Hierarchy h = deserialize_hierarchy(*bytes_);
   const std::size_t n = h.vertex_count(), nodes = h.node_count(), original = h.original_face_count();
-  const std::size_t slots = h.ring_vertices.size(), created = h.created_corners.size(), edges = h.children.size();
-  const std::size_t expected = n * (24 + 4 + 12 + 4)               // rest_positions, maps_face, maps_bary, vertex_node
+  const std::size_t slots = h.ring_vertices.size(), created = h.created_corners.size();
+  const std::size_t expected = n * (24 + 4 + 4)                    // rest_positions, maps_face, maps_bary
                                + original * 12 + created * 3       // original_faces, created_corners
                                + nodes * (4 + 1 + 12)              // node_vertex, node_closed, node_offset
-                               + (nodes + 1) * 4 * 2               // ring and child offsets
-                               + slots * (4 + 4 + 4)               // ring_vertices, ring_weights, removed_faces
-                               + edges * 4                         // children
+                               + (nodes + 1) * 4                   // ring offsets
+                               + slots * (4 + 2)                   // ring_vertices, ring_weights
                                + (h.base_vertices.size() + h.base_faces.size()) * 4;
   EXPECT_EQ(h.memory_bytes(), expected);
   EXPECT_EQ(created, slots - 2 * nodes);  // each ring of r vertices made r − 2 faces
@@ -191,6 +189,11 @@ TEST_F(HierarchyFileTest, VersionOneFilesAreRefusedWithWhatToDo) {
   EXPECT_NE(msg.find("test.fgh: unsupported format version 1"), std::string::npos) << msg;
   EXPECT_NE(msg.find("rebuild it"), std::string::npos) << msg;
   EXPECT_NE(msg.find("filigree preprocess"), std::string::npos) << msg;
+  // Version 2 (which stored each removal's deleted faces) likewise.
+  const std::uint32_t v2 = 2;
+  std::memcpy(b.data() + 8, &v2, 4);
+  EXPECT_NE(error_of(b).find("test.fgh: unsupported format version 2, older than"), std::string::npos) << error_of(b);
+  std::memcpy(b.data() + 8, &v1, 4);
 
   const auto path = temp_file("v1.fgh");
   std::ofstream(path, std::ios::binary).write(b.data(), static_cast<std::streamsize>(b.size()));
@@ -263,9 +266,18 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   // A structurally wrong hierarchy written by a buggy or malicious producer:
   // the checksum is right, the content is not.
   Hierarchy forged = *hierarchy_;
-  forged.children[0] = static_cast<NodeId>(forged.node_count() + 5);
+  const NodeId last = static_cast<NodeId>(forged.node_count() - 1);
+  forged.ring_vertices[forged.ring_offsets[last]] = forged.node_vertex[0];  // gone before the last node
   std::string msg = error_of(serialize_hierarchy(forged));
-  EXPECT_NE(msg.find("corrupt: invalid hierarchy"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("corrupt: invalid hierarchy: node " + std::to_string(last) + " has ring vertex " +
+                     std::to_string(forged.node_vertex[0]) + ", removed before it"),
+            std::string::npos)
+      << msg;
+
+  forged = *hierarchy_;
+  forged.node_vertex[5] = forged.node_vertex[2];
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("node 5 removes vertex"), std::string::npos) << msg;
 
   forged = *hierarchy_;
   forged.original_faces[3][1] = static_cast<Index>(forged.vertex_count());
@@ -273,33 +285,65 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   EXPECT_NE(msg.find("face 3"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.maps_bary[7] = Vec3f(0.5f, 0.5f, 0.5f);
+  forged.maps_bary[7] = {40000, 40000};
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("barycentric"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.ring_weights[2] = std::nanf("");
-  EXPECT_NE(error_of(serialize_hierarchy(forged)).find("ring weight"), std::string::npos);
+  forged.ring_weights[2] = 0;
+  EXPECT_NE(error_of(serialize_hierarchy(forged)).find("zero ring weight"), std::string::npos);
+
+  forged = *hierarchy_;
+  forged.node_closed[0] ^= 1;  // one fan face more or less than the faces say
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("have only base vertices"), std::string::npos) << msg;
 
   // Stored forms the writer never makes, edited into the bytes.
   std::string b = *bytes_;
   b[section_data(b, 3) + 4] = 40;  // a created face's corner past its ring
   msg = error_of(rehashed(b));
   EXPECT_NE(msg.find("corners outside its ring"), std::string::npos) << msg;
+}
 
-  b = *bytes_;
-  // A removed face that is also removed by the next node.
-  std::memcpy(b.data() + section_data(b, 10) + 4 * hierarchy_->ring_offsets[1], b.data() + section_data(b, 10), 4);
-  msg = error_of(rehashed(b));
-  EXPECT_NE(msg.find("removes an invalid face"), std::string::npos) << msg;
+// What loading leaves unchecked (which faces each removal deleted) is checked
+// when a changing cut first needs it: a clear error, not a wrong cut.
+TEST_F(HierarchyFileTest, ForgedFansFailWhenTheNodeGraphIsDerived) {
+  EXPECT_NO_THROW(NodeGraph{*hierarchy_});
+  const auto graph_error = [](const Hierarchy& h) -> std::string {
+    try {
+      NodeGraph g(h);
+    } catch (const HierarchyError& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  // A created face that a later node deletes: the first node whose first one is.
+  const Hierarchy& h0 = *hierarchy_;
+  const std::vector<NodeId> node_of = vertex_nodes(h0);
+  NodeId k = 0;
+  const auto deleted = [&](NodeId n) {
+    const Triangle t = h0.created_face(n, 0);
+    return node_of[t[0]] != kNone || node_of[t[1]] != kNone || node_of[t[2]] != kNone;
+  };
+  while (k < h0.node_count() && !deleted(k)) ++k;
+  ASSERT_LT(k, h0.node_count());
+  const std::size_t at = h0.first_created_face(k) - h0.original_face_count();
 
-  b = *bytes_;
-  // Node 0 removes a face the last node creates: a face that does not exist yet.
-  const NodeId last = static_cast<NodeId>(hierarchy_->node_count() - 1);
-  const FaceId own = hierarchy_->created_faces_of(last)[0];
-  std::memcpy(b.data() + section_data(b, 10) + 4 * hierarchy_->ring_offsets[0], &own, 4);
-  msg = error_of(rehashed(b));
-  EXPECT_NE(msg.find("node 0 removes face " + std::to_string(own) + " before it exists"), std::string::npos) << msg;
+  Hierarchy h = h0;
+  std::swap(h.created_corners[at][1], h.created_corners[at][2]);  // turned over
+  Hierarchy loaded = deserialize_hierarchy(serialize_hierarchy(h));  // loading does not look at orientation
+  EXPECT_NE(graph_error(loaded).find("which is not in its fan"), std::string::npos) << graph_error(loaded);
+
+  if (h0.ring_size(k) > 3) {
+    h = h0;
+    h.created_corners[at + 1] = h.created_corners[at];  // the same face twice, another one missing
+    EXPECT_NE(graph_error(h).find("two faces in fan slot"), std::string::npos) << graph_error(h);
+  }
+
+  // Through a model, the error reaches whoever first sets a finite T.
+  const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(std::move(loaded)));
+  EXPECT_THROW((void)model->node_graph(), HierarchyError);
+  EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again, not a half-built graph
 }
 
 TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
@@ -318,11 +362,11 @@ TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
   h.created_corners.back() = {0, 1, 1};
   EXPECT_NE(message(h).find("corners outside its ring"), std::string::npos) << message(h);
   h = *hierarchy_;
-  h.vertex_node[h.base_vertices[0]] = 0;
-  EXPECT_NE(message(h).find("names a node that did not remove it"), std::string::npos) << message(h);
+  h.base_vertices.pop_back();
+  EXPECT_NE(message(h).find("base vertex count"), std::string::npos) << message(h);
   h = *hierarchy_;
   h.base_faces.pop_back();
-  EXPECT_NE(message(h).find("base face count"), std::string::npos) << message(h);
+  EXPECT_NE(message(h).find("base faces are not"), std::string::npos) << message(h);
 }
 
 TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
@@ -337,6 +381,7 @@ TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
   ASSERT_GT(all.size(), h.original_face_count());
   for (FaceId f = 0; f < all.size(); ++f) ASSERT_EQ(h.face(f), all[f]) << "face " << f;
   std::size_t checked = 0;
+  const NodeGraph graph(h);
   for (NodeId k = 0; k < h.node_count(); ++k) {
     const auto ring = h.ring(k);
     // Created faces join ring vertices, and their creator is k.
@@ -345,11 +390,12 @@ TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
       for (Index c : all[f]) ASSERT_NE(std::find(ring.begin(), ring.end(), c), ring.end()) << "face " << f;
     }
     // Slot i of the fan is (v, ring[i], ring[i+1]), up to rotation, whoever made it.
-    const auto removed = h.removed_faces_of(k);
+    const auto removed = graph.removed_faces_of(k);
+    ASSERT_EQ(removed.size(), h.fan_size(k));
     for (std::size_t i = 0; i < removed.size(); ++i) {
-      const Triangle t = h.removed_face(k, i);
-      ASSERT_EQ(t, all[removed[i]]) << "node " << k << " slot " << i;
-      const Triangle fan{h.node_vertex[k], ring[i], ring[(i + 1) % ring.size()]};
+      const Triangle t = all[removed[i]];
+      const Triangle fan = h.fan_face(k, i);
+      ASSERT_EQ(fan, (Triangle{h.node_vertex[k], ring[i], ring[(i + 1) % ring.size()]}));
       const bool rotated = t == fan || t == Triangle{fan[1], fan[2], fan[0]} || t == Triangle{fan[2], fan[0], fan[1]};
       ASSERT_TRUE(rotated) << "node " << k << " slot " << i;
       checked += removed[i] >= h.original_face_count() ? 1 : 0;

@@ -2,6 +2,7 @@
 // ring coordinates, over meshes of different topology.
 
 #include <algorithm>
+#include <optional>
 #include <cmath>
 #include <random>
 #include <set>
@@ -11,7 +12,7 @@
 #include "geometry/cotangent_laplacian.h"
 #include "geometry/ring_frame.h"
 #include "hierarchy/cut_state.h"
-#include "hierarchy/node_parents.h"
+#include "hierarchy/node_graph.h"
 #include "hierarchy/hierarchy.h"
 #include "mesh/mesh_validation.h"
 #include "preprocess/preprocess.h"
@@ -65,11 +66,11 @@ class PreprocessTest : public ::testing::TestWithParam<Case> {
     options.base_vertices = GetParam().base_vertices;
     options.threads = 2;
     h_ = preprocess(mesh_, options);
-    parents_ = node_parents(h_);
+    graph_.emplace(h_);
   }
   TriMesh mesh_;
   Hierarchy h_;
-  NodeParents parents_;
+  std::optional<NodeGraph> graph_;  // of h_
 };
 
 TEST_P(PreprocessTest, ReachesTheTargetAndKeepsTopologyInTheBase) {
@@ -81,7 +82,7 @@ TEST_P(PreprocessTest, ReachesTheTargetAndKeepsTopologyInTheBase) {
 }
 
 TEST_P(PreprocessTest, RecoveringEveryNodeGivesBackTheOriginalTriangles) {
-  CutState cut(h_, parents_);
+  CutState cut(*graph_);
   for (NodeId k : recovery_order(h_)) cut.recover(k);
   std::vector<Index> ids;
   const TriMesh full = cut.mesh(&ids);
@@ -93,7 +94,7 @@ TEST_P(PreprocessTest, RecoveringEveryNodeGivesBackTheOriginalTriangles) {
 
 TEST_P(PreprocessTest, EveryIntermediateCutIsAManifoldWithTheOriginalTopology) {
   const Topology original = topology_of(mesh_, "original");
-  CutState cut(h_, parents_);
+  CutState cut(*graph_);
   const std::vector<NodeId> order = recovery_order(h_);
   const std::size_t step = std::max<std::size_t>(order.size() / 150, 1);
   for (std::size_t i = 0; i < order.size(); ++i) {
@@ -110,7 +111,7 @@ TEST_P(PreprocessTest, EveryIntermediateCutIsAManifoldWithTheOriginalTopology) {
 TEST_P(PreprocessTest, RandomCutsAreManifoldAndRecoverableNodesHaveTheirRing) {
   const Topology original = topology_of(mesh_, "original");
   std::mt19937 rng(12345);
-  CutState cut(h_, parents_);
+  CutState cut(*graph_);
   const std::size_t moves = std::min<std::size_t>(4 * h_.node_count(), 6000);
   std::size_t checked_rings = 0;
   std::vector<NodeId> candidates;
@@ -128,7 +129,7 @@ TEST_P(PreprocessTest, RandomCutsAreManifoldAndRecoverableNodesHaveTheirRing) {
       cut.recover(k);
       // After recovery the node's vertex is present with its fan.
       ASSERT_TRUE(cut.vertex_present(h_.node_vertex[k]));
-      for (FaceId f : h_.removed_faces_of(k)) ASSERT_TRUE(cut.face_alive(f));
+      for (FaceId f : graph_->removed_faces_of(k)) ASSERT_TRUE(cut.face_alive(f));
     } else {
       cut.remove(k);
       ASSERT_FALSE(cut.vertex_present(h_.node_vertex[k]));
@@ -143,27 +144,27 @@ TEST_P(PreprocessTest, RandomCutsAreManifoldAndRecoverableNodesHaveTheirRing) {
   }
   EXPECT_GT(checked_rings, h_.node_count());
   // Recovering a node whose parent is missing, or removing one never recovered, is refused.
-  CutState empty(h_, parents_);
+  CutState empty(*graph_);
   NodeId with_parent = 0;
-  while (with_parent < h_.node_count() && parents_.of(with_parent).empty()) ++with_parent;
+  while (with_parent < h_.node_count() && graph_->parents_of(with_parent).empty()) ++with_parent;
   ASSERT_LT(with_parent, h_.node_count());
   EXPECT_THROW(empty.recover(with_parent), std::logic_error);
   EXPECT_THROW(empty.remove(0), std::logic_error);
 }
 
 TEST_P(PreprocessTest, ParentsWereRemovedAfterTheirChildren) {
-  ASSERT_EQ(parents_.offsets.size(), h_.node_count() + 1);
-  std::size_t edges = 0;
+  std::size_t edges = 0, child_edges = 0;
   for (NodeId k = 0; k < h_.node_count(); ++k) {
-    for (NodeId p : parents_.of(k)) {
+    for (NodeId p : graph_->parents_of(k)) {
       EXPECT_GT(p, k);
-      const auto kids = h_.children_of(p);
+      const auto kids = graph_->children_of(p);
       EXPECT_TRUE(std::find(kids.begin(), kids.end(), k) != kids.end());
       ++edges;
     }
+    child_edges += graph_->children_of(k).size();
   }
   EXPECT_GT(edges, 0u);
-  EXPECT_EQ(edges, h_.children.size());  // every child edge, once each way
+  EXPECT_EQ(edges, child_edges);  // every child edge, once each way
   EXPECT_GT(h_.depth(), 1u);
 }
 
@@ -178,13 +179,13 @@ TEST_P(PreprocessTest, MapsCoordinatesLandNearTheOriginalOnTheBaseMesh) {
   base_edge /= 3.0 * static_cast<double>(base.face_count());
   double max_error = 0.0, sum_sq = 0.0;
   for (Index v = 0; v < h_.vertex_count(); ++v) {
-    const Vec3 b = h_.maps_bary[v].cast<double>();
-    ASSERT_GE(b.minCoeff(), -1e-12);
-    ASSERT_NEAR(b.sum(), 1.0, 1e-6);  // float32 barycentrics
+    const Vec3 b = h_.maps_barycentric(v);
+    ASSERT_GE(b.minCoeff(), 0.0);
+    ASSERT_NEAR(b.sum(), 1.0, 1e-12);
     const double e = (h_.maps_position(v, h_.rest_positions) - h_.rest_positions[v]).norm() / base_edge;
     max_error = std::max(max_error, e);
     sum_sq += e * e;
-    if (h_.vertex_node[v] == kNone) {
+    if (graph_->node_of_vertex(v) == kNone) {
       ASSERT_LT(e, 1e-12) << "base vertex " << v << " must map to itself";
     }
   }
@@ -197,7 +198,7 @@ TEST_P(PreprocessTest, MapsCoordinatesLandNearTheOriginalOnTheBaseMesh) {
 
 // Direct recovery (thesis eq. 3.10) from the rest positions of the ring puts
 // every removed vertex back: the stored offset is in the frame of the stored
-// (float32) weights, so only the offset's own float rounding remains — a
+// (16-bit) weights, so only the offset's own float rounding remains — a
 // few 1e-8 of the ring's radius (the runtime adds back even that).
 TEST_P(PreprocessTest, RingCoordinatesReproduceTheRestPosition) {
   for (NodeId k = 0; k < h_.node_count(); ++k) {
@@ -206,8 +207,8 @@ TEST_P(PreprocessTest, RingCoordinatesReproduceTheRestPosition) {
     const Vec3 back = frame.from_local(offset);
     ASSERT_LT((back - h_.rest_positions[h_.node_vertex[k]]).norm(), 2e-7 * frame.scale * (1.0 + offset.norm())) << "node " << k;
     double sum = 0.0;
-    for (float w : h_.weights(k)) sum += w;
-    ASSERT_NEAR(sum, 1.0, 1e-6);
+    for (std::uint16_t w : h_.weights(k)) sum += w;
+    ASSERT_NEAR(sum / 65535.0, 1.0, static_cast<double>(h_.ring_size(k)) / 65535.0);  // each rounded by ≤ a step
   }
 }
 

@@ -53,8 +53,8 @@ void export_cut(const ExportCutArgs& a) {
       throw std::invalid_argument("--recover " + a.recover + ": the hierarchy has only " + std::to_string(h.node_count()) + " nodes");
     count = k;
   }
-  const NodeParents parents = node_parents(h);
-  CutState cut(h, parents);
+  const NodeGraph graph(h);
+  CutState cut(graph);
   const std::vector<NodeId> order = recovery_order(h);
   for (std::size_t i = 0; i < count; ++i) cut.recover(order[i]);
   const TriMesh mesh = cut.mesh();

@@ -58,7 +58,7 @@ RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weight
   return frame_of(ring, weights, positions, closed);
 }
 
-RingFrame ring_frame(std::span<const Index> ring, std::span<const float> weights,
+RingFrame ring_frame(std::span<const Index> ring, std::span<const std::uint16_t> weights,
                      const std::vector<Vec3>& positions, bool closed) {
   return frame_of(ring, weights, positions, closed);
 }

@@ -3,6 +3,7 @@
 // offset from its ring can be stored rotation- and scale-invariantly and put
 // back after the ring moves (thesis eq. 3.10 with the local frame of §3.1.2).
 
+#include <cstdint>
 #include <span>
 
 #include <Eigen/Core>
@@ -26,12 +27,13 @@ struct RingFrame {
 // not closed), the tangent the direction to ring[0] projected into the
 // tangent plane. Degenerate rings get an arbitrary but deterministic
 // orthonormal basis and scale 1, never NaN.
-// Dividing by Σ w matters for the hierarchy's float32 weights, whose sum is 1
-// only to ~1e-7: without it the centre would drift by (Σ w − 1)·x, growing
-// with the distance from the coordinate origin.
+// Weights are relative (the centre is Σ w x / Σ w): the hierarchy's 16-bit
+// fixed-point weights sum to 65535 only up to rounding, and without the
+// division the centre would drift by (Σ w − 1)·x, growing with the
+// distance from the coordinate origin.
 RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
                      const std::vector<Vec3>& positions, bool closed);
-RingFrame ring_frame(std::span<const Index> ring, std::span<const float> weights,
+RingFrame ring_frame(std::span<const Index> ring, std::span<const std::uint16_t> weights,
                      const std::vector<Vec3>& positions, bool closed);
 
 }  // namespace filigree

@@ -6,20 +6,20 @@
 
 namespace filigree {
 
-CutState::CutState(const Hierarchy& h, const NodeParents& parents) : CutState(h, &parents) {}
+CutState::CutState(const NodeGraph& graph) : CutState(graph.hierarchy(), &graph) {}
 
-CutState::CutState(const Hierarchy& h, const NodeParents* parents)
-    : h_(&h), p_(parents), recovered_(h.node_count(), false), face_alive_(h.face_count(), false) {
-  if (parents && parents->offsets.size() != h.node_count() + 1) throw std::invalid_argument("a cut's parents are another hierarchy's");
+CutState::CutState(const Hierarchy& h, const NodeGraph* graph)
+    : h_(&h), g_(graph), recovered_(h.node_count(), false), face_alive_(h.face_count(), false) {
+  if (graph && &graph->hierarchy() != &h) throw std::invalid_argument("a cut's node graph is another hierarchy's");
   for (FaceId f : h.base_faces) face_alive_[f] = true;
   alive_faces_ = h.base_faces.size();
 }
 
-CutState CutState::full(const Hierarchy& h, const NodeParents* parents) {
+CutState CutState::full(const Hierarchy& h, const NodeGraph* graph) {
   // Every node recovered is the original mesh: a node's recovery kills the
   // faces it created and no original face stays deleted, so the alive faces
   // are exactly the original ones (tests compare it with node-by-node recovery).
-  CutState cut(h, parents);
+  CutState cut(h, graph);
   cut.recovered_.assign(h.node_count(), true);
   cut.recovered_count_ = h.node_count();
   cut.face_alive_.assign(h.face_count(), false);
@@ -28,68 +28,66 @@ CutState CutState::full(const Hierarchy& h, const NodeParents* parents) {
   return cut;
 }
 
-void CutState::require_parents() const {
-  if (!p_) throw std::logic_error("a cut made without the hierarchy's parents cannot change");
-}
-
-std::span<const NodeId> CutState::parents_of(NodeId k) const {
-  require_parents();
-  return p_->of(k);
+const NodeGraph& CutState::graph() const {
+  if (!g_) throw std::logic_error("a cut made without the hierarchy's node graph cannot change");
+  return *g_;
 }
 
 bool CutState::parents_recovered(NodeId k) const {
-  const auto parents = parents_of(k);
+  const auto parents = graph().parents_of(k);
   return std::all_of(parents.begin(), parents.end(), [&](NodeId p) { return recovered_[p]; });
 }
 
 bool CutState::child_recovered(NodeId k) const {
-  const auto children = h_->children_of(k);
+  const auto children = graph().children_of(k);
   return std::any_of(children.begin(), children.end(), [&](NodeId c) { return recovered_[c]; });
 }
 
 void CutState::count_blockers() {
+  const NodeGraph& g = graph();
   blockers_.assign(h_->node_count(), 0);
   for (NodeId k = 0; k < h_->node_count(); ++k) {
     Index n = 0;
     if (recovered_[k]) {
-      for (NodeId c : h_->children_of(k)) n += recovered_[c] ? 1 : 0;
+      for (NodeId c : g.children_of(k)) n += recovered_[c] ? 1 : 0;
     } else {
-      for (NodeId p : parents_of(k)) n += recovered_[p] ? 0 : 1;
+      for (NodeId p : g.parents_of(k)) n += recovered_[p] ? 0 : 1;
     }
     blockers_[k] = n;
   }
 }
 
 void CutState::recover(NodeId k) {
-  require_parents();  // before any change
+  const NodeGraph& g = graph();  // before any change
   if (!can_recover(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be recovered: already recovered or a parent is not");
   if (blockers_.empty()) count_blockers();
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = false;
-  for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = true;
-  alive_faces_ += h_->removed_faces_of(k).size() - h_->created_faces_of(k).size();
+  for (FaceId f : g.removed_faces_of(k)) face_alive_[f] = true;
+  alive_faces_ += g.removed_faces_of(k).size() - h_->created_faces_of(k).size();
   recovered_[k] = true;
   ++recovered_count_;
   // k's children are not recovered (k was not): one parent fewer missing.
   // k's parents are recovered: one recovered child more.
-  for (NodeId c : h_->children_of(k)) --blockers_[c];
-  for (NodeId p : parents_of(k)) ++blockers_[p];
+  for (NodeId c : g.children_of(k)) --blockers_[c];
+  for (NodeId p : g.parents_of(k)) ++blockers_[p];
 }
 
 void CutState::remove(NodeId k) {
-  require_parents();
+  const NodeGraph& g = graph();
   if (!can_remove(k)) throw std::logic_error("node " + std::to_string(k) + " cannot be removed: not recovered or a child is");
   if (blockers_.empty()) count_blockers();
-  for (FaceId f : h_->removed_faces_of(k)) face_alive_[f] = false;
+  for (FaceId f : g.removed_faces_of(k)) face_alive_[f] = false;
   for (FaceId f : h_->created_faces_of(k)) face_alive_[f] = true;
-  alive_faces_ -= h_->removed_faces_of(k).size() - h_->created_faces_of(k).size();
+  alive_faces_ -= g.removed_faces_of(k).size() - h_->created_faces_of(k).size();
   recovered_[k] = false;
   --recovered_count_;
-  for (NodeId c : h_->children_of(k)) ++blockers_[c];
-  for (NodeId p : parents_of(k)) --blockers_[p];
+  for (NodeId c : g.children_of(k)) ++blockers_[c];
+  for (NodeId p : g.parents_of(k)) --blockers_[p];
 }
 
 bool CutState::vertex_present(Index v) const {
-  const NodeId k = h_->vertex_node[v];
+  if (!g_) return true;  // a read-only cut is the full one
+  const NodeId k = g_->node_of_vertex(v);
   return k == kNone || recovered_[k];
 }
 

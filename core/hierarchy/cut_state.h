@@ -6,20 +6,20 @@
 #include <vector>
 
 #include "hierarchy/hierarchy.h"
-#include "hierarchy/node_parents.h"
+#include "hierarchy/node_graph.h"
 
 namespace filigree {
 
 class CutState {
  public:
-  // Starts at the empty cut (the base mesh). `h` and `parents`
-  // (node_parents(h)) must outlive the CutState.
-  CutState(const Hierarchy& h, const NodeParents& parents);
+  // Starts at the empty cut (the base mesh). `graph` (and its hierarchy)
+  // must outlive the CutState.
+  explicit CutState(const NodeGraph& graph);
   // The full cut (the original mesh) in O(n), without recovering node by
-  // node. Without `parents` it can be read but not changed: recover() and
-  // remove() throw std::logic_error (can_recover() is false anyway: every
-  // node is recovered).
-  static CutState full(const Hierarchy& h, const NodeParents* parents = nullptr);
+  // node. Without `graph` it can be read but not changed: recover() and
+  // remove() throw std::logic_error, can_recover() and can_remove() are
+  // false.
+  static CutState full(const Hierarchy& h, const NodeGraph* graph = nullptr);
 
   bool recovered(NodeId k) const { return recovered_[k]; }
   // Not recovered and every parent recovered.
@@ -29,7 +29,7 @@ class CutState {
   }
   // Recovered and no child recovered.
   bool can_remove(NodeId k) const {
-    if (!recovered_[k]) return false;
+    if (!recovered_[k] || !g_) return false;
     return blockers_.empty() ? !child_recovered(k) : blockers_[k] == 0;
   }
 
@@ -61,15 +61,14 @@ class CutState {
   std::size_t memory_bytes() const;
 
  private:
-  CutState(const Hierarchy& h, const NodeParents* parents);
-  void require_parents() const;  // throws std::logic_error for a read-only cut
-  std::span<const NodeId> parents_of(NodeId k) const;
+  CutState(const Hierarchy& h, const NodeGraph* graph);
+  const NodeGraph& graph() const;  // throws std::logic_error for a read-only cut
   bool parents_recovered(NodeId k) const;
   bool child_recovered(NodeId k) const;
   void count_blockers();
 
   const Hierarchy* h_;
-  const NodeParents* p_;  // null: a full cut that is only read
+  const NodeGraph* g_;  // null: a full cut that is only read
   std::vector<bool> recovered_;
   // Per node, made on the first change (a cut that never changes, such as
   // T = 0's full one, needs none): for a recovered node its recovered

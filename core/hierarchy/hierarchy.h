@@ -4,15 +4,14 @@
 // Plain arrays (structure of arrays) so that it (de)serialises by memcpy and
 // many of them fit in one server.
 //
-// Compact (format v2, issue 10): 32-bit indices, float32 wherever the value
-// is relative to a local frame (see each field for why that is precise
-// enough), faces created by removals as 3-byte ring corners (in memory as
-// in the file), and nothing stored that the rest determines. A few arrays are
-// *derived* (vertex_node, base_vertices, base_faces): kept in memory
-// because callers index them, never stored in the file, and rebuilt by
-// hierarchy_from() when a file is loaded. Parents are derived only by what
-// needs them (hierarchy/node_parents.h).
-
+// Compact (format v3, issue 10): 32-bit indices, float32 or 16-bit fixed
+// point wherever the value is relative to a local frame (see each field for
+// why that is precise enough), faces created by removals as 3-byte ring
+// corners, and nothing stored that the rest determines. The base mesh
+// (base_vertices, base_faces) is derived when a file is loaded. What only a
+// changing cut needs (which face each removal deleted, the dependency edges,
+// vertex → node) is derived by whoever needs it (hierarchy/node_graph.h):
+// direct recovery (T = 0) never does.
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -35,6 +34,11 @@ inline constexpr Index kNone = std::numeric_limits<Index>::max();
 // removed vertex's ring (the hole's triangulation only joins ring vertices):
 // how the file stores created faces, in 3 bytes instead of 12.
 using RingCorners = std::array<std::uint8_t, 3>;
+
+// Barycentric coordinates (b0, b1, 1 − b0 − b1) in a triangle, b0 and b1
+// as multiples of 1/65535 with b0 + b1 ≤ 65535.
+using Barycentric16 = std::array<std::uint16_t, 2>;
+inline constexpr double kFixedPointOne = 65535.0;
 // So a ring has at most this many vertices (preprocessing stops at 32).
 inline constexpr std::size_t kMaxRingSize = 255;
 
@@ -71,30 +75,29 @@ struct Hierarchy {
   // order (face()). Only the original ones are stored as triangles.
   std::vector<Triangle> original_faces;
 
-  // ---- Nodes. Node k is the k-th vertex removal. A node's parents were
-  // removed after it (they deleted faces it created) and must be recovered
-  // before it; its children were removed before it.
+  // ---- Nodes. Node k is the k-th vertex removal. Its ring vertices were
+  // removed after it (or never), so they are recovered before it.
   std::vector<Index> node_vertex;         // removed vertex (original id)
   std::vector<std::uint8_t> node_closed;  // 1: interior vertex, closed ring; 0: boundary, open ring
   // Removal-time 1-ring, ordered so that (v, ring[k], ring[k+1]) were faces.
   std::vector<Index> ring_offsets;        // N+1
   std::vector<Index> ring_vertices;
-  // Normalised (Σ = 1 up to float rounding), > 0 (geometry/ring_weights.h).
-  // Float32 is enough because preprocessing rounds the weights *before* it
-  // computes node_offset: the offset is exact for the stored weights, and
-  // ring_frame() divides by their sum, so the rounding only changes which
-  // (equally valid) centre the offset is relative to.
-  std::vector<float> ring_weights;
+  // Relative weights in 16-bit fixed point: w_i = ring_weights[i] / Σ ≥ 1/65535
+  // (geometry/ring_weights.h, then quantize_ring_weights()). Enough because
+  // preprocessing rounds the weights *before* it computes node_offset: the
+  // offset is exact for the stored weights, and ring_frame() divides by
+  // their sum, so the rounding only changes which (equally valid) centre the
+  // offset is relative to.
+  std::vector<std::uint16_t> ring_weights;
   // v's position in the RingFrame of its ring (geometry/ring_frame.h): direct
   // recovery puts v back at frame.from_local(node_offset) (thesis eq. 3.10).
   // Float32: the offset is rotation- and scale-free, O(1), so rounding moves
   // v by ~1e-7 of its ring's radius; the rest pose stays exact because direct
   // recovery adds back its float error of the rest pose.
   std::vector<Vec3f> node_offset;
-  // Faces deleted by the removal, one per ring slot: slot i holds the fan
-  // face (v, ring[i], ring[i+1]); an open ring has one face fewer and its
-  // last slot holds kNone. They return on recovery.
-  std::vector<FaceId> removed_faces;
+  // The removal deleted v's fan: face (v, ring[i], ring[i+1]) for each ring
+  // slot i (fan_face()), one fewer for an open ring. Which face ids those
+  // are is derived (NodeGraph::removed_faces_of).
   // Faces created by the removal (the hole's triangulation; they go on
   // recovery), as corners in its ring: a ring of r vertices leaves a hole of
   // r corners, so node k created exactly r − 2 faces, ids
@@ -102,10 +105,6 @@ struct Hierarchy {
   // stored here at index ring_offsets[k] − 2k onwards. 3 bytes a face
   // instead of a 12-byte triangle.
   std::vector<RingCorners> created_corners;
-  // Dependency edges (thesis Fig. 3.9): k's children created faces that k
-  // deleted. Their inverse, the parents, is node_parents() (node_parents.h).
-  std::vector<Index> child_offsets;  // N+1
-  std::vector<NodeId> children;
 
   // ---- Base mesh: the vertices never removed and the faces alive at the end
   // (derived).
@@ -114,13 +113,11 @@ struct Hierarchy {
 
   // ---- MAPS parameterisation (thesis §3.1.2): vertex i lies at
   // Σ_c maps_bary[i][c] · x(face(base_faces[maps_face[i]])[c]) on the base mesh.
-  // Float32: barycentrics in [0, 1]; rounding moves the point by ~1e-7 of
-  // its base triangle, far below the parameterisation's own distortion.
+  // The first two barycentrics in 16-bit fixed point (maps_barycentric());
+  // rounding moves the point by ~1e-5 of its base triangle, far below the
+  // parameterisation's own distortion.
   std::vector<Index> maps_face;
-  std::vector<Vec3f> maps_bary;
-
-  // ---- Per vertex: the node that removed it, kNone for base vertices (derived).
-  std::vector<NodeId> vertex_node;
+  std::vector<Barycentric16> maps_bary;
 
   std::uint64_t mesh_hash = 0;  // hash_mesh() of the mesh it was built from
   BuildInfo build;
@@ -129,10 +126,9 @@ struct Hierarchy {
   std::size_t node_count() const { return node_vertex.size(); }
   std::size_t ring_size(NodeId k) const { return ring_offsets[k + 1] - ring_offsets[k]; }
   std::span<const Index> ring(NodeId k) const { return {ring_vertices.data() + ring_offsets[k], ring_size(k)}; }
-  std::span<const float> weights(NodeId k) const { return {ring_weights.data() + ring_offsets[k], ring_size(k)}; }
-  std::span<const FaceId> removed_faces_of(NodeId k) const {
-    return {removed_faces.data() + ring_offsets[k], ring_size(k) - (node_closed[k] ? 0 : 1)};
-  }
+  std::span<const std::uint16_t> weights(NodeId k) const { return {ring_weights.data() + ring_offsets[k], ring_size(k)}; }
+  // The number of faces node k deleted: its ring's edges.
+  std::size_t fan_size(NodeId k) const { return ring_size(k) - (node_closed[k] ? 0 : 1); }
   // Ids of the faces node k created, ascending.
   FaceIdRange created_faces_of(NodeId k) const {
     const FaceId first = first_created_face(k);
@@ -149,9 +145,12 @@ struct Hierarchy {
     const Index* r = ring_vertices.data() + ring_offsets[k];
     return {r[c[0]], r[c[1]], r[c[2]]};
   }
-  // The face in slot i of node k's fan (i < removed_faces_of(k).size()):
-  // an original face, or one its children created (searched among them).
-  Triangle removed_face(NodeId k, std::size_t i) const;
+  // The face in slot i of node k's fan (i < fan_size(k)), (v, ring[i],
+  // ring[i+1]): the deleted face's corners up to rotation.
+  Triangle fan_face(NodeId k, std::size_t i) const {
+    const auto r = ring(k);
+    return {node_vertex[k], r[i], r[i + 1 == r.size() ? 0 : i + 1]};
+  }
   // The node that created face f, kNone for an original face; O(log nodes).
   NodeId creator(FaceId f) const;
   // Any face: O(1) for an original face, O(log nodes) for a created one.
@@ -165,25 +164,31 @@ struct Hierarchy {
     for (NodeId k = 0; k < node_count(); ++k)
       for (std::size_t j = 0; j + 2 < ring_size(k); ++j) fn(f++, created_face(k, j));
   }
-  std::span<const NodeId> children_of(NodeId k) const { return span_of(children, child_offsets, k); }
-
   // The original mesh.
   TriMesh original_mesh() const;
   // The base mesh in base order (vertex i of it is original vertex base_vertices[i]).
   TriMesh base_mesh() const;
+  // Vertex i's barycentrics in base face maps_face[i].
+  Vec3 maps_barycentric(Index i) const;
   // Position of vertex i through the MAPS parameterisation on the base mesh
   // whose vertices (original ids) are at `positions`.
   Vec3 maps_position(Index i, const std::vector<Vec3>& positions) const;
-  // Longest chain of dependent nodes (0 for no nodes).
+  // Longest chain of dependent nodes (0 for no nodes): node k depends on the
+  // nodes that removed its ring vertices.
   std::size_t depth() const;
   // Heap bytes held: the capacities of every array.
   std::size_t memory_bytes() const;
 
- private:
-  static std::span<const Index> span_of(const std::vector<Index>& data, const std::vector<Index>& offsets, NodeId k) {
-    return {data.data() + offsets[k], offsets[k + 1] - offsets[k]};
-  }
 };
+
+// Per vertex, the node that removed it; kNone for a base vertex. O(n).
+std::vector<NodeId> vertex_nodes(const Hierarchy& h);
+
+// Normalised positive weights (geometry/ring_weights.h) in 16-bit fixed
+// point, each ≥ 1: what Hierarchy::ring_weights stores.
+std::vector<std::uint16_t> quantize_ring_weights(std::span<const double> weights);
+// A barycentric triple (≥ 0, Σ = 1) as Hierarchy::maps_bary stores it.
+Barycentric16 quantize_barycentric(const Vec3& b);
 
 // The arrays a hierarchy is made of, as read-only views: exactly what the
 // file stores (hierarchy_file.h), laid out as in a Hierarchy. Everything else
@@ -196,13 +201,10 @@ struct StoredHierarchy {
   std::span<const std::uint8_t> node_closed;
   std::span<const Index> ring_offsets;
   std::span<const Index> ring_vertices;
-  std::span<const float> ring_weights;
+  std::span<const std::uint16_t> ring_weights;
   std::span<const Vec3f> node_offset;
-  std::span<const FaceId> removed_faces;
-  std::span<const Index> child_offsets;
-  std::span<const NodeId> children;
   std::span<const Index> maps_face;
-  std::span<const Vec3f> maps_bary;
+  std::span<const Barycentric16> maps_bary;
 };
 
 // A structurally inconsistent hierarchy (bad file, or a bug); what() says what.
@@ -210,16 +212,18 @@ struct HierarchyError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Checks every invariant a consumer relies on (sizes, index ranges, finite
-// values, dependency order, each face created by one node and removed at most
-// once and only after it was created, children = the creators of the faces a
-// node removed); throws HierarchyError naming the first violation. Linear
-// time, in sequential passes (random reads only into per-vertex/per-face bit
-// sets and the ring offsets of each node's children).
+// Checks every invariant direct recovery and the base mesh rely on (sizes,
+// index ranges, finite values, each vertex removed at most once, every ring
+// vertex present after its node's removal, created faces inside their ring,
+// as many faces left at the end as the removals leave); throws
+// HierarchyError naming the first violation. Linear time, in sequential
+// passes (random reads only into per-vertex bit sets). That each removal
+// deleted exactly its fan's faces is checked where it is used, by
+// NodeGraph (node_graph.h).
 void validate_hierarchy(const StoredHierarchy& s);
 
 // Validates `s` and builds the hierarchy from it: its arrays copied, the
-// derived ones (base, vertex_node) computed. mesh_hash, build and
+// derived ones (the base mesh) computed. mesh_hash, build and
 // nothing else are left to the caller.
 // `concurrently` (if any) is called once, alongside the checks: on a helper
 // thread for a large hierarchy on a machine with a second core (the file

@@ -57,14 +57,11 @@ void for_each_section(S& s, Fn&& fn) {
   fn(7, s.ring_vertices);
   fn(8, s.ring_weights);
   fn(9, s.node_offset);
-  fn(10, s.removed_faces);
-  fn(11, s.child_offsets);
-  fn(12, s.children);
-  fn(13, s.maps_face);
-  fn(14, s.maps_bary);
+  fn(10, s.maps_face);
+  fn(11, s.maps_bary);
 }
-constexpr std::uint32_t kBuildTag = 15;
-constexpr std::uint32_t kSectionCount = 15;
+constexpr std::uint32_t kBuildTag = 12;
+constexpr std::uint32_t kSectionCount = 12;
 
 using Sink = std::function<void(const void*, std::size_t)>;
 

@@ -11,9 +11,11 @@
 // its order, then the build record; every element sits at a multiple of its
 // alignment, so a loaded file is read in place.
 //
-// Version 2 (issue 10) stores only what cannot be derived, in float32 where
-// the hierarchy allows it: ~170 bytes per vertex against ~310 in version 1.
-// Version 1 files are refused with a message to rebuild them.
+// Version 3 (issue 10) stores only what cannot be derived, in float32 or
+// 16-bit fixed point where the hierarchy allows it: ~110 bytes per vertex,
+// against ~170 in version 2 (which also stored the faces each removal
+// deleted and the dependency edges) and ~310 in version 1. Older files are
+// refused with a message to rebuild them.
 //
 // Loading maps the file read-only, checks the header, every size against the
 // bytes present, the payload hash, then validates the mapped arrays
@@ -32,7 +34,7 @@ namespace filigree {
 
 struct Hierarchy;
 
-inline constexpr std::uint32_t kHierarchyFormatVersion = 2;
+inline constexpr std::uint32_t kHierarchyFormatVersion = 3;
 
 // what() starts with the file name (or "<memory>") and says what is wrong.
 struct HierarchyFileError : std::runtime_error {

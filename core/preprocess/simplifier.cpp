@@ -78,11 +78,9 @@ class Simplifier {
     for (double& c : curvature_) c = p90 > 0.0 ? std::min(c / p90, 3.0) : 0.0;
 
     face_points_.resize(mesh.faces.size());
-    face_creator_.assign(mesh.faces.size(), kNone);
     point_face_.assign(n, kNone);
     point_bary_.assign(n, Vec3::Zero());
     removed_.assign(n, false);
-    out_.vertex_node.assign(n, kNone);
     out_.original_faces = mesh.faces;  // face ids: the input's, then add_face's
   }
 
@@ -90,7 +88,6 @@ class Simplifier {
     const std::size_t n = mesh_.positions().size();
     const std::size_t target = std::max<std::size_t>(opt_.target_vertices, 1);
     out_.ring_offsets = {0};
-    out_.child_offsets = {0};
 
     // Initial costs in parallel; each thread plans with its own scratch.
     std::vector<double> initial(n);
@@ -252,45 +249,28 @@ class Simplifier {
   void perform(Index v, const Plan& p) {
     const auto& x = mesh_.positions();
     const std::vector<Index>& r = p.ring.ring;
-    const NodeId node = static_cast<NodeId>(out_.node_vertex.size());
 
     // Ring coordinates for direct recovery (thesis eq. 3.10). The hierarchy
-    // keeps the weights in float32: round them first and compute the offset
-    // in the frame of the rounded weights, so that the stored pair puts v
-    // back where it was (only the offset's own float rounding remains).
-    const std::vector<double> w = ring_weights(x[v], r, x, p.ring.closed);
-    const std::size_t first = out_.ring_weights.size();
-    for (double wi : w) out_.ring_weights.push_back(static_cast<float>(wi));
-    const std::span<const float> stored(out_.ring_weights.data() + first, w.size());
+    // keeps the weights in 16-bit fixed point: round them first and compute
+    // the offset in the frame of the rounded weights, so that the stored pair
+    // puts v back where it was (only the offset's own float rounding remains).
+    const std::vector<std::uint16_t> stored = quantize_ring_weights(ring_weights(x[v], r, x, p.ring.closed));
+    out_.ring_weights.insert(out_.ring_weights.end(), stored.begin(), stored.end());
     out_.node_vertex.push_back(v);
     out_.node_closed.push_back(p.ring.closed ? 1 : 0);
     out_.ring_vertices.insert(out_.ring_vertices.end(), r.begin(), r.end());
     out_.ring_offsets.push_back(static_cast<Index>(out_.ring_vertices.size()));
-    out_.node_offset.push_back(ring_frame(r, stored, x, p.ring.closed).to_local(x[v]).cast<float>());
+    out_.node_offset.push_back(ring_frame(r, std::span<const std::uint16_t>(stored), x, p.ring.closed).to_local(x[v]).cast<float>());
 
-    // Faces: the fan dies, the hole's triangulation is born. The new node is
-    // the parent of every node that created a fan face (thesis Fig. 3.9: the
-    // labels of the edges it deletes, kept per face).
+    // Faces: the fan dies, the hole's triangulation is born. Which faces
+    // died, and so the dependency edges, are derived (hierarchy/node_graph.h).
     std::vector<FaceId> created;
     for (const auto& t : p.tris) {
       created.push_back(mesh_.add_face({r[t[0]], r[t[1]], r[t[2]]}));
       // Ring corners, as the hierarchy keeps created faces (a ring has ≤ kMaxRingSize vertices).
       out_.created_corners.push_back({static_cast<std::uint8_t>(t[0]), static_cast<std::uint8_t>(t[1]), static_cast<std::uint8_t>(t[2])});
       face_points_.emplace_back();
-      face_creator_.push_back(node);
     }
-    std::vector<NodeId> kids;
-    for (FaceId f : p.ring.fan)
-      if (face_creator_[f] != kNone) kids.push_back(face_creator_[f]);
-    std::sort(kids.begin(), kids.end());
-    kids.erase(std::unique(kids.begin(), kids.end()), kids.end());
-    out_.children.insert(out_.children.end(), kids.begin(), kids.end());
-    out_.child_offsets.push_back(static_cast<Index>(out_.children.size()));
-    // One removed face per ring slot (fan[i] follows ring[i]); an open ring's
-    // last slot has none. Created faces need no list of their own: they are
-    // the next r − 2 ids (add_face numbers faces in order).
-    out_.removed_faces.insert(out_.removed_faces.end(), p.ring.fan.begin(), p.ring.fan.end());
-    if (!p.ring.closed) out_.removed_faces.push_back(kNone);
 
     // MAPS: v and every point in its fan move into the new triangles through
     // the same planar map (thesis §3.1.2).
@@ -308,7 +288,6 @@ class Simplifier {
     }
     for (FaceId f : p.ring.fan) mesh_.kill_face(f);
     removed_[v] = true;
-    out_.vertex_node[v] = node;
   }
 
   // Base mesh and MAPS coordinates relative to it.
@@ -325,17 +304,17 @@ class Simplifier {
       out_.base_faces.push_back(f);
     }
     out_.maps_face.assign(n, kNone);
-    out_.maps_bary.assign(n, Vec3f::Zero());
+    out_.maps_bary.assign(n, Barycentric16{});
     for (Index v = 0; v < n; ++v) {
       if (removed_[v]) {
         out_.maps_face[v] = base_index[point_face_[v]];
-        out_.maps_bary[v] = point_bary_[v].cast<float>();  // float32: see Hierarchy::maps_bary
+        out_.maps_bary[v] = quantize_barycentric(point_bary_[v]);
       } else {
         // A base vertex is the corner of its first live face.
         const FaceId f = mesh_.vertex_faces(v).front();
         const Triangle& t = mesh_.face(f);
         out_.maps_face[v] = base_index[f];
-        for (int c = 0; c < 3; ++c) out_.maps_bary[v][c] = t[c] == v ? 1.0f : 0.0f;
+        out_.maps_bary[v] = quantize_barycentric(Vec3(t[0] == v, t[1] == v, t[2] == v));
       }
     }
   }
@@ -347,7 +326,6 @@ class Simplifier {
   double diag_ = 1.0;
   std::vector<double> curvature_;
   std::vector<std::vector<Index>> face_points_;  // per face: removed vertices parameterised in it
-  std::vector<NodeId> face_creator_;             // per face: node that created it, kNone if original
   std::vector<FaceId> point_face_;               // per removed vertex: its current face
   std::vector<Vec3> point_bary_;                 // ... and barycentrics in it
   std::vector<bool> removed_;

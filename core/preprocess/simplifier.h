@@ -32,9 +32,8 @@ struct SimplifyOptions {
   std::function<void(double)> progress;
 };
 
-// Simplifies `mesh` and fills `out`'s faces, nodes, dependency edges, base
-// mesh, MAPS parameterisation and vertex_node (everything but mesh_hash and
-// build). `curvature` and `saliency` are per vertex.
+// Simplifies `mesh` and fills `out`'s faces, nodes, base mesh and MAPS
+// parameterisation (everything but mesh_hash and build). `curvature` and `saliency` are per vertex.
 // Precondition: mesh is edge- and vertex-manifold, consistently oriented,
 // without degenerate/duplicate faces or unreferenced vertices
 // (validate_mesh reports nothing fatal or repairable).

@@ -53,8 +53,8 @@ constexpr std::size_t kPatchFaces = 64;
 
 }  // namespace
 
-AdaptiveCut::AdaptiveCut(const Hierarchy& h, const NodeParents& parents, const CotangentLaplacian& laplacian, double threshold)
-    : h_(h), parents_(parents), laplacian_(laplacian), cut_(h, parents), recoverable_(place_), removable_(place_) {
+AdaptiveCut::AdaptiveCut(const NodeGraph& graph, const CotangentLaplacian& laplacian, double threshold)
+    : h_(graph.hierarchy()), graph_(graph), laplacian_(laplacian), cut_(graph), recoverable_(place_), removable_(place_) {
   reset(threshold);
 }
 
@@ -80,13 +80,13 @@ void AdaptiveCut::reset(double threshold) {
   regions_ = Regions{};
   const std::size_t n = h_.vertex_count();
   if (threshold == kInfinity) {
-    cut_ = CutState(h_, parents_);
+    cut_ = CutState(graph_);
     in_cut_.assign(n, false);
     for (Index v : h_.base_vertices) in_cut_[v] = true;
     regions_ = find_regions(laplacian_, in_cut_);
     return;
   }
-  cut_ = CutState::full(h_, &parents_);
+  cut_ = CutState::full(h_, &graph_);
   in_cut_.assign(n, true);
   if (!adaptive()) return;
   // The full cut: exactly the nodes without children may leave it, and none
@@ -94,7 +94,7 @@ void AdaptiveCut::reset(double threshold) {
   score_.assign(h_.node_count(), 0.0f);
   place_.assign(h_.node_count(), kNone);
   for (NodeId k = 0; k < h_.node_count(); ++k)
-    if (h_.children_of(k).empty()) removable_.push(k, 0.0f);
+    if (graph_.children_of(k).empty()) removable_.push(k, 0.0f);
   moved_.assign(n, false);
 }
 
@@ -111,7 +111,7 @@ double AdaptiveCut::evaluate(NodeId k, Index v, const std::vector<Vec3>& x) cons
   // The patch: the faces k's recovery would delete, or its removal would.
   const bool recover = cut_.can_recover(k);
   if (!recover && !cut_.can_remove(k)) return -1.0;
-  const std::size_t count = recover ? h_.ring_size(k) - 2 : h_.removed_faces_of(k).size();
+  const std::size_t count = recover ? h_.ring_size(k) - 2 : h_.fan_size(k);
   const auto& p = h_.rest_positions;
   PatchFace local[kPatchFaces];
   std::vector<PatchFace> heap;
@@ -122,7 +122,7 @@ double AdaptiveCut::evaluate(NodeId k, Index v, const std::vector<Vec3>& x) cons
   }
   double stretch_sum = 0.0, area_sum = 0.0, bend = 0.0, edge_sum = 0.0;
   for (std::size_t i = 0; i < count; ++i) {
-    const Triangle t = recover ? h_.created_face(k, i) : h_.removed_face(k, i);
+    const Triangle t = recover ? h_.created_face(k, i) : h_.fan_face(k, i);
     PatchFace& f = patch[i];
     f.v[0] = t[0], f.v[1] = t[1], f.v[2] = t[2];
     f.rest_normal = (p[t[1]] - p[t[0]]).cross(p[t[2]] - p[t[0]]);
@@ -177,7 +177,7 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
   Index vertex[kScoreBlock];
   for (std::size_t i = 0; i < count; ++i) {
     vertex[i] = static_cast<Index>(first + i);
-    node[i] = h_.vertex_node[vertex[i]];
+    node[i] = graph_.node_of_vertex(vertex[i]);
     if (node[i] != kNone) cut_.prefetch(node[i]);
   }
   std::uint16_t frontier[kScoreBlock];
@@ -194,17 +194,12 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
     recovers[m] = recover;
     frontier[m++] = static_cast<std::uint16_t>(i);
   }
-  // A patch's corners are k's vertex and its ring; a removal's faces may be
-  // its children's, found through their ring offsets.
+  // A patch's corners are k's vertex and its ring: a removal's faces are
+  // its fan, a recovery's its ring corners.
   for (std::size_t j = 0; j < m; ++j) {
     const NodeId k = node[frontier[j]];
     __builtin_prefetch(h_.ring(k).data());
-    if (recovers[j]) {
-      __builtin_prefetch(&h_.created_corners[h_.first_created_face(k) - h_.original_face_count()]);
-    } else {
-      __builtin_prefetch(h_.removed_faces_of(k).data());
-      __builtin_prefetch(&h_.child_offsets[k]);
-    }
+    if (recovers[j]) __builtin_prefetch(&h_.created_corners[h_.first_created_face(k) - h_.original_face_count()]);
     __builtin_prefetch(&laplacian_.neighbors[laplacian_.offsets[vertex[frontier[j]]]]);
   }
   for (std::size_t j = 0; j < m; ++j) {
@@ -215,8 +210,6 @@ void AdaptiveCut::score_block(std::size_t first, std::size_t count, const std::v
       __builtin_prefetch(&h_.rest_positions[c]);
       __builtin_prefetch(&x[c]);
     }
-    if (!recovers[j])
-      for (NodeId c : h_.children_of(k)) __builtin_prefetch(&h_.ring_offsets[c]);
   }
   for (std::size_t j = 0; j < m; ++j) {
     const std::size_t i = frontier[j];
@@ -246,8 +239,8 @@ void AdaptiveCut::place(NodeId k) {
 
 void AdaptiveCut::place_around(NodeId k) {
   place(k);
-  for (NodeId p : parents_.of(k)) place(p);
-  for (NodeId c : h_.children_of(k)) place(c);
+  for (NodeId p : graph_.parents_of(k)) place(p);
+  for (NodeId c : graph_.children_of(k)) place(c);
 }
 
 void AdaptiveCut::note_change(Index v) {
@@ -413,12 +406,12 @@ std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t 
     const std::size_t size = block_size(b);
     for (std::size_t i = 0; i < size; ++i) {
       if (i + 8 < size && block_scores[i + 8] >= 0.0f) {  // the queue slot lies scattered
-        const NodeId ahead = h_.vertex_node[firsts[b] + i + 8];
+        const NodeId ahead = graph_.node_of_vertex(firsts[b] + i + 8);
         __builtin_prefetch(&place_[ahead]);
         __builtin_prefetch(&score_[ahead]);
       }
       if (block_scores[i] < 0.0f) continue;
-      const NodeId k = h_.vertex_node[firsts[b] + i];
+      const NodeId k = graph_.node_of_vertex(firsts[b] + i);
       score_[k] = block_scores[i];
       place(k);
     }

@@ -21,9 +21,9 @@ class AdaptiveCut {
  public:
   static constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
-  // `h`, its `parents` (node_parents(h)) and `laplacian` (of the original
-  // mesh) must outlive the cut. Starts as reset(threshold) leaves it.
-  AdaptiveCut(const Hierarchy& h, const NodeParents& parents, const CotangentLaplacian& laplacian, double threshold = kInfinity);
+  // `graph` (and its hierarchy) and `laplacian` (of the original mesh) must
+  // outlive the cut. Starts as reset(threshold) leaves it.
+  AdaptiveCut(const NodeGraph& graph, const CotangentLaplacian& laplacian, double threshold = kInfinity);
   AdaptiveCut(const AdaptiveCut&) = delete;  // the queues point into it
   AdaptiveCut& operator=(const AdaptiveCut&) = delete;
 
@@ -133,7 +133,7 @@ class AdaptiveCut {
   void release_queues();
 
   const Hierarchy& h_;
-  const NodeParents& parents_;
+  const NodeGraph& graph_;
   const CotangentLaplacian& laplacian_;
   double threshold_ = kInfinity;
   CutState cut_;

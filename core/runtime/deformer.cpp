@@ -40,7 +40,7 @@ struct Deformer::Optimised {
   std::vector<Eigen::Quaterniond> base_q;
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
-      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.hierarchy(), m.node_parents(), m.laplacian(), o.threshold),
+      : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.node_graph(), m.laplacian(), o.threshold),
         solver(m.laplacian(), m.differential_coordinates()), positions(m.hierarchy().rest_positions) {
     cut.reset(o.threshold);
   }
@@ -209,7 +209,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   const auto& corners = model_->maps_corners();
   auto interpolated = [&](Index v) {
     const auto& c = corners[v];
-    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_bary[v].cast<double>()).toRotationMatrix();
+    return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_barycentric(v)).toRotationMatrix();
   };
   stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
   const CotangentLaplacian& laplacian = model_->laplacian();

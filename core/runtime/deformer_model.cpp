@@ -2,7 +2,7 @@
 
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
-#include "hierarchy/node_parents.h"
+#include "hierarchy/node_graph.h"
 #include "runtime/direct_recovery.h"
 #include "util/buffer_pool.h"
 
@@ -47,17 +47,17 @@ const std::vector<Vec3>& DeformerModel::differential_coordinates() const { retur
 
 const std::vector<std::array<Index, 3>>& DeformerModel::maps_corners() const { return optimisation().maps_corners; }
 
-const NodeParents& DeformerModel::node_parents() const {
-  std::call_once(parents_once_, [this] {
-    parents_ = std::make_unique<const NodeParents>(filigree::node_parents(*h_));
-    parents_built_.store(true, std::memory_order_release);
+const NodeGraph& DeformerModel::node_graph() const {
+  std::call_once(graph_once_, [this] {
+    graph_ = std::make_unique<const NodeGraph>(*h_);
+    graph_built_.store(true, std::memory_order_release);
   });
-  return *parents_;
+  return *graph_;
 }
 
 std::size_t DeformerModel::memory_bytes() const {
   std::size_t bytes = recovery_->memory_bytes();
-  if (parents_built_.load(std::memory_order_acquire)) bytes += parents_->memory_bytes();
+  if (graph_built_.load(std::memory_order_acquire)) bytes += graph_->memory_bytes();
   if (optimisation_built_.load(std::memory_order_acquire)) {
     const Optimisation& o = *optimisation_;
     bytes += o.laplacian.offsets.capacity() * sizeof(Index) + o.laplacian.neighbors.capacity() * sizeof(Index) +

@@ -20,7 +20,7 @@ namespace filigree {
 
 struct Hierarchy;
 struct CotangentLaplacian;
-struct NodeParents;
+class NodeGraph;
 class DirectRecovery;
 template <class T>
 class BufferPool;
@@ -44,9 +44,10 @@ class DeformerModel {
   const std::vector<Vec3>& differential_coordinates() const;
   // Per vertex: the base-order corners of its MAPS face (thesis §3.1.2).
   const std::vector<std::array<Index, 3>>& maps_corners() const;
-  // The hierarchy's parent lists, for cuts that change (T > 0): built by the
-  // first caller, then shared.
-  const NodeParents& node_parents() const;
+  // The hierarchy's node graph, for cuts that change (T > 0): built by the
+  // first caller, then shared. Throws HierarchyError if the hierarchy's
+  // removals do not delete their fans (hierarchy/node_graph.h).
+  const NodeGraph& node_graph() const;
   // Direct recovery's scratch, lent to a deformer for one frame at a time
   // (thread-safe): an idle deformer, a session between frames, holds none.
   BufferPool<float>& recovery_scratch() const { return *recovery_scratch_; }
@@ -65,9 +66,9 @@ class DeformerModel {
   mutable std::once_flag optimisation_once_;
   mutable std::unique_ptr<const Optimisation> optimisation_;
   mutable std::atomic<bool> optimisation_built_{false};  // lets memory_bytes() look without building
-  mutable std::once_flag parents_once_;
-  mutable std::unique_ptr<const NodeParents> parents_;
-  mutable std::atomic<bool> parents_built_{false};
+  mutable std::once_flag graph_once_;
+  mutable std::unique_ptr<const NodeGraph> graph_;
+  mutable std::atomic<bool> graph_built_{false};
 };
 
 }  // namespace filigree

@@ -9,7 +9,6 @@
 #include <thread>
 
 #include "hierarchy/hierarchy.h"
-#include "hierarchy/node_parents.h"
 #include "mesh/vertex_order.h"
 #include "util/cpu_features.h"
 #include "util/spin_barrier.h"
@@ -242,12 +241,19 @@ void kRecoverBlocks(const Layout& t, std::size_t first, std::size_t end, float* 
 DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
     : base_count_(h.base_vertices.size()), node_count_(h.node_count()), base_vertices_(h.base_vertices) {
   const std::size_t n_nodes = h.node_count();
-  const NodeParents parents = node_parents(h);  // for the layout only
-  // Level = 1 + the deepest parent's level. Parents have larger ids (they
-  // were removed later), so one descending pass sees them first.
+  // Node k reads the positions of its ring vertices: it depends on the nodes
+  // that removed them (those not in the base), which have larger ids. (The
+  // cut's parents, NodeGraph, give the same levels and phases below: each is
+  // a longest path, and every such dependency is a chain of parents.)
+  const std::vector<NodeId> node_of = vertex_nodes(h);
+  const auto for_each_dependency = [&](std::size_t k, auto&& fn) {
+    for (Index u : h.ring(static_cast<NodeId>(k)))
+      if (node_of[u] != kNone) fn(node_of[u]);
+  };
+  // Level = 1 + the deepest dependency's level: one descending pass sees
+  // them first.
   std::vector<std::uint32_t> level(n_nodes, 0);
-  for (std::size_t k = n_nodes; k-- > 0;)
-    for (NodeId p : parents.of(static_cast<NodeId>(k))) level[k] = std::max(level[k], level[p] + 1);
+  for (std::size_t k = n_nodes; k-- > 0;) for_each_dependency(k, [&](NodeId p) { level[k] = std::max(level[k], level[p] + 1); });
 
   // Tiles: runs of kTileVertices consecutive vertices along a Morton curve
   // (for the service's sessions, whose vertex order is that curve, runs of
@@ -261,17 +267,18 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
   partitions_ = partitions ? partitions
                            : std::clamp<std::size_t>(n_nodes / kNodesPerThread, 1,
                                                      std::min<std::size_t>(kMaxPartitions, std::max(1u, std::thread::hardware_concurrency())));
-  // A node runs in its own partition, in the first phase after every parent
-  // of another partition (phases are separated by a barrier); within a
-  // partition and phase, by (tile, level), its tile raised to its parents'
-  // there so that the order stays valid.
+  // A node runs in its own partition, in the first phase after every
+  // dependency of another partition (phases are separated by a barrier);
+  // within a partition and phase, by (tile, level), its tile raised to its
+  // dependencies' there so that the order stays valid.
   std::vector<std::uint32_t> tile(n_nodes), part(n_nodes), phase(n_nodes, 0);
   for (std::size_t k = n_nodes; k-- > 0;) {
     tile[k] = static_cast<std::uint32_t>(rank[h.node_vertex[k]] / kTileVertices);
     part[k] = static_cast<std::uint32_t>(tile[k] * partitions_ / tiles);
-    for (NodeId p : parents.of(static_cast<NodeId>(k))) phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u));
-    for (NodeId p : parents.of(static_cast<NodeId>(k)))
+    for_each_dependency(k, [&](NodeId p) { phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u)); });
+    for_each_dependency(k, [&](NodeId p) {
       if (part[p] == part[k] && phase[p] == phase[k]) tile[k] = std::max(tile[k], tile[p]);
+    });
   }
   const std::size_t phases = n_nodes ? *std::max_element(phase.begin(), phase.end()) + 1 : 1;
   std::vector<NodeId> sorted(n_nodes);
@@ -336,10 +343,12 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
       }
       const auto r = h.ring(k);
       const auto w = h.weights(k);
+      double sum = 0.0;  // the stored weights are relative (Hierarchy::ring_weights)
+      for (std::uint16_t wi : w) sum += wi;
       for (std::size_t i = 0; i < ring; ++i) {
         const bool real = i < r.size();
         ring_slot_[first + i * W + l] = 4 * slot_of_vertex_[r[real ? i : 0]];  // the float index: no shift per load
-        ring_weight_[first + i * W + l] = real ? static_cast<float>(w[i]) : 0.0f;
+        ring_weight_[first + i * W + l] = real ? static_cast<float>(w[i] / sum) : 0.0f;
       }
       for (int c = 0; c < 3; ++c) offset_[(3 * blk + c) * W + l] = static_cast<float>(h.node_offset[k][c]);
       lane_ring_[blk * W + l] = static_cast<std::uint8_t>(r.size() | (h.node_closed[k] ? 0 : kOpenRing));
