@@ -14,6 +14,7 @@ grep -q "peak" "$OUT/pre.txt" || fail "no peak memory in summary"
 "$FILIGREE" inspect "$OUT/bunny.fgh" > "$OUT/inspect.txt"
 grep -q "original      1839 vertices, 3674 faces" "$OUT/inspect.txt" || fail "inspect: $(cat "$OUT/inspect.txt")"
 grep -q "bytes/vertex in memory (.*), .* bytes/vertex on disk" "$OUT/inspect.txt" || fail "inspect size: $(cat "$OUT/inspect.txt")"
+grep -q "node graph    derived and checked in .* ms; .* bytes/vertex more" "$OUT/inspect.txt" || fail "inspect graph: $(cat "$OUT/inspect.txt")"
 "$FILIGREE" export-base "$OUT/bunny.fgh" -o "$OUT/base.obj" --ids "$OUT/ids.txt" > /dev/null
 [ "$(wc -l < "$OUT/ids.txt")" -eq 150 ] || fail "ids file does not have 150 lines"
 [ "$(grep -c '^v ' "$OUT/base.obj")" -eq 150 ] || fail "base.obj does not have 150 vertices"

@@ -9,6 +9,7 @@
 #include "cli/commands.h"
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/hierarchy_file.h"
+#include "hierarchy/node_graph.h"
 #include "util/content_hash.h"
 
 namespace filigree::cli {
@@ -22,6 +23,10 @@ void add_inspect_command(CLI::App& app) {
     const auto start = std::chrono::steady_clock::now();
     const Hierarchy h = load_hierarchy(*path);
     const double load_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    // What loading leaves to the first finite T: checked here too.
+    const auto graph_start = std::chrono::steady_clock::now();
+    const NodeGraph graph(h);
+    const double graph_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - graph_start).count();
     std::size_t boundary_nodes = 0, max_ring = 0;
     for (NodeId k = 0; k < h.node_count(); ++k) {
       boundary_nodes += h.node_closed[k] ? 0 : 1;
@@ -40,6 +45,8 @@ void add_inspect_command(CLI::App& app) {
     std::printf("size          %.1f bytes/vertex in memory (%.1f MiB), %.1f bytes/vertex on disk\n",
                 static_cast<double>(h.memory_bytes()) / n, static_cast<double>(h.memory_bytes()) / (1024.0 * 1024.0),
                 static_cast<double>(info.file_size) / n);
+    std::printf("node graph    derived and checked in %.1f ms; %.1f bytes/vertex more once a session sets a finite T\n", graph_ms,
+                static_cast<double>(graph.memory_bytes()) / n);
     std::printf("built         in %.2f s with %u threads, requested base %llu\n", h.build.build_seconds, h.build.threads,
                 static_cast<unsigned long long>(h.build.requested_base_vertices));
   });
