@@ -46,7 +46,7 @@ using F8 [[gnu::vector_size(32)]] = float;
 using I8 [[gnu::vector_size(32)]] = std::int32_t;
 using U8 [[gnu::vector_size(8)]] = std::uint8_t;
 using F4 [[gnu::vector_size(16)]] = float;
-using D4 [[gnu::vector_size(32)]] = double;
+using D8 [[gnu::vector_size(64)]] = double;
 static_assert(W == 8, "the kernel's vectors hold one block");
 
 [[gnu::always_inline]] inline F8 splat(float x) { return F8{} + x; }
@@ -152,23 +152,16 @@ static_assert(W == 8, "the kernel's vectors hold one block");
   // The caller's doubles: origin + float result + the rest error. Written
   // once, straight into the caller's order: a scattered store does not stall
   // the way a scattered load in a later pass would.
+  // (Converted eight lanes at once: as two halves of four, GCC converted
+  // two at a time through the stack.)
   const F8 ex = load8(b.error), ey = load8(b.error + W), ez = load8(b.error + 2 * W);
-  const D4 dx[2] = {__builtin_convertvector(__builtin_shufflevector(px, px, 0, 1, 2, 3), D4) + o.ox +
-                        __builtin_convertvector(__builtin_shufflevector(ex, ex, 0, 1, 2, 3), D4),
-                    __builtin_convertvector(__builtin_shufflevector(px, px, 4, 5, 6, 7), D4) + o.ox +
-                        __builtin_convertvector(__builtin_shufflevector(ex, ex, 4, 5, 6, 7), D4)};
-  const D4 dy[2] = {__builtin_convertvector(__builtin_shufflevector(py, py, 0, 1, 2, 3), D4) + o.oy +
-                        __builtin_convertvector(__builtin_shufflevector(ey, ey, 0, 1, 2, 3), D4),
-                    __builtin_convertvector(__builtin_shufflevector(py, py, 4, 5, 6, 7), D4) + o.oy +
-                        __builtin_convertvector(__builtin_shufflevector(ey, ey, 4, 5, 6, 7), D4)};
-  const D4 dz[2] = {__builtin_convertvector(__builtin_shufflevector(pz, pz, 0, 1, 2, 3), D4) + o.oz +
-                        __builtin_convertvector(__builtin_shufflevector(ez, ez, 0, 1, 2, 3), D4),
-                    __builtin_convertvector(__builtin_shufflevector(pz, pz, 4, 5, 6, 7), D4) + o.oz +
-                        __builtin_convertvector(__builtin_shufflevector(ez, ez, 4, 5, 6, 7), D4)};
+  const D8 dx = __builtin_convertvector(px, D8) + o.ox + __builtin_convertvector(ex, D8);
+  const D8 dy = __builtin_convertvector(py, D8) + o.oy + __builtin_convertvector(ey, D8);
+  const D8 dz = __builtin_convertvector(pz, D8) + o.oz + __builtin_convertvector(ez, D8);
   for (std::size_t l = 0; l < W; ++l) {
     if (b.vertex[l] == kPaddingLane) continue;
     double* d = o.xyz + 3 * static_cast<std::size_t>(b.vertex[l]);
-    d[0] = dx[l / 4][l % 4], d[1] = dy[l / 4][l % 4], d[2] = dz[l / 4][l % 4];
+    d[0] = dx[l], d[1] = dy[l], d[2] = dz[l];
   }
 }
 
@@ -213,8 +206,10 @@ struct Layout {
       // cache: fetch a later block's ring rows now (~15% a frame at 1.25M).
       const std::size_t ahead = k + kRingPrefetchBlocks;
       const std::uint32_t* slot = t.ring_slot + t.block_ring[ahead] * W;
-      const std::size_t reads = (t.block_ring[ahead + 1] - t.block_ring[ahead]) * W;
-      for (std::size_t i = 0; i < reads; ++i) __builtin_prefetch(p + slot[i], 0, 3);
+      // A ring slot's W rows at a time, unrolled: the loop's own counting
+      // was most of these instructions.
+      for (std::size_t i = t.block_ring[ahead]; i < t.block_ring[ahead + 1]; ++i, slot += W)
+        for (std::size_t l = 0; l < W; ++l) __builtin_prefetch(p + slot[l], 0, 3);
     }
     recover_block(b, p, o);
   }
