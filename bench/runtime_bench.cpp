@@ -11,11 +11,15 @@
 // ramps in over 8 frames, then 12 timed frames go once round an oscillation
 // that ends at full strength, so the cut update works as it does in use.
 // Times are medians of the timed frames (per stage, and of the total): on a
-// shared machine one descheduled frame would move a mean by 10–40%.
+// shared machine one descheduled frame would move a mean by 10–40%. Each
+// timed frame follows the whole-mesh solve of the same pose, and "vs whole"
+// divides the medians of those pairs.
 // Quality is measured on the last timed frame, at phase 1.
 //
-// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--threads N]
+// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--bound N] [--threads N]
 //   --quick: only the shipped Armadillo (for a fast look).
+//   --bound N: only the streaming-bound table, N times over (its spread on
+//   a shared machine).
 
 #include <algorithm>
 #include <chrono>
@@ -178,7 +182,7 @@ std::string quality(const MeshComparison& q) {
   return out;
 }
 
-void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
+void run_mesh(const std::string& name, const TriMesh& mesh, int threads, int bound_only) {
   PreprocessOptions pre;
   pre.threads = threads;
   const auto t0 = Clock::now();
@@ -187,6 +191,10 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
               h.base_vertices.size(), ms_since(t0) / 1000.0);
   if (h.rest_positions.size() != mesh.positions.size()) throw std::logic_error("the hierarchy is not of this mesh");
 
+  if (bound_only > 0) {
+    for (int i = 0; i < bound_only; ++i) recovery_bound(h, threads);
+    return;
+  }
   recovery_bound(h, threads);
 
   compare_rotation_methods(h, mesh, threads);
@@ -226,9 +234,10 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
 
     std::printf("\n### %s, %s (quality at phase %g; whole-mesh solve %.1f ms per frame prefactored (median); factorisation + first solve %.0f ms)\n\n",
                 name.c_str(), to_string(motion), quality_phase, whole_ms, factor_ms);
-    std::printf("| T | first frame ms | rotations ms | cut update ms | recover ms | regions ms | total ms | vs whole | regions | optimised vertices "
-                "| RMS to truth | max to truth | normal dev to truth (deg) | RMS to ∞ | max to ∞ | normal dev to ∞ (deg) |\n");
-    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    std::printf("| T | first frame ms | rotations ms | cut update ms | recover ms | regions ms | total ms | whole-mesh ms, same frames | vs whole | regions "
+                "| optimised vertices | RMS to truth | max to truth | normal dev to truth (deg) | RMS to ∞ | max to ∞ | normal dev to ∞ (deg) |\n");
+    std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+    std::vector<Vec3> paired(h.vertex_count());  // the whole-mesh solve's output, timed beside each row
     const std::vector<double> thresholds = {0.0, 2e4, 2e5, 2e6, DeformerOptions::kInfinity};
     for (double threshold : thresholds) {
       DeformerOptions o;
@@ -245,19 +254,27 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads) {
       d.deform(first_pose, result.positions);
       const double first_ms = ms_since(first_start);
       for (int f = 1; f < kRampFrames; ++f) d.deform(pose_at(f), result.positions);
+      // Each timed frame right after the whole-mesh solve of the same pose:
+      // on a shared machine whose speed drifts, the ratio compares like with like.
       Timing tm;
       FrameStats s;
+      std::vector<double> whole_here;
       for (int f = kRampFrames; f <= kLastFrame; ++f) {
-        s = d.deform(pose_at(f), result.positions);
+        const Pose pose = pose_at(f);
+        const auto whole_start = Clock::now();
+        reference.deform(pose, paired);
+        whole_here.push_back(ms_since(whole_start));
+        s = d.deform(pose, result.positions);
         tm.add(s);
       }
       const std::string to_truth = quality(compare_meshes(result, truth)), to_best = quality(compare_meshes(result, best));
       std::string label = threshold == DeformerOptions::kInfinity ? "∞" : std::to_string(static_cast<long>(threshold));
       if (threshold == DeformerOptions::kDefaultThreshold) label += " (default)";
       const double total = median(tm.total);
-      std::printf("| %s | %.0f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1fx | %zu | %zu | %s | %s |\n", label.c_str(), first_ms, median(tm.rotations),
-                  median(tm.cut), median(tm.recover), median(tm.regions), total, whole_ms / total, s.regions,
-                  s.region_vertices, to_truth.c_str(), to_best.c_str());
+      const double whole_paired = median(whole_here);
+      std::printf("| %s | %.0f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f | %.1fx | %zu | %zu | %s | %s |\n", label.c_str(), first_ms,
+                  median(tm.rotations), median(tm.cut), median(tm.recover), median(tm.regions), total, whole_paired, whole_paired / total,
+                  s.regions, s.region_vertices, to_truth.c_str(), to_best.c_str());
       std::fflush(stdout);
     }
   }
@@ -270,10 +287,12 @@ int main(int argc, char** argv) {
   using namespace filigree;
   std::string only;  // camel, armadillo, dragon or large; empty: all
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int bound_only = 0;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) only = "armadillo";
     if (!std::strcmp(argv[i], "--mesh") && i + 1 < argc) only = argv[++i];
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
+    if (!std::strcmp(argv[i], "--bound") && i + 1 < argc) bound_only = std::max(1, std::atoi(argv[++i]));
   }
   const std::string shared = FILIGREE_SHARED_DATA_DIR, repo = FILIGREE_REPO_DATA_DIR;
   auto wanted = [&](const char* name) { return only.empty() || only == name; };
@@ -283,12 +302,12 @@ int main(int argc, char** argv) {
               "posed by the same map) and *to ∞* (the whole-mesh optimisation result of the same pose).\n",
               threads);
   if (wanted("camel") && std::filesystem::exists(shared + "/camel.off"))
-    bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads);
-  if (wanted("armadillo")) bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads);
+    bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads, bound_only);
+  if (wanted("armadillo")) bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads, bound_only);
   if (wanted("dragon") && std::filesystem::exists(shared + "/dragon.ply"))
-    bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads);
+    bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads, bound_only);
   if (wanted("large"))
     bench::run_mesh("armadillo Loop x2 + sqrt3",
-                    bench::in_session_order(bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1)), threads);
+                    bench::in_session_order(bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1)), threads, bound_only);
   return 0;
 }
