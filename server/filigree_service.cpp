@@ -884,6 +884,8 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
       *response = s->info();
     } catch (const StoreUnavailable& e) {
       status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+    } catch (const HierarchyError& e) {
+      status = {grpc::StatusCode::FAILED_PRECONDITION, std::string("this session's hierarchy cannot run a finite T: ") + e.what()};
     }
   }
   return finish_unary(context, status);

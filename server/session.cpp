@@ -13,7 +13,9 @@
 #include "codec/delta_quantization.h"
 #include "codec/keyed_deltas.h"
 #include "hierarchy/cut_state.h"
+#include "hierarchy/hierarchy.h"
 #include "runtime/deformer.h"
+#include "runtime/deformer_model.h"
 #include "runtime/handle_solver.h"
 #include "runtime/pose.h"
 #include "server/secret.h"
@@ -136,7 +138,16 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
   record_.handles.clear();
   record_.handles_pending = false;
 
-  deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
+  try {
+    deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
+  } catch (const HierarchyError& e) {
+    // A recorded finite T on a hierarchy that cannot run one (a cache file
+    // replaced since): the session comes back at T = 0 rather than not at all.
+    spdlog::warn("session={} event=threshold_reset error=\"{}\"", record_.id, e.what());
+    record_.options.set_threshold(0.0);
+    record_.options.set_whole_mesh(false);
+    deformer_ = std::make_unique<Deformer>(assets_->model, deformer_options(record_.options));
+  }
   // The adaptive cut is not a function of the pose: it moves a bounded number
   // of nodes a frame by scores it remembers. Restored, the frame below (of
   // the recorded pose) is the old process's last one, and the next frames
@@ -456,6 +467,10 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
 }
 
 void Session::set_threshold(double threshold, bool whole_mesh) {
+  // A finite T needs the hierarchy's node graph, which loading does not
+  // check (hierarchy/node_graph.h): derive it now (once per mesh) so that a
+  // hierarchy that cannot run one is refused here, not frame after frame.
+  if (whole_mesh || threshold > 0.0) (void)assets_->model->node_graph();
   std::uint64_t seq;
   SessionProgress progress;
   {

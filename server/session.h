@@ -136,6 +136,8 @@ class Session {
   // The next frame is a keyframe (a client lost its decoded state).
   void request_keyframe();
 
+  // Throws HierarchyError (and changes nothing) if a finite T is asked of a
+  // hierarchy whose node graph cannot be derived.
   void set_threshold(double threshold, bool whole_mesh);
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
   // targets); the next frame solves every client's handles into the base pose.

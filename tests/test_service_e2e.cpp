@@ -17,6 +17,7 @@
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "hierarchy/hierarchy.h"
 #include "mesh/mesh_io.h"
+#include "hierarchy/hierarchy_file.h"
 #include "mesh/vertex_order.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
@@ -606,6 +607,78 @@ TEST_F(ServiceTest, HandlesAndTheCutSurviveARestart) {
     for (std::size_t i = 0; i < g.size(); ++i) worst = std::max(worst, (g[i] - w[i]).cwiseAbs().maxCoeff());
     EXPECT_LE(worst, double{got->max_error()} + want->max_error() + slack) << "frame " << got->version();
   }
+}
+
+// A cached hierarchy replaced by one that loads but whose removals do not
+// delete their fans (what loading leaves to the first finite T, checked by
+// the node graph): a session recorded at a finite T comes back at T = 0,
+// asking for a finite T again is refused with what is wrong, and the session
+// keeps computing frames.
+TEST_F(ServiceTest, AHierarchyThatCannotRunAFiniteTIsRefusedAndTheSessionKeepsWorking) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  v1::SetOptionsRequest so;
+  so.set_session_id(id);
+  so.set_threshold(2e4);
+  v1::SessionInfo info;
+  ASSERT_TRUE(stub_->SetOptions(context(id, editor).get(), so, &info).ok());
+  EXPECT_EQ(info.options().threshold(), 2e4);
+  ASSERT_EQ(server_->terminate(), 0);
+
+  // Turn over a created face that a later removal deletes; the file's
+  // checksum is written anew, so only the node graph can tell.
+  std::filesystem::path file;
+  for (const auto& e : std::filesystem::directory_iterator(data_dir_ / "hierarchies"))
+    if (e.path().extension() == ".fgh") file = e.path();
+  ASSERT_FALSE(file.empty());
+  Hierarchy h = load_hierarchy(file);
+  const std::vector<NodeId> node_of = vertex_nodes(h);
+  NodeId k = 0;
+  for (; k < h.node_count(); ++k) {
+    const Triangle t = h.created_face(k, 0);
+    if (node_of[t[0]] != kNone || node_of[t[1]] != kNone || node_of[t[2]] != kNone) break;
+  }
+  ASSERT_LT(k, h.node_count());
+  RingCorners& turned = h.created_corners[h.first_created_face(k) - h.original_face_count()];
+  std::swap(turned[1], turned[2]);
+  save_hierarchy(h, file);
+
+  start({});
+  // A pose, and its frame seen by a watcher.
+  auto submit = [&](float x) {
+    auto wctx = context(id, editor);
+    v1::WatchRequest wr;
+    wr.set_session_id(id);
+    auto watch = stub_->Watch(wctx.get(), wr);
+    v1::Frame f;
+    ASSERT_TRUE(watch->Read(&f));  // the current frame
+    v1::DriveRequest pose;
+    pose.set_session_id(id);
+    pose.add_indices(2);
+    pose.add_positions(x), pose.add_positions(0.5f), pose.add_positions(0.5f);
+    v1::SubmitPoseResponse accepted;
+    ASSERT_TRUE(stub_->SubmitPose(context(id, editor).get(), pose, &accepted).ok());
+    do {
+      ASSERT_TRUE(watch->Read(&f));
+    } while (f.version() <= accepted.accepted_at_version());
+    EXPECT_GT(f.vertex_count(), 0u);
+    wctx->TryCancel();
+    watch->Finish();
+  };
+  submit(0.5f);
+  v1::JoinSessionRequest jr;
+  jr.set_session_id(id);
+  ASSERT_TRUE(stub_->JoinSession(context(id, editor).get(), jr, &info).ok());
+  EXPECT_EQ(info.options().threshold(), 0.0);  // came back at T = 0
+
+  const grpc::Status refused = stub_->SetOptions(context(id, editor).get(), so, &info);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_NE(refused.error_message().find("cannot run a finite T"), std::string::npos) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("not in its fan"), std::string::npos) << refused.error_message();
+  ASSERT_TRUE(stub_->JoinSession(context(id, editor).get(), jr, &info).ok());
+  EXPECT_EQ(info.options().threshold(), 0.0);  // the refused request changed nothing
+  submit(0.75f);
 }
 
 TEST_F(ServiceTest, UnarySubmitPoseReachesWatchers) {

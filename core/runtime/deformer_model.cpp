@@ -49,9 +49,14 @@ const std::vector<std::array<Index, 3>>& DeformerModel::maps_corners() const { r
 
 const NodeGraph& DeformerModel::node_graph() const {
   std::call_once(graph_once_, [this] {
-    graph_ = std::make_unique<const NodeGraph>(*h_);
-    graph_built_.store(true, std::memory_order_release);
+    try {
+      graph_ = std::make_unique<const NodeGraph>(*h_);
+      graph_built_.store(true, std::memory_order_release);
+    } catch (const HierarchyError&) {
+      graph_error_ = std::current_exception();  // the same answer for every later caller, at no cost
+    }
   });
+  if (graph_error_) std::rethrow_exception(graph_error_);
   return *graph_;
 }
 

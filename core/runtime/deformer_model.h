@@ -10,6 +10,7 @@
 #include <array>
 #include <atomic>
 #include <cstddef>
+#include <exception>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -46,7 +47,8 @@ class DeformerModel {
   const std::vector<std::array<Index, 3>>& maps_corners() const;
   // The hierarchy's node graph, for cuts that change (T > 0): built by the
   // first caller, then shared. Throws HierarchyError if the hierarchy's
-  // removals do not delete their fans (hierarchy/node_graph.h).
+  // removals do not delete their fans (hierarchy/node_graph.h): every call,
+  // without deriving it again.
   const NodeGraph& node_graph() const;
   // Direct recovery's scratch, lent to a deformer for one frame at a time
   // (thread-safe): an idle deformer, a session between frames, holds none.
@@ -69,6 +71,7 @@ class DeformerModel {
   mutable std::once_flag graph_once_;
   mutable std::unique_ptr<const NodeGraph> graph_;
   mutable std::atomic<bool> graph_built_{false};
+  mutable std::exception_ptr graph_error_;  // set once, under graph_once_
 };
 
 }  // namespace filigree
