@@ -16,6 +16,7 @@
 #include "hierarchy/node_graph.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer_model.h"
+#include "support/forged_hierarchy.h"
 #include "support/test_meshes.h"
 #include "util/content_hash.h"
 
@@ -298,6 +299,23 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("have only base vertices"), std::string::npos) << msg;
 
+  // Created faces that do not triangulate their ring: one turned over, one
+  // twice (and so another missing).
+  const NodeId quad = [&] {
+    NodeId k = 0;
+    while (hierarchy_->ring_size(k) < 4) ++k;
+    return k;
+  }();
+  const std::size_t at = hierarchy_->first_created_face(quad) - hierarchy_->original_face_count();
+  forged = *hierarchy_;
+  std::swap(forged.created_corners[at][1], forged.created_corners[at][2]);
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("node " + std::to_string(quad) + "'s created faces do not triangulate its ring"), std::string::npos) << msg;
+  forged = *hierarchy_;
+  forged.created_corners[at + 1] = forged.created_corners[at];
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("do not triangulate its ring"), std::string::npos) << msg;
+
   // Stored forms the writer never makes, edited into the bytes.
   std::string b = *bytes_;
   b[section_data(b, 3) + 4] = 40;  // a created face's corner past its ring
@@ -317,33 +335,16 @@ TEST_F(HierarchyFileTest, ForgedFansFailWhenTheNodeGraphIsDerived) {
     }
     return "no error";
   };
-  // A created face that a later node deletes: the first node whose first one is.
-  const Hierarchy& h0 = *hierarchy_;
-  const std::vector<NodeId> node_of = vertex_nodes(h0);
-  NodeId k = 0;
-  const auto deleted = [&](NodeId n) {
-    const Triangle t = h0.created_face(n, 0);
-    return node_of[t[0]] != kNone || node_of[t[1]] != kNone || node_of[t[2]] != kNone;
-  };
-  while (k < h0.node_count() && !deleted(k)) ++k;
-  ASSERT_LT(k, h0.node_count());
-  const std::size_t at = h0.first_created_face(k) - h0.original_face_count();
-
-  Hierarchy h = h0;
-  std::swap(h.created_corners[at][1], h.created_corners[at][2]);  // turned over
-  Hierarchy loaded = deserialize_hierarchy(serialize_hierarchy(h));  // loading does not look at orientation
+  Hierarchy h = *hierarchy_;
+  const NodeId k = test::flip_a_quad_diagonal(h);
+  ASSERT_NE(k, kNone);
+  Hierarchy loaded = deserialize_hierarchy(serialize_hierarchy(h));  // loading sees a valid triangulation
   EXPECT_NE(graph_error(loaded).find("which is not in its fan"), std::string::npos) << graph_error(loaded);
-
-  if (h0.ring_size(k) > 3) {
-    h = h0;
-    h.created_corners[at + 1] = h.created_corners[at];  // the same face twice, another one missing
-    EXPECT_NE(graph_error(h).find("two faces in fan slot"), std::string::npos) << graph_error(h);
-  }
 
   // Through a model, the error reaches whoever first sets a finite T.
   const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(std::move(loaded)));
   EXPECT_THROW((void)model->node_graph(), HierarchyError);
-  EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again, not a half-built graph
+  EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again (kept), not a half-built graph
 }
 
 TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
@@ -418,6 +419,35 @@ TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
   } catch (const HierarchyError& e) {
     EXPECT_NE(std::string(e.what()).find("not a triangle of its ring"), std::string::npos) << e.what();
   }
+}
+
+// The hierarchy's 16-bit fixed point: weights stay positive and sum to 1 up
+// to a step each; barycentrics keep corners exact and b0 + b1 ≤ 1.
+TEST(FixedPoint, WeightsAndBarycentrics) {
+  const std::vector<double> w = {1e-9, 0.25, 0.5, 0.25 - 1e-9};
+  const std::vector<std::uint16_t> q = quantize_ring_weights(w);
+  EXPECT_EQ(q, (std::vector<std::uint16_t>{1, 16384, 32768, 16384}));  // the tiny weight kept, not 0
+  EXPECT_EQ(quantize_ring_weights(std::vector<double>{1.0}), std::vector<std::uint16_t>{65535});
+  for (const double third : {1.0 / 3.0, 0.2, 0.7}) {
+    const std::vector<std::uint16_t> r = quantize_ring_weights(std::vector<double>{third, 1.0 - third});
+    EXPECT_NEAR((r[0] + r[1]) / 65535.0, 1.0, 1.0 / 65535.0);
+    EXPECT_NEAR(r[0] / 65535.0, third, 0.5 / 65535.0);
+  }
+
+  EXPECT_EQ(quantize_barycentric(Vec3(1, 0, 0)), (Barycentric16{65535, 0}));
+  EXPECT_EQ(quantize_barycentric(Vec3(0, 1, 0)), (Barycentric16{0, 65535}));
+  EXPECT_EQ(quantize_barycentric(Vec3(0, 0, 1)), (Barycentric16{0, 0}));
+  EXPECT_EQ(quantize_barycentric(Vec3(-1e-12, 0.5, 0.5)), (Barycentric16{0, 32768}));  // rounding error below 0
+  const Barycentric16 over = quantize_barycentric(Vec3(0.5 + 4e-6, 0.5 + 4e-6, -8e-6));  // rounds to 32768 + 32768
+  EXPECT_LE(over[0] + over[1], 65535);
+  Hierarchy h;
+  h.maps_bary = {quantize_barycentric(Vec3(0.2, 0.3, 0.5)), over};
+  for (Index i = 0; i < 2; ++i) {
+    const Vec3 b = h.maps_barycentric(i);
+    EXPECT_GE(b.minCoeff(), 0.0);
+    EXPECT_NEAR(b.sum(), 1.0, 1e-15);
+  }
+  EXPECT_NEAR((h.maps_barycentric(0) - Vec3(0.2, 0.3, 0.5)).norm(), 0.0, 1.0 / 65535.0);
 }
 
 TEST_F(HierarchyFileTest, MissingFileIsAnError) {

@@ -2,8 +2,10 @@
 // ring coordinates, over meshes of different topology.
 
 #include <algorithm>
-#include <optional>
+#include <array>
 #include <cmath>
+#include <map>
+#include <optional>
 #include <random>
 #include <set>
 
@@ -166,6 +168,36 @@ TEST_P(PreprocessTest, ParentsWereRemovedAfterTheirChildren) {
   EXPECT_GT(edges, 0u);
   EXPECT_EQ(edges, child_edges);  // every child edge, once each way
   EXPECT_GT(h_.depth(), 1u);
+}
+
+// The node graph against a search of its own: slot i of node k holds the
+// one face ever made on fan_face(k, i)'s corners, and k's children are the
+// creators of those faces; on one thread or several (the ranges split
+// inside the created faces), the same.
+TEST_P(PreprocessTest, NodeGraphMatchesABruteForceSearchOnAnyNumberOfThreads) {
+  std::map<std::array<Index, 3>, FaceId> by_corners;
+  h_.for_each_face([&](FaceId f, Triangle t) {
+    std::sort(t.begin(), t.end());
+    ASSERT_TRUE(by_corners.emplace(t, f).second) << "two faces on the corners of face " << f;
+  });
+  for (std::size_t threads : {1u, 2u, 3u}) {
+    const NodeGraph g(h_, threads);
+    for (NodeId k = 0; k < h_.node_count(); ++k) {
+      std::vector<NodeId> children;
+      ASSERT_EQ(g.removed_faces_of(k).size(), h_.fan_size(k));
+      for (std::size_t i = 0; i < h_.fan_size(k); ++i) {
+        Triangle t = h_.fan_face(k, i);
+        std::sort(t.begin(), t.end());
+        const auto found = by_corners.find(t);
+        ASSERT_NE(found, by_corners.end()) << "node " << k << " slot " << i;
+        ASSERT_EQ(g.removed_faces_of(k)[i], found->second) << "node " << k << " slot " << i << ", " << threads << " threads";
+        if (const NodeId c = h_.creator(found->second); c != kNone) children.push_back(c);
+      }
+      std::sort(children.begin(), children.end());
+      children.erase(std::unique(children.begin(), children.end()), children.end());
+      ASSERT_TRUE(std::ranges::equal(g.children_of(k), children)) << "node " << k << ", " << threads << " threads";
+    }
+  }
 }
 
 // The MAPS image of every vertex on the base rest mesh stays within a fraction

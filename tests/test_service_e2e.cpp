@@ -22,6 +22,7 @@
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
 #include "runtime/procedural_motion.h"
+#include "support/forged_hierarchy.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
 
@@ -626,22 +627,14 @@ TEST_F(ServiceTest, AHierarchyThatCannotRunAFiniteTIsRefusedAndTheSessionKeepsWo
   EXPECT_EQ(info.options().threshold(), 2e4);
   ASSERT_EQ(server_->terminate(), 0);
 
-  // Turn over a created face that a later removal deletes; the file's
-  // checksum is written anew, so only the node graph can tell.
+  // Re-triangulate a hole across its other diagonal; the file's checksum is
+  // written anew, so only the node graph can tell.
   std::filesystem::path file;
   for (const auto& e : std::filesystem::directory_iterator(data_dir_ / "hierarchies"))
     if (e.path().extension() == ".fgh") file = e.path();
   ASSERT_FALSE(file.empty());
   Hierarchy h = load_hierarchy(file);
-  const std::vector<NodeId> node_of = vertex_nodes(h);
-  NodeId k = 0;
-  for (; k < h.node_count(); ++k) {
-    const Triangle t = h.created_face(k, 0);
-    if (node_of[t[0]] != kNone || node_of[t[1]] != kNone || node_of[t[2]] != kNone) break;
-  }
-  ASSERT_LT(k, h.node_count());
-  RingCorners& turned = h.created_corners[h.first_created_face(k) - h.original_face_count()];
-  std::swap(turned[1], turned[2]);
+  ASSERT_NE(test::flip_a_quad_diagonal(h), kNone);
   save_hierarchy(h, file);
 
   start({});

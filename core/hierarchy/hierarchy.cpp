@@ -77,6 +77,40 @@ void check_ring_sizes(std::span<const Index> ring_offsets) {
   }
 }
 
+// Whether `tris` (corners < r, each triangle's distinct) triangulate the
+// ring's polygon consistently with its fan: every ring edge i → i+1 (the
+// closing one r−1 → 0 too) once, every other edge once each way. Then the
+// hole closes into a manifold disc with every ring vertex on it. O(r) for
+// the rings the simplifier makes (diagonals paired by a scan).
+bool is_ring_triangulation(std::span<const RingCorners> tris, std::size_t r) {
+  std::array<std::uint64_t, 4> ring_edge{};  // r ≤ kMaxRingSize < 256
+  std::array<std::array<std::uint8_t, 2>, 3 * kMaxRingSize> diagonal;
+  std::size_t diagonals = 0, ring_edges = 0;
+  for (const RingCorners& t : tris) {
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t a = t[c], b = t[(c + 1) % 3];
+      if (b == (a + 1 == r ? 0 : a + 1)) {
+        const std::uint64_t bit = std::uint64_t{1} << (a % 64);
+        if (ring_edge[a / 64] & bit) return false;
+        ring_edge[a / 64] |= bit;
+        ++ring_edges;
+      } else {
+        diagonal[diagonals++] = {t[c], t[(c + 1) % 3]};
+      }
+    }
+  }
+  if (ring_edges != r) return false;
+  for (std::size_t i = 0; i < diagonals; ++i) {
+    std::size_t same = 0, reverse = 0;
+    for (std::size_t j = 0; j < diagonals; ++j) {
+      same += diagonal[j] == diagonal[i];
+      reverse += diagonal[j][0] == diagonal[i][1] && diagonal[j][1] == diagonal[i][0];
+    }
+    if (same != 1 || reverse != 1) return false;
+  }
+  return true;
+}
+
 // First created face of node k (valid ring offsets assumed).
 std::size_t first_created(std::span<const Index> ring_offsets, std::size_t original_faces, std::size_t k) {
   return original_faces + ring_offsets[k] - 2 * k;
@@ -159,7 +193,7 @@ Checked check(const StoredHierarchy& s) {
 
   // Rings, last node first: a ring vertex is a base vertex or one removed
   // later (so direct recovery, in descending node order, has placed it).
-  // Created faces: a triangulation of the ring's corners.
+  // Created faces: a triangulation of the ring's polygon.
   Bits later(n);
   std::size_t fans = 0;
   for (std::size_t k = nodes; k-- > 0;) {
@@ -178,17 +212,19 @@ Checked check(const StoredHierarchy& s) {
     later.test_and_set(v);
     fans += size - (s.node_closed[k] ? 0 : 1);
 
-    const std::size_t created = first_created(s.ring_offsets, 0, k);
+    const std::span<const RingCorners> made = s.created_corners.subspan(first_created(s.ring_offsets, 0, k), size - 2);
     bool outside = false;
-    for (const RingCorners& t : s.created_corners.subspan(created, size - 2))
+    for (const RingCorners& t : made)
       outside |= t[0] >= size || t[1] >= size || t[2] >= size || t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
     if (outside) fail("node " + str(k) + " creates a face with corners outside its ring");
+    if (!is_ring_triangulation(made, size)) fail("node " + str(k) + "'s created faces do not triangulate its ring");
   }
 
   // The faces alive at the end are those with only base vertices (a face
   // dies with the first of its vertices removed), and as many as the
   // removals leave: every face, less one per fan slot.
   const auto base = [&](Index v) { return !c.removed_vertices.test(v); };
+  if (fans <= faces) c.base_faces.reserve(faces - fans);
   for (std::size_t f = 0; f < original; ++f) {
     const Triangle& t = s.original_faces[f];
     if (base(t[0]) && base(t[1]) && base(t[2])) c.base_faces.push_back(static_cast<FaceId>(f));

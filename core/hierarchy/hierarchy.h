@@ -9,9 +9,10 @@
 // why that is precise enough), faces created by removals as 3-byte ring
 // corners, and nothing stored that the rest determines. The base mesh
 // (base_vertices, base_faces) is derived when a file is loaded. What only a
-// changing cut needs (which face each removal deleted, the dependency edges,
-// vertex → node) is derived by whoever needs it (hierarchy/node_graph.h):
-// direct recovery (T = 0) never does.
+// changing cut needs (which face each removal deleted, the dependency edges)
+// is derived by whoever needs it (hierarchy/node_graph.h), and vertex → node
+// by vertex_nodes(): direct recovery (T = 0) needs only the latter, once,
+// while it lays itself out.
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -82,8 +83,9 @@ struct Hierarchy {
   // Removal-time 1-ring, ordered so that (v, ring[k], ring[k+1]) were faces.
   std::vector<Index> ring_offsets;        // N+1
   std::vector<Index> ring_vertices;
-  // Relative weights in 16-bit fixed point: w_i = ring_weights[i] / Σ ≥ 1/65535
-  // (geometry/ring_weights.h, then quantize_ring_weights()). Enough because
+  // Relative weights in 16-bit fixed point, each ≥ 1: w_i = ring_weights[i] / Σ
+  // (geometry/ring_weights.h, then quantize_ring_weights(); Σ is 65535 up to
+  // a step per weight). Enough because
   // preprocessing rounds the weights *before* it computes node_offset: the
   // offset is exact for the stored weights, and ring_frame() divides by
   // their sum, so the rounding only changes which (equally valid) centre the
@@ -112,7 +114,8 @@ struct Hierarchy {
   std::vector<FaceId> base_faces;    // face ids, ascending
 
   // ---- MAPS parameterisation (thesis §3.1.2): vertex i lies at
-  // Σ_c maps_bary[i][c] · x(face(base_faces[maps_face[i]])[c]) on the base mesh.
+  // Σ_c b_c · x(face(base_faces[maps_face[i]])[c]) on the base mesh, b =
+  // maps_barycentric(i).
   // The first two barycentrics in 16-bit fixed point (maps_barycentric());
   // rounding moves the point by ~1e-5 of its base triangle, far below the
   // parameterisation's own distortion.

@@ -12,7 +12,7 @@
 // alignment, so a loaded file is read in place.
 //
 // Version 3 (issue 10) stores only what cannot be derived, in float32 or
-// 16-bit fixed point where the hierarchy allows it: ~110 bytes per vertex,
+// 16-bit fixed point where the hierarchy allows it: ~119 bytes per vertex,
 // against ~170 in version 2 (which also stored the faces each removal
 // deleted and the dependency edges) and ~310 in version 1. Older files are
 // refused with a message to rebuild them.

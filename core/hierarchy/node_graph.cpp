@@ -79,7 +79,7 @@ void in_parts(std::size_t n, std::size_t parts, Fn&& fn) {
 
 }  // namespace
 
-NodeGraph::NodeGraph(const Hierarchy& h) : h_(&h), vertex_node_(filigree::vertex_nodes(h)) {
+NodeGraph::NodeGraph(const Hierarchy& h, std::size_t threads) : h_(&h), vertex_node_(filigree::vertex_nodes(h)) {
   const std::size_t nodes = h.node_count(), slots = h.ring_vertices.size(), faces = h.face_count();
   const std::vector<NodeId>& node_of = vertex_node_;
   // Every read below is scattered (a face's vertices, its deleter's ring and
@@ -87,7 +87,9 @@ NodeGraph::NodeGraph(const Hierarchy& h) : h_(&h), vertex_node_(filigree::vertex
   // loads are in flight, and both cores take half the faces (1.25M
   // vertices: 1.0 s → 0.33–0.41 s).
   constexpr std::size_t kAhead = 32;
-  const std::size_t parts = faces >= 100000 ? std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 2) : 1;
+  const std::size_t parts =
+      threads ? std::min(threads, std::max<std::size_t>(faces, 1))
+              : (faces >= 100000 ? std::clamp<std::size_t>(std::thread::hardware_concurrency(), 1, 2) : 1);
 
   // Pass 1: each face's deleter, and its corner.
   std::vector<NodeId> face_deleter(faces);

@@ -21,7 +21,8 @@ class NodeGraph {
   // outlive it. O(faces). Checks what validation leaves to it: every fan
   // slot of every node holds exactly one face that was alive then, and no
   // face is deleted twice; throws HierarchyError naming the first violation.
-  explicit NodeGraph(const Hierarchy& h);
+  // `threads`: 0 uses two for a large hierarchy; the result never depends on it.
+  explicit NodeGraph(const Hierarchy& h, std::size_t threads = 0);
 
   const Hierarchy& hierarchy() const { return *h_; }
   // The node that removed vertex v; kNone for a base vertex.
