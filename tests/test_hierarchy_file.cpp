@@ -15,6 +15,7 @@
 #include "hierarchy/hierarchy_file.h"
 #include "hierarchy/node_graph.h"
 #include "preprocess/preprocess.h"
+#include "runtime/deformer.h"
 #include "runtime/deformer_model.h"
 #include "support/forged_hierarchy.h"
 #include "support/test_meshes.h"
@@ -190,11 +191,6 @@ TEST_F(HierarchyFileTest, VersionOneFilesAreRefusedWithWhatToDo) {
   EXPECT_NE(msg.find("test.fgh: unsupported format version 1"), std::string::npos) << msg;
   EXPECT_NE(msg.find("rebuild it"), std::string::npos) << msg;
   EXPECT_NE(msg.find("filigree preprocess"), std::string::npos) << msg;
-  // Version 2 (which stored each removal's deleted faces) likewise.
-  const std::uint32_t v2 = 2;
-  std::memcpy(b.data() + 8, &v2, 4);
-  EXPECT_NE(error_of(b).find("test.fgh: unsupported format version 2, older than"), std::string::npos) << error_of(b);
-  std::memcpy(b.data() + 8, &v1, 4);
 
   const auto path = temp_file("v1.fgh");
   std::ofstream(path, std::ios::binary).write(b.data(), static_cast<std::streamsize>(b.size()));
@@ -208,6 +204,86 @@ TEST_F(HierarchyFileTest, VersionOneFilesAreRefusedWithWhatToDo) {
     }
   }
   std::filesystem::remove(path);
+}
+
+// A hierarchy written as version 2 did (float32 weights and barycentrics,
+// the deleted faces and child lists stored): the old writer, kept here.
+std::string serialize_v2(const Hierarchy& h) {
+  const NodeGraph g(h);
+  std::vector<float> weights;
+  for (NodeId k = 0; k < h.node_count(); ++k) {
+    double sum = 0.0;
+    for (std::uint16_t w : h.weights(k)) sum += w;
+    for (std::uint16_t w : h.weights(k)) weights.push_back(static_cast<float>(w / sum));
+  }
+  std::vector<FaceId> removed(h.ring_vertices.size(), kNone);
+  std::vector<Index> child_offsets{0};
+  std::vector<NodeId> children;
+  for (NodeId k = 0; k < h.node_count(); ++k) {
+    std::copy(g.removed_faces_of(k).begin(), g.removed_faces_of(k).end(), removed.begin() + h.ring_offsets[k]);
+    children.insert(children.end(), g.children_of(k).begin(), g.children_of(k).end());
+    child_offsets.push_back(static_cast<Index>(children.size()));
+  }
+  std::vector<Vec3f> bary;
+  for (Index v = 0; v < h.vertex_count(); ++v) bary.push_back(h.maps_barycentric(v).cast<float>());
+  std::string payload;
+  auto section = [&](std::uint32_t tag, const auto& v) {
+    const std::uint32_t head[2] = {tag, static_cast<std::uint32_t>(sizeof(v[0]))};
+    const std::uint64_t count = v.size();
+    payload.append(reinterpret_cast<const char*>(head), 8);
+    payload.append(reinterpret_cast<const char*>(&count), 8);
+    payload.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(v[0]));
+    payload.append((8 - v.size() * sizeof(v[0]) % 8) % 8, '\0');
+  };
+  section(1, h.rest_positions), section(2, h.original_faces), section(3, h.created_corners), section(4, h.node_vertex);
+  section(5, h.node_closed), section(6, h.ring_offsets), section(7, h.ring_vertices), section(8, weights);
+  section(9, h.node_offset), section(10, removed), section(11, child_offsets), section(12, children);
+  section(13, h.maps_face), section(14, bary);
+  struct Build {
+    std::uint64_t requested;
+    double seconds;
+    std::uint32_t threads, reserved;
+  };
+  section(15, std::vector<Build>{{h.build.requested_base_vertices, h.build.build_seconds, h.build.threads, 0}});
+  std::string out = serialize_hierarchy(h).substr(0, 64);  // the header: magic, sizes, counts; then patched
+  const std::uint32_t version = 2, sections = 15;
+  const std::uint64_t size = payload.size(), hash = hash_bytes(payload.data(), payload.size());
+  std::memcpy(out.data() + 8, &version, 4);
+  std::memcpy(out.data() + 24, &size, 8);
+  std::memcpy(out.data() + 32, &hash, 8);
+  std::memcpy(out.data() + 56, &sections, 4);
+  return out + payload;
+}
+
+// A version 2 file (what a session persisted by the previous server names)
+// still loads, into the same hierarchy up to the 16-bit rounding of its
+// float weights, and deforms like it within 1e-5 of the diagonal.
+TEST_F(HierarchyFileTest, VersionTwoFilesLoadAndDeformAsBefore) {
+  const Hierarchy& h = *hierarchy_;
+  const Hierarchy old = deserialize_hierarchy(serialize_v2(h), "v2.fgh");
+  EXPECT_NO_THROW(validate_hierarchy(old));
+  EXPECT_EQ(old.rest_positions, h.rest_positions);
+  EXPECT_EQ(old.ring_vertices, h.ring_vertices);
+  EXPECT_EQ(old.created_corners, h.created_corners);
+  EXPECT_EQ(old.base_faces, h.base_faces);
+  EXPECT_EQ(old.maps_bary, h.maps_bary);
+  EXPECT_EQ(old.mesh_hash, h.mesh_hash);
+  for (std::size_t j = 0; j < h.ring_weights.size(); ++j) ASSERT_NEAR(old.ring_weights[j], h.ring_weights[j], 8) << j;
+  EXPECT_NO_THROW(NodeGraph{old});
+
+  const double diag = bounding_box_diagonal(h.rest_positions);
+  Pose rest, bent;
+  for (Index v : h.base_vertices) {
+    rest.positions.push_back(h.rest_positions[v]);
+    bent.positions.push_back(h.rest_positions[v] + Vec3(0.0, 0.2 * h.rest_positions[v].x(), 0.0));  // a shear
+  }
+  Deformer now(h), before(old);
+  const std::vector<Vec3> a = now.deform(bent).positions, b = before.deform(bent).positions;
+  double worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) worst = std::max(worst, (a[i] - b[i]).norm());
+  EXPECT_LT(worst, 1e-5 * diag);
+  const std::vector<Vec3> back = before.deform(rest).positions;  // its offsets were redone for its weights
+  for (std::size_t i = 0; i < back.size(); ++i) ASSERT_LT((back[i] - h.rest_positions[i]).norm(), 1e-9 * diag) << i;
 }
 
 TEST_F(HierarchyFileTest, TruncatedOrCorruptFilesOnDiskAreErrorsNotCrashes) {

@@ -5,7 +5,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <array>
 #include <bit>
+#include <cmath>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
@@ -13,6 +15,7 @@
 #include <optional>
 #include <vector>
 
+#include "geometry/ring_frame.h"
 #include "hierarchy/hierarchy.h"
 #include "util/content_hash.h"
 
@@ -62,6 +65,36 @@ void for_each_section(S& s, Fn&& fn) {
 }
 constexpr std::uint32_t kBuildTag = 12;
 constexpr std::uint32_t kSectionCount = 12;
+
+// Version 2, still read (sessions persisted by an older server name their
+// hierarchy by key, with no mesh to rebuild it from): the same arrays plus
+// the faces each removal deleted and the child lists, which version 3
+// derives; float32 weights and barycentrics.
+constexpr std::uint32_t kOldestReadableVersion = 2;
+struct StoredV2 {
+  std::span<const Vec3> rest_positions;
+  std::span<const Triangle> original_faces;
+  std::span<const RingCorners> created_corners;
+  std::span<const Index> node_vertex;
+  std::span<const std::uint8_t> node_closed;
+  std::span<const Index> ring_offsets;
+  std::span<const Index> ring_vertices;
+  std::span<const float> ring_weights;
+  std::span<const Vec3f> node_offset;
+  std::span<const FaceId> removed_faces;
+  std::span<const Index> child_offsets;
+  std::span<const NodeId> children;
+  std::span<const Index> maps_face;
+  std::span<const Vec3f> maps_bary;
+};
+template <class Fn>
+void for_each_v2_section(StoredV2& s, Fn&& fn) {
+  fn(1, s.rest_positions), fn(2, s.original_faces), fn(3, s.created_corners), fn(4, s.node_vertex), fn(5, s.node_closed);
+  fn(6, s.ring_offsets), fn(7, s.ring_vertices), fn(8, s.ring_weights), fn(9, s.node_offset), fn(10, s.removed_faces);
+  fn(11, s.child_offsets), fn(12, s.children), fn(13, s.maps_face), fn(14, s.maps_bary);
+}
+constexpr std::uint32_t kV2BuildTag = 15;
+constexpr std::uint32_t kV2SectionCount = 15;
 
 using Sink = std::function<void(const void*, std::size_t)>;
 
@@ -116,12 +149,13 @@ Header parse_header(std::span<const char> bytes, const std::string& name) {
   Header hd;
   std::memcpy(&hd, bytes.data(), sizeof hd);
   if (std::memcmp(hd.magic, kMagic, sizeof kMagic) != 0) fail(name, "not a Filigree hierarchy file (bad magic)");
-  if (hd.version < kHierarchyFormatVersion)
+  if (hd.version < kOldestReadableVersion)
     fail(name, "unsupported format version " + std::to_string(hd.version) + ", older than this build's version " +
                    std::to_string(kHierarchyFormatVersion) +
                    ": rebuild it from its mesh with `filigree preprocess` (the server rebuilds its cached hierarchies automatically)");
-  if (hd.version != kHierarchyFormatVersion)
-    fail(name, "unsupported format version " + std::to_string(hd.version) + " (this build reads version " + std::to_string(kHierarchyFormatVersion) + ")");
+  if (hd.version > kHierarchyFormatVersion)
+    fail(name, "unsupported format version " + std::to_string(hd.version) + " (this build reads versions " +
+                   std::to_string(kOldestReadableVersion) + "–" + std::to_string(kHierarchyFormatVersion) + ")");
   if (hd.header_size != sizeof(Header)) fail(name, "corrupt header (header size " + std::to_string(hd.header_size) + ")");
   return hd;
 }
@@ -218,18 +252,51 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
   };
   Hierarchy h;
   try {
-    if (hd.section_count != kSectionCount) fail(name, "corrupt: " + std::to_string(hd.section_count) + " sections, expected " + std::to_string(kSectionCount));
+    const bool v2 = hd.version == 2;
+    const std::uint32_t sections = v2 ? kV2SectionCount : kSectionCount;
+    if (hd.section_count != sections) fail(name, "corrupt: " + std::to_string(hd.section_count) + " sections, expected " + std::to_string(sections));
     StoredHierarchy s;
     SectionReader reader(payload, name);
-    for_each_section(s, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
+    // A version 2 file's float weights and barycentrics, in version 3's form.
+    std::vector<std::uint16_t> weights;
+    std::vector<Barycentric16> bary;
+    if (v2) {
+      StoredV2 old;
+      for_each_v2_section(old, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
+      weights.resize(old.ring_weights.size());
+      for (std::size_t j = 0; j < weights.size(); ++j) {
+        const float w = old.ring_weights[j];
+        if (!(w > 0.0f) || !std::isfinite(w)) fail(name, "corrupt: invalid hierarchy: a non-positive or non-finite ring weight");
+        weights[j] = quantize_ring_weights(std::span<const double>(std::array<double, 1>{w}))[0];
+      }
+      bary.resize(old.maps_bary.size());
+      for (std::size_t v = 0; v < bary.size(); ++v) {
+        const Vec3 b = old.maps_bary[v].cast<double>();
+        if (!b.allFinite()) fail(name, "corrupt: invalid hierarchy: vertex " + std::to_string(v) + " has invalid barycentric coordinates");
+        bary[v] = quantize_barycentric(b);
+      }
+      s = {old.rest_positions, old.original_faces, old.created_corners, old.node_vertex, old.node_closed, old.ring_offsets,
+           old.ring_vertices, weights,           old.node_offset,     old.maps_face,   bary};
+    } else {
+      for_each_section(s, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
+    }
     std::span<const BuildRecord> build;
-    reader.read(kBuildTag, build);
+    reader.read(v2 ? kV2BuildTag : kBuildTag, build);
     if (build.size() != 1 || !reader.at_end()) fail(name, "corrupt: unexpected section layout");
     if (s.rest_positions.size() != hd.vertex_count || s.original_faces.size() != hd.original_face_count ||
         s.original_faces.size() + s.created_corners.size() != hd.face_count || s.node_vertex.size() != hd.node_count)
       fail(name, "corrupt: section sizes disagree with the header");
     h = hierarchy_from(s, compute_hash);
     h.build = {build[0].requested_base_vertices, build[0].build_seconds, build[0].threads};
+    if (v2) {
+      // Its offsets are in the frames of its float weights: redo them in the
+      // frames of the 16-bit ones, as preprocessing now does, so that the
+      // pair puts every vertex back where it was (validated indices by now).
+      for (NodeId k = 0; k < h.node_count(); ++k)
+        h.node_offset[k] = ring_frame(h.ring(k), h.weights(k), h.rest_positions, h.node_closed[k] != 0)
+                               .to_local(h.rest_positions[h.node_vertex[k]])
+                               .cast<float>();
+    }
   } catch (const HierarchyError& e) {
     verify_hash();
     fail(name, std::string("corrupt: ") + e.what());

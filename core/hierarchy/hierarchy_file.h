@@ -14,8 +14,11 @@
 // Version 3 (issue 10) stores only what cannot be derived, in float32 or
 // 16-bit fixed point where the hierarchy allows it: ~119 bytes per vertex,
 // against ~170 in version 2 (which also stored the faces each removal
-// deleted and the dependency edges) and ~310 in version 1. Older files are
-// refused with a message to rebuild them.
+// deleted and the dependency edges) and ~310 in version 1. Version 2 files
+// are still read (converted on load: its float weights and barycentrics
+// rounded to 16 bits, the offsets recomputed for them), since a persisted
+// session names its hierarchy with no mesh to rebuild it from; version 1
+// files are refused with a message to rebuild them.
 //
 // Loading maps the file read-only, checks the header, every size against the
 // bytes present, the payload hash, then validates the mapped arrays
