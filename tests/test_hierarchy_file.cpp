@@ -370,10 +370,23 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   forged.ring_weights[2] = 0;
   EXPECT_NE(error_of(serialize_hierarchy(forged)).find("zero ring weight"), std::string::npos);
 
+  // Open and closed rings swapped between a boundary node and an inner one:
+  // the face count still adds up, the boundary does not.
   forged = *hierarchy_;
-  forged.node_closed[0] ^= 1;  // one fan face more or less than the faces say
+  const auto first_with = [&](std::uint8_t closed) {
+    NodeId k = 0;
+    while (k < forged.node_count() && forged.node_closed[k] != closed) ++k;
+    return k;
+  };
+  const NodeId open = first_with(0), closed = first_with(1);
+  ASSERT_LT(open, forged.node_count());  // the fixture has a boundary
+  forged.node_closed[open] = 1, forged.node_closed[closed] = 0;
   msg = error_of(serialize_hierarchy(forged));
-  EXPECT_NE(msg.find("have only base vertices"), std::string::npos) << msg;
+  const NodeId first = std::min(open, closed);
+  EXPECT_NE(msg.find("node " + std::to_string(first) + " says its ring is " + (first == open ? "closed, but its vertex is on" : "open, but its vertex is not on") +
+                     " the mesh's boundary"),
+            std::string::npos)
+      << msg;
 
   // Created faces that do not triangulate their ring: one turned over, one
   // twice (and so another missing).

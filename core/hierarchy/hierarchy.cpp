@@ -191,6 +191,26 @@ Checked check(const StoredHierarchy& s) {
   for (std::size_t k = 0; k < nodes; ++k)
     if (c.removed_vertices.test_and_set(s.node_vertex[k])) fail("node " + str(k) + " removes vertex " + str(s.node_vertex[k]) + ", removed before");
 
+  // A removed vertex's ring is open exactly when the vertex is on the
+  // original mesh's boundary (simplification keeps every vertex's boundary
+  // status). A vertex is inside when its faces' next corners are their
+  // previous corners over again (a closed fan): compared as sums of a
+  // 64-bit mix of the ids, one pass over the faces, no edge table.
+  {
+    std::vector<std::uint64_t> balance(n, 0);  // Σ mix(next corner) − Σ mix(previous corner)
+    const auto mix = [](Index v) {
+      std::uint64_t x = (static_cast<std::uint64_t>(v) + 1) * 0x9E3779B97F4A7C15ull;
+      x ^= x >> 31;
+      return x * 0xBF58476D1CE4E5B9ull;
+    };
+    for (const Triangle& t : s.original_faces)
+      for (int i = 0; i < 3; ++i) balance[t[i]] += mix(t[(i + 1) % 3]) - mix(t[(i + 2) % 3]);
+    for (std::size_t k = 0; k < nodes; ++k)
+      if ((balance[s.node_vertex[k]] == 0) != (s.node_closed[k] != 0))
+        fail("node " + str(k) + " says its ring is " + (s.node_closed[k] ? "closed" : "open") + ", but its vertex is " +
+             (s.node_closed[k] ? "on" : "not on") + " the mesh's boundary");
+  }
+
   // Rings, last node first: a ring vertex is a base vertex or one removed
   // later (so direct recovery, in descending node order, has placed it).
   // Created faces: a triangulation of the ring's polygon.
