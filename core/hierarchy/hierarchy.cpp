@@ -355,8 +355,7 @@ std::size_t Hierarchy::depth() const {
   std::vector<std::uint32_t> d(node_count(), 1);
   std::size_t deepest = 0;
   for (std::size_t k = node_count(); k-- > 0;) {
-    for (Index u : ring(static_cast<NodeId>(k)))
-      if (node_of[u] != kNone) d[k] = std::max(d[k], d[node_of[u]] + 1);
+    for_each_ring_dependency(*this, node_of, static_cast<NodeId>(k), [&](NodeId p) { d[k] = std::max(d[k], d[p] + 1); });
     deepest = std::max<std::size_t>(deepest, d[k]);
   }
   return deepest;
@@ -368,10 +367,13 @@ std::vector<NodeId> vertex_nodes(const Hierarchy& h) {
   return node_of;
 }
 
+std::uint16_t quantize_ring_weight(double w) {
+  return static_cast<std::uint16_t>(std::clamp(std::lround(w * kFixedPointOne), 1L, 65535L));
+}
+
 std::vector<std::uint16_t> quantize_ring_weights(std::span<const double> weights) {
   std::vector<std::uint16_t> q(weights.size());
-  for (std::size_t i = 0; i < weights.size(); ++i)
-    q[i] = static_cast<std::uint16_t>(std::clamp(std::lround(weights[i] * kFixedPointOne), 1L, 65535L));
+  for (std::size_t i = 0; i < weights.size(); ++i) q[i] = quantize_ring_weight(weights[i]);
   return q;
 }
 
@@ -425,8 +427,7 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
     const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
     reserve_exact(h.base_vertices, n - nodes);
     c.removed_vertices.for_each_clear(n, [&](std::size_t v) { h.base_vertices.push_back(static_cast<Index>(v)); });
-    h.base_faces = std::move(c.base_faces);
-    h.base_faces.shrink_to_fit();
+    h.base_faces = std::move(c.base_faces);  // reserved exactly by check()
   }
   if (!parallel) copy_stored();
   if (helper_error) std::rethrow_exception(helper_error);

@@ -187,9 +187,19 @@ struct Hierarchy {
 // Per vertex, the node that removed it; kNone for a base vertex. O(n).
 std::vector<NodeId> vertex_nodes(const Hierarchy& h);
 
+// Calls fn(p) for each node p whose vertex is in node k's ring (repeats
+// possible): what direct recovery of k reads, all with ids above k.
+// `node_of` is vertex_nodes(h).
+template <class Fn>
+void for_each_ring_dependency(const Hierarchy& h, const std::vector<NodeId>& node_of, NodeId k, Fn&& fn) {
+  for (Index u : h.ring(k))
+    if (node_of[u] != kNone) fn(node_of[u]);
+}
+
 // Normalised positive weights (geometry/ring_weights.h) in 16-bit fixed
 // point, each ≥ 1: what Hierarchy::ring_weights stores.
 std::vector<std::uint16_t> quantize_ring_weights(std::span<const double> weights);
+std::uint16_t quantize_ring_weight(double w);
 // A barycentric triple (≥ 0, Σ = 1) as Hierarchy::maps_bary stores it.
 Barycentric16 quantize_barycentric(const Vec3& b);
 

@@ -5,7 +5,6 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <array>
 #include <bit>
 #include <cmath>
 #include <cerrno>
@@ -67,32 +66,10 @@ constexpr std::uint32_t kBuildTag = 12;
 constexpr std::uint32_t kSectionCount = 12;
 
 // Version 2, still read (sessions persisted by an older server name their
-// hierarchy by key, with no mesh to rebuild it from): the same arrays plus
-// the faces each removal deleted and the child lists, which version 3
-// derives; float32 weights and barycentrics.
+// hierarchy by key, with no mesh to rebuild it from): sections 1–7 and 9 as
+// in version 3, float32 weights (8) and barycentrics (14), and the faces
+// each removal deleted and the child lists (10–12), which version 3 derives.
 constexpr std::uint32_t kOldestReadableVersion = 2;
-struct StoredV2 {
-  std::span<const Vec3> rest_positions;
-  std::span<const Triangle> original_faces;
-  std::span<const RingCorners> created_corners;
-  std::span<const Index> node_vertex;
-  std::span<const std::uint8_t> node_closed;
-  std::span<const Index> ring_offsets;
-  std::span<const Index> ring_vertices;
-  std::span<const float> ring_weights;
-  std::span<const Vec3f> node_offset;
-  std::span<const FaceId> removed_faces;
-  std::span<const Index> child_offsets;
-  std::span<const NodeId> children;
-  std::span<const Index> maps_face;
-  std::span<const Vec3f> maps_bary;
-};
-template <class Fn>
-void for_each_v2_section(StoredV2& s, Fn&& fn) {
-  fn(1, s.rest_positions), fn(2, s.original_faces), fn(3, s.created_corners), fn(4, s.node_vertex), fn(5, s.node_closed);
-  fn(6, s.ring_offsets), fn(7, s.ring_vertices), fn(8, s.ring_weights), fn(9, s.node_offset), fn(10, s.removed_faces);
-  fn(11, s.child_offsets), fn(12, s.children), fn(13, s.maps_face), fn(14, s.maps_bary);
-}
 constexpr std::uint32_t kV2BuildTag = 15;
 constexpr std::uint32_t kV2SectionCount = 15;
 
@@ -261,22 +238,26 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
     std::vector<std::uint16_t> weights;
     std::vector<Barycentric16> bary;
     if (v2) {
-      StoredV2 old;
-      for_each_v2_section(old, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
-      weights.resize(old.ring_weights.size());
+      std::span<const float> weights_f;
+      std::span<const Vec3f> bary_f;
+      std::span<const Index> unused;  // deleted faces, child offsets, children: derived since
+      reader.read(1, s.rest_positions), reader.read(2, s.original_faces), reader.read(3, s.created_corners);
+      reader.read(4, s.node_vertex), reader.read(5, s.node_closed), reader.read(6, s.ring_offsets);
+      reader.read(7, s.ring_vertices), reader.read(8, weights_f), reader.read(9, s.node_offset);
+      reader.read(10, unused), reader.read(11, unused), reader.read(12, unused);
+      reader.read(13, s.maps_face), reader.read(14, bary_f);
+      weights.resize(weights_f.size());
       for (std::size_t j = 0; j < weights.size(); ++j) {
-        const float w = old.ring_weights[j];
-        if (!(w > 0.0f) || !std::isfinite(w)) fail(name, "corrupt: invalid hierarchy: a non-positive or non-finite ring weight");
-        weights[j] = quantize_ring_weights(std::span<const double>(std::array<double, 1>{w}))[0];
+        if (!(weights_f[j] > 0.0f) || !std::isfinite(weights_f[j])) fail(name, "corrupt: invalid hierarchy: a non-positive or non-finite ring weight");
+        weights[j] = quantize_ring_weight(weights_f[j]);
       }
-      bary.resize(old.maps_bary.size());
+      bary.resize(bary_f.size());
       for (std::size_t v = 0; v < bary.size(); ++v) {
-        const Vec3 b = old.maps_bary[v].cast<double>();
+        const Vec3 b = bary_f[v].cast<double>();
         if (!b.allFinite()) fail(name, "corrupt: invalid hierarchy: vertex " + std::to_string(v) + " has invalid barycentric coordinates");
         bary[v] = quantize_barycentric(b);
       }
-      s = {old.rest_positions, old.original_faces, old.created_corners, old.node_vertex, old.node_closed, old.ring_offsets,
-           old.ring_vertices, weights,           old.node_offset,     old.maps_face,   bary};
+      s.ring_weights = weights, s.maps_bary = bary;
     } else {
       for_each_section(s, [&](std::uint32_t tag, auto& v) { reader.read(tag, v); });
     }

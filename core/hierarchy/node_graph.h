@@ -34,12 +34,6 @@ class NodeGraph {
   // Ascending.
   std::span<const NodeId> children_of(NodeId k) const { return span_of(children_, child_offsets_, k); }
   std::span<const NodeId> parents_of(NodeId k) const { return span_of(parents_, parent_offsets_, k); }
-  const std::vector<NodeId>& vertex_nodes() const { return vertex_node_; }
-  // Starts loading what children_of(k) and removed_faces_of(k) read.
-  void prefetch(NodeId k) const {
-    __builtin_prefetch(removed_faces_.data() + h_->ring_offsets[k]);
-    __builtin_prefetch(&child_offsets_[k]);
-  }
   // Heap bytes held.
   std::size_t memory_bytes() const;
 

@@ -241,10 +241,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions)
   // cut's parents, NodeGraph, give the same levels and phases below: each is
   // a longest path, and every such dependency is a chain of parents.)
   const std::vector<NodeId> node_of = vertex_nodes(h);
-  const auto for_each_dependency = [&](std::size_t k, auto&& fn) {
-    for (Index u : h.ring(static_cast<NodeId>(k)))
-      if (node_of[u] != kNone) fn(node_of[u]);
-  };
+  const auto for_each_dependency = [&](std::size_t k, auto&& fn) { for_each_ring_dependency(h, node_of, static_cast<NodeId>(k), fn); };
   // Level = 1 + the deepest dependency's level: one descending pass sees
   // them first.
   std::vector<std::uint32_t> level(n_nodes, 0);
