@@ -433,7 +433,7 @@ TEST_F(HierarchyFileTest, ForgedFansFailWhenTheNodeGraphIsDerived) {
   // Through a model, the error reaches whoever first sets a finite T.
   const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(std::move(loaded)));
   EXPECT_THROW((void)model->node_graph(), HierarchyError);
-  EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again (kept), not a half-built graph
+  EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again: no half-built graph is handed out
 }
 
 TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
