@@ -22,13 +22,4 @@ inline bool cpu_has_avx2() {
 #endif
 }
 
-inline bool cpu_has_sse41() {
-#if FILIGREE_X86_TARGETS
-  __builtin_cpu_init();
-  return __builtin_cpu_supports("sse4.1");
-#else
-  return false;
-#endif
-}
-
 }  // namespace filigree
