@@ -872,23 +872,50 @@ grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext*
   return finish_unary(context, status);
 }
 
+namespace {
+
+grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, v1::SessionInfo* response) {
+  try {
+    s.set_threshold(threshold, whole_mesh);
+    *response = s.info();
+  } catch (const StoreUnavailable& e) {
+    return {grpc::StatusCode::UNAVAILABLE, e.what()};
+  } catch (const HierarchyError& e) {
+    return {grpc::StatusCode::FAILED_PRECONDITION, std::string("this session's hierarchy cannot run a finite T: ") + e.what()};
+  } catch (const std::bad_alloc&) {
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED, "out of memory while preparing the threshold"};
+  } catch (const std::exception& e) {
+    // Off a gRPC thread an escaped exception would end the process.
+    return {grpc::StatusCode::INTERNAL, std::string("setting the options failed: ") + e.what()};
+  }
+  return grpc::Status::OK;
+}
+
+}  // namespace
+
 grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context,
                                                       const v1::SetOptionsRequest* request, v1::SessionInfo* response) {
   std::shared_ptr<Session> s;
   grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
   if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
     status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-  if (status.ok()) {
-    try {
-      s->set_threshold(request->threshold(), request->whole_mesh());
-      *response = s->info();
-    } catch (const StoreUnavailable& e) {
-      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
-    } catch (const HierarchyError& e) {
-      status = {grpc::StatusCode::FAILED_PRECONDITION, std::string("this session's hierarchy cannot run a finite T: ") + e.what()};
-    }
-  }
-  return finish_unary(context, status);
+  if (!status.ok()) return finish_unary(context, status);
+  const double threshold = request->threshold();
+  const bool whole_mesh = request->whole_mesh();
+  if (!s->threshold_needs_derivation(threshold, whole_mesh)) return finish_unary(context, apply_options(*s, threshold, whole_mesh, response));
+  // The first finite T of a mesh derives its node graph (0.3–0.5 s at 1.25M
+  // vertices): on a thread of its own, not one of gRPC's callback threads,
+  // which every other call of this server shares. A job, so that drain()
+  // (and so the service's end) waits for it.
+  if (!begin_job()) return finish_unary(context, {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+  auto* reactor = context->DefaultReactor();
+  std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
+    const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
+    s.reset();  // the session may end with its last holder: while the service surely exists
+    reactor->Finish(result);
+    end_job();  // the last touch of the service: drain() waits for it
+  }).detach();
+  return reactor;
 }
 
 grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerContext* context,

@@ -466,6 +466,10 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
   return count;
 }
 
+bool Session::threshold_needs_derivation(double threshold, bool whole_mesh) const {
+  return (whole_mesh || threshold > 0.0) && !assets_->model->node_graph_derived();
+}
+
 void Session::set_threshold(double threshold, bool whole_mesh) {
   // A finite T needs the hierarchy's node graph, which loading does not
   // check (hierarchy/node_graph.h): derive it now (once per mesh) so that a

@@ -610,6 +610,55 @@ TEST_F(ServiceTest, HandlesAndTheCutSurviveARestart) {
   }
 }
 
+// The first finite T of a mesh derives its node graph off gRPC's threads
+// (SetOptions answers from a thread of its own): two sessions of one mesh
+// asking at once both get it, each answer says so, and the second session's
+// next frame is computed at its T.
+TEST_F(ServiceTest, TwoSessionsOfOneMeshSetAFiniteTAtOnce) {
+  const Created a = upload(file_bytes(kBunny), "obj"), b = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(a.status.ok());
+  ASSERT_TRUE(b.status.ok());
+  struct Answer {
+    grpc::Status status;
+    v1::SessionInfo info;
+  };
+  Answer answers[2];
+  std::vector<std::thread> callers;
+  for (int i = 0; i < 2; ++i)
+    callers.emplace_back([&, i] {
+      const Created& c = i == 0 ? a : b;
+      v1::SetOptionsRequest so;
+      so.set_session_id(c.created.info().session_id());
+      so.set_threshold(i == 0 ? 2e4 : 3e4);
+      answers[i].status = stub_->SetOptions(context(so.session_id(), c.created.editor_token()).get(), so, &answers[i].info);
+    });
+  for (auto& t : callers) t.join();
+  for (int i = 0; i < 2; ++i) {
+    ASSERT_TRUE(answers[i].status.ok()) << answers[i].status.error_message();
+    EXPECT_EQ(answers[i].info.options().threshold(), i == 0 ? 2e4 : 3e4);
+  }
+  // A pose of b, and its frame.
+  const std::string id = b.created.info().session_id(), editor = b.created.editor_token();
+  auto wctx = context(id, editor);
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  auto watch = stub_->Watch(wctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));
+  v1::DriveRequest pose;
+  pose.set_session_id(id);
+  pose.add_indices(2);
+  pose.add_positions(0.5f), pose.add_positions(0.5f), pose.add_positions(0.5f);
+  v1::SubmitPoseResponse accepted;
+  ASSERT_TRUE(stub_->SubmitPose(context(id, editor).get(), pose, &accepted).ok());
+  do {
+    ASSERT_TRUE(watch->Read(&f));
+  } while (f.version() <= accepted.accepted_at_version());
+  EXPECT_EQ(f.stats().threshold(), 3e4);
+  wctx->TryCancel();
+  watch->Finish();
+}
+
 // A cached hierarchy replaced by one that loads but whose removals do not
 // delete their fans (what loading leaves to the first finite T, checked by
 // the node graph): a session recorded at a finite T comes back at T = 0,

@@ -55,6 +55,7 @@ const NodeGraph& DeformerModel::node_graph() const {
     } catch (const HierarchyError&) {
       graph_error_ = std::current_exception();  // the same answer for every later caller, at no cost
     }
+    graph_tried_.store(true, std::memory_order_release);
   });
   if (graph_error_) std::rethrow_exception(graph_error_);
   return *graph_;
