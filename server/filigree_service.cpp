@@ -8,6 +8,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <system_error>
 #include <thread>
 #include <utility>
 
@@ -361,20 +362,25 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     service_.untrack_upload(this);  // its bytes are in: preprocessing is not limited by --upload-timeout
     if (expired_) return;           // expired while untracking
     if (!service_.begin_job()) return writer_.finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
-    job_ = std::thread([this] {
-      // Live sessions' frames come first: preprocessing runs at a lower
-      // priority (threads it starts inherit it), a bounded number at once.
-      ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kPreprocessingNice);
-      service_.acquire_preprocessing();
-      const grpc::Status status = process();
-      service_.release_preprocessing();
-      // Parsing, repair and preprocessing free tens to hundreds of MB that
-      // glibc would otherwise keep in this thread's arena: give them back, so
-      // the server's resident memory is what its sessions hold.
-      release_free_memory();
+    try {
+      job_ = std::thread([this] {
+        // Live sessions' frames come first: preprocessing runs at a lower
+        // priority (threads it starts inherit it), a bounded number at once.
+        ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kPreprocessingNice);
+        service_.acquire_preprocessing();
+        const grpc::Status status = process();
+        service_.release_preprocessing();
+        // Parsing, repair and preprocessing free tens to hundreds of MB that
+        // glibc would otherwise keep in this thread's arena: give them back, so
+        // the server's resident memory is what its sessions hold.
+        release_free_memory();
+        service_.end_job();
+        writer_.finish(status);  // the last touch of this reactor from the job
+      });
+    } catch (const std::system_error& e) {
       service_.end_job();
-      writer_.finish(status);  // the last touch of this reactor from the job
-    });
+      writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+    }
   }
 
   grpc::Status process() {
@@ -697,11 +703,16 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
       return;
     }
     session_->subscribe(stream_, session_->version());
-    player_ = std::thread([this] {
-      const grpc::Status status = play();
+    try {
+      player_ = std::thread([this] {
+        const grpc::Status status = play();
+        service_.end_job();
+        stream_->writer().finish(status, /*flush=*/true);
+      });
+    } catch (const std::system_error& e) {
       service_.end_job();
-      stream_->writer().finish(status, /*flush=*/true);
-    });
+      stream_->writer().finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+    }
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override {
@@ -909,12 +920,17 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
   // (and so the service's end) waits for it.
   if (!begin_job()) return finish_unary(context, {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
   auto* reactor = context->DefaultReactor();
-  std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
-    const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
-    s.reset();  // the session may end with its last holder: while the service surely exists
-    reactor->Finish(result);
-    end_job();  // the last touch of the service: drain() waits for it
-  }).detach();
+  try {
+    std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
+      const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
+      s.reset();  // the session may end with its last holder: while the service surely exists
+      reactor->Finish(result);
+      end_job();  // the last touch of the service: drain() waits for it
+    }).detach();
+  } catch (const std::system_error& e) {
+    end_job();
+    reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+  }
   return reactor;
 }
 

@@ -123,30 +123,40 @@ TEST(DeltaCodec, MaxErrorCoversActualErrorForAnyScaleAndBits) {
 }
 
 // The decoded values we compute (without decoding) are bit for bit what
-// Draco's decoder gives, for random values at many scales and bit depths,
-// a constant field and values straddling zero by less than the options' 1e-6
-// (401 points: the vector loop's last values go through its scalar tail).
+// Draco's decoder gives, in every compiled copy this CPU runs, for random
+// values at many scales and bit depths, a constant field and values
+// straddling zero by less than the options' 1e-6; 401 points (the vector
+// loop's last values go through its scalar tail), and 1 and 3 values (no
+// vector iteration, and a range found without its vector loop).
 TEST(DeltaCodec, ComputedDecodeEqualsDracoBitForBit) {
   std::mt19937 rng(11);
   struct Case {
     double centre, spread;
+    std::uint32_t points;
   };
-  for (const Case c : {Case{0.0, 3e-7}, Case{1e-6, 1e-5}, Case{0.0, 1.0}, Case{-250.0, 40.0}, Case{7.0, 0.0},
-                       Case{0.0, 1e6}}) {
+  for (const Case c : {Case{0.0, 3e-7, 401}, Case{1e-6, 1e-5, 401}, Case{0.0, 1.0, 401}, Case{-250.0, 40.0, 401}, Case{7.0, 0.0, 401},
+                       Case{0.0, 1e6, 401}, Case{0.5, 0.5, 1}}) {
     std::uniform_real_distribution<float> u(static_cast<float>(c.centre - c.spread), static_cast<float>(c.centre + c.spread));
-    std::vector<float> values(3 * 401);
+    std::vector<float> values(3 * c.points);
     for (float& v : values) v = c.spread > 0.0 ? u(rng) : static_cast<float>(c.centre);
     for (std::uint32_t bits : {8u, 11u, 16u, 24u}) {
       SCOPED_TRACE("centre " + std::to_string(c.centre) + " spread " + std::to_string(c.spread) + " bits " +
                    std::to_string(bits));
       const DeltaQuantization q = quantization_over(values, bits);
+      ASSERT_LE(q.min, *std::min_element(values.begin(), values.end()));
+      ASSERT_GE(double{q.min} + q.range, *std::max_element(values.begin(), values.end()));
       const std::string bytes = encode_draco(values, q);
-      std::vector<float> decoded(values.size()), computed(values.size());
-      decode_deltas_into(bytes, 401, decoded);
-      q.decode(values, computed);
-      for (std::size_t i = 0; i < values.size(); ++i) {
-        ASSERT_EQ(computed[i], decoded[i]) << "value " << i << " = " << values[i];
-        ASSERT_LE(std::abs(double{decoded[i]} - values[i]), q.bound()) << "value " << i;
+      std::vector<float> decoded(values.size());
+      decode_deltas_into(bytes, c.points, decoded);
+      ASSERT_FALSE(decode_kernels().empty());
+      for (const DecodeKernel& k : decode_kernels()) {
+        SCOPED_TRACE(k.name);
+        std::vector<float> computed(values.size());
+        k.decode(q, values, computed);
+        for (std::size_t i = 0; i < values.size(); ++i) {
+          ASSERT_EQ(computed[i], decoded[i]) << "value " << i << " = " << values[i];
+          ASSERT_LE(std::abs(double{decoded[i]} - values[i]), q.bound()) << "value " << i;
+        }
       }
     }
   }

@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <utility>
+#include <vector>
 #include <string>
 #include <limits>
 
@@ -67,18 +68,23 @@ struct DecodeArgs {
   }
   for (; i < a.n; ++i) a.out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(a.values[i] - a.min)) + a.min;
 }
+void decode_values_baseline(const DecodeArgs& a) { decode_values(a); }
 #if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] void decode_values_avx2(const DecodeArgs& a) { decode_values(a); }
-void decode_values_baseline(const DecodeArgs& a) { decode_values(a); }
-using DecodeFn = void (*)(const DecodeArgs&);
-// Chosen on first use, so that no static initialiser can see it unset.
-void dispatch_decode(const DecodeArgs& a) {
-  static const DecodeFn chosen = cpu_has_avx2() ? decode_values_avx2 : decode_values_baseline;
-  chosen(a);
-}
-#else
-void dispatch_decode(const DecodeArgs& a) { decode_values(a); }
 #endif
+
+template <void (*Fn)(const DecodeArgs&)>
+void decode_with(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  Fn({values.data(), out.data(), std::min(values.size(), out.size()), q.min, q.range, max_level(q.bits)});
+}
+
+std::vector<DecodeKernel> runnable_decode_kernels() {
+  std::vector<DecodeKernel> out = {{"baseline", decode_with<decode_values_baseline>}};
+#if FILIGREE_X86_TARGETS
+  if (cpu_has_avx2()) out.push_back({"avx2", decode_with<decode_values_avx2>});
+#endif
+  return out;
+}
 
 // The smallest and largest of n > 0 finite values. Lanes of four hold every
 // fourth value (min and max are exact in any order), SSE registers in the
@@ -105,8 +111,14 @@ std::pair<float, float> value_range(const float* v, std::size_t n) {
 
 }  // namespace
 
+std::span<const DecodeKernel> decode_kernels() {
+  // Found on first use, so that no static initialiser can see it unset.
+  static const std::vector<DecodeKernel> runnable = runnable_decode_kernels();
+  return runnable;
+}
+
 void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
-  dispatch_decode({values.data(), out.data(), std::min(values.size(), out.size()), min, range, max_level(bits)});
+  decode_kernels().back().decode(*this, values, out);
 }
 
 double DeltaQuantization::half_step() const { return double{range} / max_level(bits) / 2.0; }

@@ -45,6 +45,16 @@ struct DeltaQuantization {
   double half_step() const;
 };
 
+// One compiled copy of DeltaQuantization::decode, with its contract.
+struct DecodeKernel {
+  const char* name;  // "baseline", "avx2"
+  void (*decode)(const DeltaQuantization& q, std::span<const float> values, std::span<float> out);
+};
+
+// Every copy this CPU can run, the one decode() uses last (tests compare
+// them all with Draco's decoder).
+std::span<const DecodeKernel> decode_kernels();
+
 // The quantization over `values`' own range with `bits` (8…24): one origin for
 // all components at or below the smallest value, a range that reaches the
 // largest, both exactly as Draco will read them back (multiples of 1e-6, so
