@@ -494,20 +494,6 @@ TEST_F(HierarchyFileTest, FacesAreTheTrianglesTheRemovalsMadeAndUnmade) {
   EXPECT_GT(checked, 0u);  // some removed faces were made by children
   EXPECT_EQ(h.creator(0), kNone);
   EXPECT_THROW((void)h.creator(static_cast<FaceId>(h.face_count())), std::out_of_range);
-
-  // Corners of triangles a builder made: the stored ones back, and a face
-  // that is not a triangle of its node's ring refused.
-  std::vector<Triangle> created(all.begin() + static_cast<std::ptrdiff_t>(h.original_face_count()), all.end());
-  const std::vector<RingCorners> corners = ring_corners(h, created);
-  EXPECT_EQ(corners, h.created_corners);
-  const NodeId k = 3;
-  created[h.first_created_face(k) - h.original_face_count()][0] = h.node_vertex[k];  // not in its own ring
-  try {
-    (void)ring_corners(h, created);
-    ADD_FAILURE() << "no error";
-  } catch (const HierarchyError& e) {
-    EXPECT_NE(std::string(e.what()).find("not a triangle of its ring"), std::string::npos) << e.what();
-  }
 }
 
 // The hierarchy's 16-bit fixed point: weights stay positive and sum to 1 up

@@ -440,27 +440,6 @@ StoredHierarchy stored_view(const Hierarchy& h) {
           h.ring_weights, h.node_offset, h.maps_face, h.maps_bary};
 }
 
-std::vector<RingCorners> ring_corners(const Hierarchy& h, std::span<const Triangle> created) {
-  const std::size_t nodes = h.node_count();
-  const std::size_t slots = h.ring_vertices.size();
-  check_offsets(h.ring_offsets, nodes, slots, "ring");
-  check_ring_sizes(h.ring_offsets);
-  if (created.size() != slots - 2 * nodes) fail("created faces: " + str(created.size()) + ", the rings make " + str(slots - 2 * nodes));
-  std::vector<RingCorners> corners(created.size());
-  for (std::size_t k = 0; k < nodes; ++k) {
-    const auto ring = h.ring(static_cast<NodeId>(k));
-    const std::size_t first = h.ring_offsets[k] - 2 * k;
-    for (std::size_t j = first; j < first + ring.size() - 2; ++j) {
-      for (int c = 0; c < 3; ++c) {
-        const auto at = std::find(ring.begin(), ring.end(), created[j][c]);
-        if (at == ring.end()) fail("node " + str(k) + " creates face " + str(j) + " of its removals, not a triangle of its ring");
-        corners[j][c] = static_cast<std::uint8_t>(at - ring.begin());
-      }
-    }
-  }
-  return corners;
-}
-
 void validate_hierarchy(const Hierarchy& h) {
   const Checked c = check(stored_view(h));
   const std::size_t n = h.vertex_count(), nodes = h.node_count();

@@ -247,12 +247,6 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
 // ring offsets are not valid.
 StoredHierarchy stored_view(const Hierarchy& h);
 
-// The corners of `created` (every face the removals created, in order) in
-// their nodes' rings, as created_corners holds them: for a builder that
-// made them as triangles. Throws HierarchyError if one is not a triangle
-// of its node's ring or the count does not fit the rings.
-std::vector<RingCorners> ring_corners(const Hierarchy& h, std::span<const Triangle> created);
-
 // validate_hierarchy(stored_view(h)), then checks that every derived array
 // equals its derivation.
 void validate_hierarchy(const Hierarchy& h);
