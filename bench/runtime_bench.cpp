@@ -99,9 +99,13 @@ struct Timing {
   }
 };
 
-// Direct recovery against its memory bound (issue 10 items 1–2): the median
-// T = 0 frame, the bytes a frame must move, and a plain streaming copy of as
-// many bytes on as many threads, timed here in the same run.
+// Direct recovery against its memory bound (issue 10 items 1–2): the bytes a
+// T = 0 frame must move, and a plain streaming copy of as many bytes on as
+// many threads, timed here in the same run, interleaved frame by frame (on a
+// shared machine whose speed drifts, both then see the same minutes; each
+// timed copy follows an untimed one, so it is the plain copy, not the
+// write-back of the frame's output). The ratio is of the two medians; the
+// fastest copy is printed too.
 void recovery_bound(const Hierarchy& h, int threads) {
   DeformerOptions o;
   o.threads = threads;
@@ -112,20 +116,27 @@ void recovery_bound(const Hierarchy& h, int threads) {
   std::vector<Pose> poses;
   for (int f = 0; f < 5; ++f) poses.push_back(base_pose(h, field.with_phase(0.6 + 0.1 * f)));
   std::vector<Vec3> out(h.vertex_count());  // the caller's buffer, reused: the steady state
-  std::vector<double> ms;
-  for (int f = 0; f < 25; ++f) ms.push_back(d.deform(poses[f % poses.size()], out).recover_ms);
-  std::sort(ms.begin(), ms.end());
-  const double recover_ms = ms[ms.size() / 2];
   const DirectRecovery& r = d.model().recovery();
   const std::size_t bytes = r.bytes_per_frame();
-  const double copy_ms = streaming_copy_ms(bytes, threads);
+  StreamingCopy copy(bytes);
+  std::vector<double> recover, copied;
+  for (int f = 0; f < 25; ++f) {
+    recover.push_back(d.deform(poses[f % poses.size()], out).recover_ms);
+    // An untimed copy first: it writes back what the frame left dirty in the
+    // caches, which the timed copy would otherwise pay for.
+    (void)copy.run_ms(threads);
+    copied.push_back(copy.run_ms(threads));
+  }
+  const double recover_ms = median(recover), copy_ms = median(copied);
+  const double fastest_copy_ms = *std::min_element(copied.begin(), copied.end());
   const double n = static_cast<double>(h.vertex_count());
   std::printf("\n### direct recovery (T = 0) against the streaming bound\n\n");
   std::printf("| vertices | partitions | layout build ms | recover ms (median of 25) | ns/vertex | poses/s | bytes/frame (MB) "
-              "| streaming copy ms | bound ns/vertex | recover / bound |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
-  std::printf("| %zu | %zu | %.0f | %.2f | %.1f | %.0f | %.1f | %.2f | %.1f | %.2f |\n", h.vertex_count(), r.partitions(), build_ms,
-              recover_ms, 1e6 * recover_ms / n, 1000.0 / recover_ms, static_cast<double>(bytes) / 1e6, copy_ms, 1e6 * copy_ms / n,
-              recover_ms / copy_ms);
+              "| streaming copy ms (median of 25, interleaved) | bound ns/vertex | recover / bound | fastest copy ms | recover / fastest copy |\n"
+              "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf("| %zu | %zu | %.0f | %.2f | %.1f | %.0f | %.1f | %.2f | %.1f | %.2f | %.2f | %.2f |\n", h.vertex_count(), r.partitions(),
+              build_ms, recover_ms, 1e6 * recover_ms / n, 1000.0 / recover_ms, static_cast<double>(bytes) / 1e6, copy_ms,
+              1e6 * copy_ms / n, recover_ms / copy_ms, fastest_copy_ms, recover_ms / fastest_copy_ms);
   std::printf("\nMemory: the shared model's recovery layout %.0f B/vertex; a deformer's own state %.0f B/vertex.\n",
               static_cast<double>(d.model().memory_bytes()) / n, static_cast<double>(d.memory_bytes()) / n);
 }

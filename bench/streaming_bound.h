@@ -4,12 +4,23 @@
 // measured in the same run as the pass it bounds.
 
 #include <cstddef>
+#include <vector>
 
 namespace filigree::bench {
 
-// Best of `repeats` timings, in ms, of copying bytes/2 bytes (so `bytes` are
-// touched) on `threads` threads, each its own contiguous range; buffers are
-// allocated and faulted in before timing.
-double streaming_copy_ms(std::size_t bytes, int threads, int repeats = 7);
+// Two buffers of bytes/2 each, allocated and faulted in once, so that each
+// timed copy is the copy alone (and can be interleaved with the pass it
+// bounds: both then see the same machine).
+class StreamingCopy {
+ public:
+  explicit StreamingCopy(std::size_t bytes);
+  // Copies bytes/2 bytes (so `bytes` are touched) on `threads` threads, each
+  // its own contiguous range; returns the time in ms.
+  double run_ms(int threads);
+
+ private:
+  std::vector<char> src_, dst_;
+  std::size_t runs_ = 0;
+};
 
 }  // namespace filigree::bench
