@@ -3,7 +3,9 @@
 
 #include <cmath>
 #include <map>
+#include <memory>
 #include <set>
+#include <thread>
 
 #include <Eigen/Geometry>
 #include <Eigen/SVD>
@@ -13,6 +15,8 @@
 #include "hierarchy/hierarchy.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
+#include "runtime/deformer_model.h"
+#include "runtime/regions.h"
 #include "runtime/procedural_motion.h"
 #include "support/test_meshes.h"
 
@@ -239,6 +243,44 @@ TEST_F(DeformerTest, UnchangedCutPerformsNoFactorization) {
     }
   }
   EXPECT_GT(frames_with_unchanged_cut, 0u);
+}
+
+// Deformers of one model at T = ∞ share the whole-mesh factorisation: the
+// second makes none of the shared ones and adds none to the model, gives the
+// first one's result bit for bit, also when both solve at once on two
+// threads (a factor's solves take turns), and the factor goes with its last
+// holder.
+TEST_F(DeformerTest, DeformersOfOneModelShareLargeFactorisations) {
+  const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(*h_));
+  DeformerOptions inf;
+  inf.threshold = kInf;
+  Deformer a(model, inf);
+  const DeformResult first = a.deform(bend(1.0));
+  const std::size_t shared = model->region_factors().count();
+  ASSERT_GT(shared, 0u) << "no region at T = ∞ reaches RegionSolver::kSharedMin vertices";
+  EXPECT_GT(model->region_factors().memory_bytes(), 0u);
+  Deformer b(model, inf);
+  const DeformResult second = b.deform(bend(1.0));
+  EXPECT_EQ(model->region_factors().count(), shared);
+  EXPECT_EQ(second.stats.factorizations + shared, first.stats.factorizations);
+  EXPECT_TRUE(second.positions == first.positions);
+
+  // Both at once, against a deformer of a model of its own.
+  const DeformResult alone = Deformer(*h_, inf).deform(bend(0.5));
+  std::vector<Vec3> xa(h_->vertex_count()), xb(h_->vertex_count());
+  {
+    std::jthread other([&] {
+      for (int i = 0; i < 4; ++i) a.deform(bend(0.5), xa);
+    });
+    for (int i = 0; i < 4; ++i) b.deform(bend(0.5), xb);
+  }
+  EXPECT_TRUE(xa == alone.positions);
+  EXPECT_TRUE(xb == alone.positions);
+
+  a.set_threshold(0.0);
+  EXPECT_EQ(model->region_factors().count(), shared);  // b still holds them
+  b.set_threshold(0.0);
+  EXPECT_EQ(model->region_factors().count(), 0u);
 }
 
 TEST_F(DeformerTest, ErrorToTheWholeMeshResultShrinksAsTGrows) {

@@ -4,6 +4,7 @@
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/node_graph.h"
 #include "runtime/direct_recovery.h"
+#include "runtime/regions.h"
 #include "util/buffer_pool.h"
 
 namespace filigree {
@@ -23,7 +24,8 @@ DeformerModel::DeformerModel(std::shared_ptr<const Hierarchy> h)
     : h_(std::move(h)),
       recovery_(std::make_unique<const DirectRecovery>(*h_)),
       // A few frames' worth: as many as deformers of this mesh compute at once.
-      recovery_scratch_(std::make_unique<BufferPool<float>>(4)) {}
+      recovery_scratch_(std::make_unique<BufferPool<float>>(4)),
+      region_factors_(std::make_unique<RegionFactors>()) {}
 
 DeformerModel::~DeformerModel() = default;
 
@@ -70,7 +72,7 @@ std::size_t DeformerModel::memory_bytes() const {
              o.laplacian.weights.capacity() * sizeof(double) + o.delta.capacity() * sizeof(Vec3) +
              o.maps_corners.capacity() * sizeof(o.maps_corners[0]);
   }
-  return bytes;
+  return bytes + region_factors_->memory_bytes();
 }
 
 }  // namespace filigree

@@ -5,7 +5,9 @@
 // MAPS corners. Immutable once
 // built (the lazy parts are built once, thread-safely) and shared read-only by
 // every Deformer and every thread of that mesh; a Deformer owns only its
-// session's state.
+// session's state. Besides, the factorisations of large regions (T = ∞'s
+// whole mesh among them) are shared by every deformer of the mesh
+// (RegionFactors, thread-safe).
 
 #include <array>
 #include <atomic>
@@ -23,6 +25,7 @@ struct Hierarchy;
 struct CotangentLaplacian;
 class NodeGraph;
 class DirectRecovery;
+class RegionFactors;
 template <class T>
 class BufferPool;
 
@@ -53,11 +56,14 @@ class DeformerModel {
   // Whether node_graph() has been tried (built, or refused): a call now
   // returns or throws at once, without the derivation's ~0.4 s at 1.25M.
   bool node_graph_derived() const { return graph_tried_.load(std::memory_order_acquire); }
+  // The factorisations of large regions, shared by every deformer of the
+  // mesh (runtime/regions.h); thread-safe.
+  RegionFactors& region_factors() const { return *region_factors_; }
   // Direct recovery's scratch, lent to a deformer for one frame at a time
   // (thread-safe): an idle deformer, a session between frames, holds none.
   BufferPool<float>& recovery_scratch() const { return *recovery_scratch_; }
-  // Heap bytes held now, excluding the hierarchy (lazy parts once built) and
-  // the scratch lent out.
+  // Heap bytes held now: the layout, the lazy parts once built and the shared
+  // region factorisations; not the hierarchy, nor the scratch lent out.
   std::size_t memory_bytes() const;
 
  private:
@@ -68,6 +74,7 @@ class DeformerModel {
   std::shared_ptr<const Hierarchy> h_;
   std::unique_ptr<const DirectRecovery> recovery_;
   std::unique_ptr<BufferPool<float>> recovery_scratch_;
+  std::unique_ptr<RegionFactors> region_factors_;
   mutable std::once_flag optimisation_once_;
   mutable std::unique_ptr<const Optimisation> optimisation_;
   mutable std::atomic<bool> optimisation_built_{false};  // lets memory_bytes() look without building

@@ -229,14 +229,63 @@ struct RegionSolver::Factor {
   std::vector<Index> vertices;
   std::vector<double> dense;  // n ≤ kDenseMax: the packed dense factor
   std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>> sparse;
-  bool used = false;
   bool made = false;  // factorised (a new factor is factorised by its region's task)
+  // A RegionFactors' factor: made once, by whichever solver gets there
+  // first, and solved with by one solver at a time.
+  bool shared = false;
+  std::once_flag once;
+  std::mutex use;
 };
 
-RegionSolver::RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta)
-    : laplacian_(laplacian), delta_(delta) {}
+namespace {
+
+// Heap bytes of a factor: CHOLMOD's estimated from its size, plus its
+// workspace and settings.
+template <class Factor>
+std::size_t factor_bytes(const Factor& f) {
+  std::size_t bytes = sizeof(Factor) + 32 + f.vertices.capacity() * sizeof(Index) + f.dense.capacity() * sizeof(double);
+  if (f.sparse) bytes += sizeof(*f.sparse) + 16 * f.vertices.size() * sizeof(double);
+  return bytes;
+}
+
+}  // namespace
+
+RegionSolver::RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta, RegionFactors* shared)
+    : laplacian_(laplacian), delta_(delta), shared_(shared) {}
 
 RegionSolver::~RegionSolver() = default;
+
+RegionFactors::RegionFactors() = default;
+RegionFactors::~RegionFactors() = default;
+
+std::shared_ptr<RegionSolver::Factor> RegionFactors::find_or_add(std::uint64_t key, const Index* first, std::size_t n) {
+  std::lock_guard lock(mutex_);
+  const auto [begin, end] = factors_.equal_range(key);
+  for (auto it = begin; it != end; ++it)
+    if (auto f = it->second.lock(); f && f->vertices.size() == n && std::equal(first, first + n, f->vertices.begin())) return f;
+  // Factors no solver holds any more go when a new one comes.
+  std::erase_if(factors_, [](const auto& entry) { return entry.second.expired(); });
+  auto f = std::make_shared<RegionSolver::Factor>();
+  f->vertices.assign(first, first + n);
+  f->shared = true;
+  factors_.emplace(key, f);
+  return f;
+}
+
+std::size_t RegionFactors::count() const {
+  std::lock_guard lock(mutex_);
+  std::size_t alive = 0;
+  for (const auto& [key, w] : factors_) alive += !w.expired();
+  return alive;
+}
+
+std::size_t RegionFactors::memory_bytes() const {
+  std::lock_guard lock(mutex_);
+  std::size_t bytes = 0;
+  for (const auto& [key, w] : factors_)
+    if (const auto f = w.lock()) bytes += factor_bytes(*f) + 48;
+  return bytes;
+}
 
 void RegionSolver::factorize(const Regions& regions, std::size_t r, Factor& f) const {
   const Index* first = regions.vertices.data() + regions.offsets[r];
@@ -354,34 +403,42 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
   const std::size_t count = regions.count();
   // Find each larger region's factorisation, or make a place for a new one
   // (keyed by a hash of the vertex list; on a collision, probe the next key).
-  for (auto& [key, f] : cache_) f->used = false;
+  for (auto& [key, c] : cache_) c.used = false;
   std::vector<Index> large;
   std::vector<Factor*> factors;
-  std::vector<std::pair<std::uint64_t, std::unique_ptr<Factor>>> fresh;
+  std::vector<std::pair<std::uint64_t, std::shared_ptr<Factor>>> fresh;
   for (std::size_t r = 0; r < count; ++r) {
     const std::size_t n = regions.size(r);
     if (n <= kDirectMax) continue;
     const Index* first = regions.vertices.data() + regions.offsets[r];
-    std::uint64_t key = hash_bytes(first, n * sizeof(Index));
+    const std::uint64_t hash = hash_bytes(first, n * sizeof(Index));
     Factor* found = nullptr;
-    for (auto it = cache_.find(key); it != cache_.end(); it = cache_.find(++key)) {
-      if (it->second->vertices.size() == n && std::equal(first, first + n, it->second->vertices.begin())) {
-        found = it->second.get();
-        break;
+    for (std::uint64_t key = hash; !found; ++key) {
+      const auto it = cache_.find(key);
+      if (it == cache_.end()) break;
+      const Factor& f = *it->second.factor;
+      if (f.vertices.size() == n && std::equal(first, first + n, f.vertices.begin())) {
+        it->second.used = true;
+        found = it->second.factor.get();
       }
     }
     if (!found) {
-      auto f = std::make_unique<Factor>();
-      f->vertices.assign(first, first + n);
+      std::shared_ptr<Factor> f;
+      if (shared_ && n >= kSharedMin) {
+        f = shared_->find_or_add(hash, first, n);
+      } else {
+        f = std::make_shared<Factor>();
+        f->vertices.assign(first, first + n);
+      }
       found = f.get();
-      fresh.emplace_back(key, std::move(f));
+      fresh.emplace_back(hash, std::move(f));
     }
-    found->used = true;
     large.push_back(static_cast<Index>(r));
     factors.push_back(found);
   }
-  // Factorisations of regions that no longer exist are dropped.
-  std::erase_if(cache_, [](const auto& entry) { return !entry.second->used; });
+  // Factorisations of regions that no longer exist are dropped (a shared one
+  // stays while another solver holds it).
+  std::erase_if(cache_, [](const auto& entry) { return !entry.second.used; });
 
   // Tasks, handed out dynamically: the larger regions one by one, largest
   // first, then the tiny ones in blocks. A task makes its region's
@@ -393,7 +450,7 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
                    [&](std::size_t a, std::size_t b) { return regions.size(large[a]) > regions.size(large[b]); });
   constexpr std::size_t kBlock = 256;
   const std::size_t tasks = order.size() + (count + kBlock - 1) / kBlock;
-  std::atomic<std::size_t> next{0};
+  std::atomic<std::size_t> next{0}, made{0};
   std::exception_ptr failure;
   std::mutex failure_mutex;
   auto work = [&] {
@@ -402,8 +459,20 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
         if (task < order.size()) {
           const std::size_t i = order[task];
           Factor& f = *factors[i];
-          if (!f.made) factorize(regions, large[i], f);
-          solve_region(regions, large[i], &f, x, calls);
+          if (f.shared) {
+            std::call_once(f.once, [&] {
+              factorize(regions, large[i], f);
+              ++made;
+            });
+            std::lock_guard lock(f.use);
+            solve_region(regions, large[i], &f, x, calls);
+          } else {
+            if (!f.made) {
+              factorize(regions, large[i], f);
+              ++made;
+            }
+            solve_region(regions, large[i], &f, x, calls);
+          }
           continue;
         }
         // Tiny regions lie scattered over the mesh, so their solves wait on
@@ -431,22 +500,18 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
   }
   if (failure) std::rethrow_exception(failure);
 
-  const std::size_t made = fresh.size();
   for (auto& [key, f] : fresh) {
     std::uint64_t k = key;
     while (cache_.count(k)) ++k;
-    cache_.emplace(k, std::move(f));
+    cache_.emplace(k, Cached{std::move(f), true});
   }
   return made;
 }
 
 std::size_t RegionSolver::memory_bytes() const {
   std::size_t bytes = 0;
-  for (const auto& [key, f] : cache_) {
-    bytes += sizeof(Factor) + 32 + f->vertices.capacity() * sizeof(Index) + f->dense.capacity() * sizeof(double);
-    // CHOLMOD's factor: about its non-zeros, plus its workspace and settings.
-    if (f->sparse) bytes += sizeof(*f->sparse) + 16 * f->vertices.size() * sizeof(double);
-  }
+  for (const auto& [key, c] : cache_)
+    if (!c.factor->shared) bytes += factor_bytes(*c.factor);
   return bytes;
 }
 

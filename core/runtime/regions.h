@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <type_traits>
 #include <unordered_map>
@@ -48,15 +49,21 @@ Regions find_regions(const CotangentLaplacian& laplacian, const std::vector<bool
 void update_regions(const CotangentLaplacian& laplacian, const std::vector<bool>& in_cut,
                     std::span<const Index> changed, Regions& regions);
 
+class RegionFactors;
+
 // Solves regions, keeping each region's Cholesky factorisation for as long as
 // a region with exactly the same vertices exists: dense for small regions (a
 // sparse solver's fixed cost per call would dominate), CHOLMOD's sparse one
 // above. Most regions of a finite T hold a vertex or two (percolation, DESIGN
 // §2.2.4); those are factorised afresh every solve, from the rows their
 // right-hand side reads anyway, which costs less than finding a cached factor.
+// Regions of kSharedMin vertices or more (T = ∞'s whole mesh, large regions
+// of a finite T) take their factorisation from `shared`, if given.
 class RegionSolver {
  public:
-  RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta);
+  // `shared` (may be null) must outlive the solver; it is the mesh's, shared
+  // by the solvers of every session of it (DeformerModel::region_factors).
+  RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta, RegionFactors* shared = nullptr);
   ~RegionSolver();
 
   // Writes the solution of every region into `x` (cut vertices of `x` are the
@@ -81,16 +88,21 @@ class RegionSolver {
     return solve_all(regions, x, threads, calls);
   }
 
+  // Factorisations this solver holds, shared ones included.
   std::size_t cached_factorizations() const { return cache_.size(); }
-  // Heap bytes of the cached factorisations (estimated for CHOLMOD's).
+  // Heap bytes of the factorisations only this solver holds (estimated for
+  // CHOLMOD's); shared ones are counted by their RegionFactors.
   std::size_t memory_bytes() const;
 
   // Regions of at most this many vertices are solved without the cache.
   static constexpr std::size_t kDirectMax = 8;
   // Regions of at most this many vertices get a dense factorisation.
   static constexpr std::size_t kDenseMax = 32;
+  // Regions of at least this many vertices share their factorisation.
+  static constexpr std::size_t kSharedMin = 1024;
 
  private:
+  friend class RegionFactors;
   struct Factor;
   // The caller's rotation, type-erased.
   struct Calls {
@@ -108,7 +120,41 @@ class RegionSolver {
 
   const CotangentLaplacian& laplacian_;
   const std::vector<Vec3>& delta_;
-  std::unordered_map<std::uint64_t, std::unique_ptr<Factor>> cache_;
+  RegionFactors* shared_;
+  struct Cached {
+    std::shared_ptr<Factor> factor;
+    bool used = false;  // by this solve's regions (this solver's own mark: a shared factor has several)
+  };
+  std::unordered_map<std::uint64_t, Cached> cache_;
+};
+
+// The factorisations of large regions shared by every RegionSolver of one
+// mesh: a region's matrix depends on its vertices alone, so the first solver
+// whose regions include it factorises it, and the others use that factor
+// (T = ∞: one whole-mesh factorisation, 2 s and ~200 MB at 435k vertices,
+// for all sessions instead of each). A factor lives while some solver holds
+// its region; solves with one factor take turns (CHOLMOD's solve uses the
+// factor's own workspace). Thread-safe.
+class RegionFactors {
+ public:
+  RegionFactors();
+  ~RegionFactors();
+  RegionFactors(const RegionFactors&) = delete;
+  RegionFactors& operator=(const RegionFactors&) = delete;
+
+  // Factorisations some solver holds now.
+  std::size_t count() const;
+  // Their heap bytes (estimated for CHOLMOD's).
+  std::size_t memory_bytes() const;
+
+ private:
+  friend class RegionSolver;
+  // The factor of the region with vertices [first, first + n) (ascending),
+  // made empty if no solver holds one; `key` is their hash.
+  std::shared_ptr<RegionSolver::Factor> find_or_add(std::uint64_t key, const Index* first, std::size_t n);
+
+  mutable std::mutex mutex_;
+  std::unordered_multimap<std::uint64_t, std::weak_ptr<RegionSolver::Factor>> factors_;
 };
 
 }  // namespace filigree
