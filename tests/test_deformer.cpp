@@ -247,9 +247,8 @@ TEST_F(DeformerTest, UnchangedCutPerformsNoFactorization) {
 
 // Deformers of one model at T = ∞ share the whole-mesh factorisation: the
 // second makes none of the shared ones and adds none to the model, gives the
-// first one's result bit for bit, also when both solve at once on two
-// threads (a factor's solves take turns), and the factor goes with its last
-// holder.
+// first one's result bit for bit, also when both solve with it at once on
+// two threads, and the factor goes with its last holder.
 TEST_F(DeformerTest, DeformersOfOneModelShareLargeFactorisations) {
   const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(*h_));
   DeformerOptions inf;

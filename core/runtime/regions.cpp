@@ -225,16 +225,46 @@ void dense_solve(const double* l, std::size_t n, Vec3* y) {
 
 }  // namespace
 
+namespace {
+
+// A thread's own CHOLMOD workspace and settings, for solves.
+struct ThreadCholmod {
+  cholmod_common common;
+  ThreadCholmod() { cholmod_start(&common); }
+  ~ThreadCholmod() { cholmod_finish(&common); }
+  ThreadCholmod(const ThreadCholmod&) = delete;
+  ThreadCholmod& operator=(const ThreadCholmod&) = delete;
+};
+
+// CHOLMOD's sparse Cholesky factor, solved with the calling thread's
+// workspace: cholmod_solve only reads the factor, so solves with one factor
+// may run at once on several threads (Eigen's solve() uses the workspace
+// inside the decomposition, which would make them take turns).
+class SparseFactor : public Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower> {
+ public:
+  // Solves for the n × 3 right-hand side b, in place. False if CHOLMOD fails.
+  bool solve_in_place(Eigen::MatrixXd& b) const {
+    thread_local ThreadCholmod workspace;
+    cholmod_dense b_cd = Eigen::viewAsCholmod(b);
+    cholmod_dense* x = cholmod_solve(CHOLMOD_A, m_cholmodFactor, &b_cd, &workspace.common);
+    if (!x) return false;
+    b = Eigen::Map<const Eigen::MatrixXd>(static_cast<const double*>(x->x), b.rows(), b.cols());
+    cholmod_free_dense(&x, &workspace.common);
+    return true;
+  }
+};
+
+}  // namespace
+
 struct RegionSolver::Factor {
   std::vector<Index> vertices;
   std::vector<double> dense;  // n ≤ kDenseMax: the packed dense factor
-  std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>> sparse;
+  std::unique_ptr<SparseFactor> sparse;
   bool made = false;  // factorised (a new factor is factorised by its region's task)
   // A RegionFactors' factor: made once, by whichever solver gets there
-  // first, and solved with by one solver at a time.
+  // first (std::call_once), then only read.
   bool shared = false;
   std::once_flag once;
-  std::mutex use;
 };
 
 namespace {
@@ -316,7 +346,7 @@ void RegionSolver::factorize(const Regions& regions, std::size_t r, Factor& f) c
     for_each_entry([&](std::size_t i, std::size_t j, double w) { entries.emplace_back(static_cast<int>(i), static_cast<int>(j), w); });
     Eigen::SparseMatrix<double> a(static_cast<int>(n), static_cast<int>(n));
     a.setFromTriplets(entries.begin(), entries.end());
-    f.sparse = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Lower>>();
+    f.sparse = std::make_unique<SparseFactor>();
     f.sparse->compute(a);
     if (f.sparse->info() != Eigen::Success) not_factorisable(n);
   }
@@ -374,10 +404,11 @@ void RegionSolver::solve_region(const Regions& regions, std::size_t r, const Fac
     for (std::size_t i = 0; i < n; ++i) x[first[i]] = y[i];
     return;
   }
-  Eigen::MatrixX3d b(static_cast<Eigen::Index>(n), 3);
+  Eigen::MatrixXd b(static_cast<Eigen::Index>(n), 3);
   for (std::size_t i = 0; i < n; ++i) b.row(static_cast<Eigen::Index>(i)) = rhs_of(i).transpose();
-  const Eigen::MatrixX3d sol = f->sparse->solve(b);
-  for (std::size_t i = 0; i < n; ++i) x[first[i]] = sol.row(static_cast<Eigen::Index>(i)).transpose();
+  if (!f->sparse->solve_in_place(b))
+    throw std::runtime_error("CHOLMOD could not solve a region of " + std::to_string(n) + " vertices");
+  for (std::size_t i = 0; i < n; ++i) x[first[i]] = b.row(static_cast<Eigen::Index>(i)).transpose();
 }
 
 void RegionSolver::prefetch(const Regions& regions, std::size_t r, int step, const std::vector<Vec3>& x,
@@ -459,20 +490,16 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
         if (task < order.size()) {
           const std::size_t i = order[task];
           Factor& f = *factors[i];
+          const auto make = [&] {
+            factorize(regions, large[i], f);
+            ++made;
+          };
           if (f.shared) {
-            std::call_once(f.once, [&] {
-              factorize(regions, large[i], f);
-              ++made;
-            });
-            std::lock_guard lock(f.use);
-            solve_region(regions, large[i], &f, x, calls);
-          } else {
-            if (!f.made) {
-              factorize(regions, large[i], f);
-              ++made;
-            }
-            solve_region(regions, large[i], &f, x, calls);
+            std::call_once(f.once, make);  // another solver may be making it: wait for it
+          } else if (!f.made) {
+            make();
           }
+          solve_region(regions, large[i], &f, x, calls);
           continue;
         }
         // Tiny regions lie scattered over the mesh, so their solves wait on

@@ -133,8 +133,8 @@ class RegionSolver {
 // whose regions include it factorises it, and the others use that factor
 // (T = ∞: one whole-mesh factorisation, 2 s and ~200 MB at 435k vertices,
 // for all sessions instead of each). A factor lives while some solver holds
-// its region; solves with one factor take turns (CHOLMOD's solve uses the
-// factor's own workspace). Thread-safe.
+// its region; once made it is only read, and solves with it run at once,
+// each with its thread's CHOLMOD workspace. Thread-safe.
 class RegionFactors {
  public:
   RegionFactors();
