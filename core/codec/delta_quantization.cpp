@@ -49,8 +49,8 @@ struct DecodeArgs {
   quantizer.Init(a.range, a.levels);
   draco::Dequantizer dequantizer;
   dequantizer.Init(a.range, a.levels);
-  // Eight at a time, the same float operations written out (GCC leaves the
-  // loop above scalar: 4.6% of encoding a frame): Draco's Init computes
+  // Eight at a time, the same float operations written out (GCC left the
+  // plain loop, now the tail, scalar: 4.6% of encoding a frame): Draco's Init computes
   // inverse_delta = float(levels) / range and delta = range / float(levels)
   // (draco/core/quantization_utils.cc); DequantizeFloat(1) is delta itself.
   // Values are ≥ min, so floor(t) for t ≥ 0.5 is the truncating conversion.
