@@ -467,14 +467,20 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
 }
 
 bool Session::threshold_needs_derivation(double threshold, bool whole_mesh) const {
-  return (whole_mesh || threshold > 0.0) && !assets_->model->node_graph_derived();
+  const DeformerModel& m = *assets_->model;
+  return (whole_mesh || threshold > 0.0) && !(m.node_graph_derived() && m.optimisation_data_derived());
 }
 
 void Session::set_threshold(double threshold, bool whole_mesh) {
-  // A finite T needs the hierarchy's node graph, which loading does not
-  // check (hierarchy/node_graph.h): derive it now (once per mesh) so that a
-  // hierarchy that cannot run one is refused here, not frame after frame.
-  if (whole_mesh || threshold > 0.0) (void)assets_->model->node_graph();
+  if (whole_mesh || threshold > 0.0) {
+    // A finite T needs the hierarchy's node graph, which loading does not
+    // check (hierarchy/node_graph.h): derive it now (once per mesh) so that
+    // a hierarchy that cannot run one is refused here, not frame after frame.
+    (void)assets_->model->node_graph();
+    // And region optimisation's data (0.65 s at 1.25M): built here, not by
+    // the first frame on a worker every session's frames share.
+    (void)assets_->model->laplacian();
+  }
   std::uint64_t seq;
   SessionProgress progress;
   {

@@ -140,8 +140,9 @@ class Session {
   // hierarchy whose node graph cannot be derived.
   void set_threshold(double threshold, bool whole_mesh);
   // Whether set_threshold(threshold, whole_mesh) would first derive the
-  // mesh's node graph (once per mesh; ~0.4 s at 1.25M vertices): callers
-  // keep such a call off threads that must stay responsive.
+  // mesh's node graph and region optimisation's data (once per mesh; ~1 s
+  // at 1.25M vertices): callers keep such a call off threads that must stay
+  // responsive.
   bool threshold_needs_derivation(double threshold, bool whole_mesh) const;
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
   // targets); the next frame solves every client's handles into the base pose.
