@@ -468,7 +468,7 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
 
 bool Session::threshold_needs_derivation(double threshold, bool whole_mesh) const {
   const DeformerModel& m = *assets_->model;
-  return (whole_mesh || threshold > 0.0) && !(m.node_graph_derived() && m.optimisation_data_derived());
+  return whole_mesh || (threshold > 0.0 && !(m.node_graph_derived() && m.optimisation_data_derived()));
 }
 
 void Session::set_threshold(double threshold, bool whole_mesh) {
@@ -481,6 +481,24 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     // the first frame on a worker every session's frames share.
     (void)assets_->model->laplacian();
   }
+  std::unique_ptr<Deformer> warm;
+  if (whole_mesh) {
+    // T = ∞ factorises the whole mesh (2 s at 435k vertices), a factor every
+    // session of the mesh shares (RegionFactors): a deformer makes it here
+    // by solving the rest pose once (T = ∞'s regions do not depend on the
+    // pose) and holds it until this session's frame at T = ∞ has found it,
+    // so that frame, on a worker every session's frames share, only solves.
+    DeformerOptions o;
+    o.threshold = DeformerOptions::kInfinity;
+    o.threads = 1;
+    warm = std::make_unique<Deformer>(assets_->model, o);
+    const Hierarchy& h = assets_->hierarchy();
+    Pose rest;
+    rest.positions.reserve(h.base_vertices.size());
+    for (Index v : h.base_vertices) rest.positions.push_back(h.rest_positions[v]);
+    std::vector<Vec3> out(h.vertex_count());
+    (void)warm->deform(rest, out);
+  }
   std::uint64_t seq;
   SessionProgress progress;
   {
@@ -489,6 +507,7 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
+    warm.swap(warm_);  // an older one, if any, goes after the lock
     seq = ++journal_seq_;
     if (journal_) progress = progress_with_change_locked();
     pending_ = true;
@@ -691,6 +710,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
   Pose& pose = scratch_pose_;
   pose.positions.resize(m);
   std::optional<double> threshold;
+  std::unique_ptr<Deformer> warm;  // set_threshold's, for T = ∞: dropped when this frame ends
   std::vector<HandleTarget> handle_targets;
   std::uint64_t seq;
   SessionProgress progress;
@@ -716,6 +736,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     f.force_keyframe = std::exchange(keyframe_requested_, false);
     f.changes.swap(changes_);
     threshold.swap(pending_threshold_);
+    if (threshold) warm.swap(warm_);  // released once this frame has applied the threshold
     seq = journal_seq_;
   }
   // A version (and keyframe request) given out but never published is taken

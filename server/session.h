@@ -141,7 +141,8 @@ class Session {
   void set_threshold(double threshold, bool whole_mesh);
   // Whether set_threshold(threshold, whole_mesh) would first derive the
   // mesh's node graph and region optimisation's data (once per mesh; ~1 s
-  // at 1.25M vertices): callers keep such a call off threads that must stay
+  // at 1.25M vertices), or, for whole_mesh, make T = ∞'s factorisation
+  // (seconds): callers keep such a call off threads that must stay
   // responsive.
   bool threshold_needs_derivation(double threshold, bool whole_mesh) const;
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
@@ -284,6 +285,9 @@ class Session {
   bool keyframe_needed_ = false;
   std::shared_ptr<const PublishedFrame> keyframe_;
   std::optional<double> pending_threshold_;
+  // A deformer that made T = ∞'s shared factorisations in set_threshold,
+  // holding them until the frame that applies that threshold has found them.
+  std::unique_ptr<Deformer> warm_;
   std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;
   std::map<std::string, v1::Change> changes_;  // since the last frame, by client
   struct HandleEntry {

@@ -670,6 +670,34 @@ TEST_F(ServiceTest, TwoSessionsOfOneMeshSetAFiniteTAtOnce) {
   EXPECT_EQ(frame_after_pose(b.created.info().session_id(), b.created.editor_token(), 0.5f).stats().threshold(), 3e4);
 }
 
+// Whole-mesh optimisation's factorisation is made before SetOptions answers
+// (on its thread, not a frame worker; every session of the mesh shares it):
+// the frame that first runs at T = ∞ makes no factorisation of its own.
+TEST_F(ServiceTest, WholeMeshIsFactorisedBeforeItsFirstFrame) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  auto wctx = context(id, editor);
+  v1::WatchRequest wr;
+  wr.set_session_id(id);
+  auto watch = stub_->Watch(wctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));  // the current frame, at T = 0
+  v1::SetOptionsRequest so;
+  so.set_session_id(id);
+  so.set_whole_mesh(true);
+  v1::SessionInfo info;
+  ASSERT_TRUE(stub_->SetOptions(context(id, editor).get(), so, &info).ok());
+  EXPECT_TRUE(info.options().whole_mesh());
+  do {
+    ASSERT_TRUE(watch->Read(&f));
+  } while (!std::isinf(f.stats().threshold()));
+  EXPECT_GE(f.stats().largest_region(), 1024u);  // RegionSolver::kSharedMin: a shared factor
+  EXPECT_EQ(f.stats().factorizations(), 0u);
+  wctx->TryCancel();
+  watch->Finish();
+}
+
 // A cached hierarchy replaced by one that loads but whose removals do not
 // delete their fans (what loading leaves to the first finite T, checked by
 // the node graph): a session recorded at a finite T comes back at T = 0,
