@@ -913,12 +913,12 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
   if (!status.ok()) return finish_unary(context, status);
   const double threshold = request->threshold();
   const bool whole_mesh = request->whole_mesh();
-  if (!s->threshold_needs_derivation(threshold, whole_mesh)) return finish_unary(context, apply_options(*s, threshold, whole_mesh, response));
+  if (!s->threshold_needs_preparation(threshold, whole_mesh)) return finish_unary(context, apply_options(*s, threshold, whole_mesh, response));
   // The first finite T of a mesh derives its node graph and region
-  // optimisation's data (~1 s at 1.25M vertices): on a thread of its own,
-  // not one of gRPC's callback threads, which every other call of this
-  // server shares. A job, so that drain() (and so the service's end) waits
-  // for it.
+  // optimisation's data (~1 s at 1.25M vertices), and whole-mesh
+  // optimisation factorises the mesh (seconds): on a thread of its own, not
+  // one of gRPC's callback threads, which every other call of this server
+  // shares. A job, so that drain() (and so the service's end) waits for it.
   if (!begin_job()) return finish_unary(context, {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
   auto* reactor = context->DefaultReactor();
   try {

@@ -466,7 +466,7 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
   return count;
 }
 
-bool Session::threshold_needs_derivation(double threshold, bool whole_mesh) const {
+bool Session::threshold_needs_preparation(double threshold, bool whole_mesh) const {
   const DeformerModel& m = *assets_->model;
   return whole_mesh || (threshold > 0.0 && !(m.node_graph_derived() && m.optimisation_data_derived()));
 }

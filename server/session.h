@@ -144,7 +144,7 @@ class Session {
   // at 1.25M vertices), or, for whole_mesh, make T = ∞'s factorisation
   // (seconds): callers keep such a call off threads that must stay
   // responsive.
-  bool threshold_needs_derivation(double threshold, bool whole_mesh) const;
+  bool threshold_needs_preparation(double threshold, bool whole_mesh) const;
   // Replaces `client_name`'s handles (vertex ids of the detailed mesh and
   // targets); the next frame solves every client's handles into the base pose.
   // Throws PoseError for a vertex out of range or a non-finite target. With a

@@ -103,15 +103,32 @@ class ServiceTest : public ::testing::Test {
     return h;
   }
 
+  // A watch of a session; cancelled and finished when it goes.
+  struct Watching {
+    std::unique_ptr<grpc::ClientContext> context;
+    std::unique_ptr<grpc::ClientReader<v1::Frame>> reader;
+    ~Watching() {
+      context->TryCancel();
+      reader->Finish();
+    }
+  };
+  // Opens a watch of session `id` and reads its first frame (the current
+  // one) into `first`; false if none came.
+  std::unique_ptr<Watching> open_watch(const std::string& id, const std::string& token, v1::Frame& first) {
+    auto w = std::make_unique<Watching>();
+    w->context = context(id, token);
+    v1::WatchRequest wr;
+    wr.set_session_id(id);
+    w->reader = stub_->Watch(w->context.get(), wr);
+    EXPECT_TRUE(w->reader->Read(&first)) << "no current frame";
+    return w;
+  }
+
   // Submits a pose that moves base vertex 2 to (x, 0.5, 0.5) and returns the
   // first frame a watcher sees after it (a step that fails is a test failure).
   v1::Frame frame_after_pose(const std::string& id, const std::string& editor, float x) {
-    auto wctx = context(id, editor);
-    v1::WatchRequest wr;
-    wr.set_session_id(id);
-    auto watch = stub_->Watch(wctx.get(), wr);
     v1::Frame f;
-    EXPECT_TRUE(watch->Read(&f));  // the current frame
+    const auto watch = open_watch(id, editor, f);
     v1::DriveRequest pose;
     pose.set_session_id(id);
     pose.add_indices(2);
@@ -119,7 +136,7 @@ class ServiceTest : public ::testing::Test {
     v1::SubmitPoseResponse accepted;
     if (stub_->SubmitPose(context(id, editor).get(), pose, &accepted).ok()) {
       do {
-        if (!watch->Read(&f)) {
+        if (!watch->reader->Read(&f)) {
           ADD_FAILURE() << "the watch ended before the pose's frame";
           break;
         }
@@ -127,8 +144,6 @@ class ServiceTest : public ::testing::Test {
     } else {
       ADD_FAILURE() << "SubmitPose failed";
     }
-    wctx->TryCancel();
-    watch->Finish();
     return f;
   }
 
@@ -677,12 +692,8 @@ TEST_F(ServiceTest, WholeMeshIsFactorisedBeforeItsFirstFrame) {
   const Created c = upload(file_bytes(kBunny), "obj");
   ASSERT_TRUE(c.status.ok());
   const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
-  auto wctx = context(id, editor);
-  v1::WatchRequest wr;
-  wr.set_session_id(id);
-  auto watch = stub_->Watch(wctx.get(), wr);
-  v1::Frame f;
-  ASSERT_TRUE(watch->Read(&f));  // the current frame, at T = 0
+  v1::Frame f;  // the current frame, at T = 0
+  const auto watch = open_watch(id, editor, f);
   v1::SetOptionsRequest so;
   so.set_session_id(id);
   so.set_whole_mesh(true);
@@ -690,12 +701,10 @@ TEST_F(ServiceTest, WholeMeshIsFactorisedBeforeItsFirstFrame) {
   ASSERT_TRUE(stub_->SetOptions(context(id, editor).get(), so, &info).ok());
   EXPECT_TRUE(info.options().whole_mesh());
   do {
-    ASSERT_TRUE(watch->Read(&f));
+    ASSERT_TRUE(watch->reader->Read(&f));
   } while (!std::isinf(f.stats().threshold()));
   EXPECT_GE(f.stats().largest_region(), 1024u);  // RegionSolver::kSharedMin: a shared factor
   EXPECT_EQ(f.stats().factorizations(), 0u);
-  wctx->TryCancel();
-  watch->Finish();
 }
 
 // A cached hierarchy replaced by one that loads but whose removals do not
@@ -863,12 +872,8 @@ TEST_F(ServiceTest, OverlaysShowRegionsThatFollowTheThreshold) {
   const Created c = upload(file_bytes(kBunny), "obj");
   ASSERT_TRUE(c.status.ok());
   const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
-  auto wctx = context(id, editor);
-  v1::WatchRequest wr;
-  wr.set_session_id(id);
-  auto watch = stub_->Watch(wctx.get(), wr);
   v1::Frame f;
-  ASSERT_TRUE(watch->Read(&f));
+  const auto watch = open_watch(id, editor, f);
 
   // Ask for overlays (the first answer may not be ready), then follow frames
   // until one carries them; bounded by frames, not time.
@@ -880,7 +885,7 @@ TEST_F(ServiceTest, OverlaysShowRegionsThatFollowTheThreshold) {
     for (int attempt = 0; attempt < 20; ++attempt) {
       EXPECT_TRUE(stub_->GetOverlays(context(id, c.created.viewer_token()).get(), req, &o).ok());
       if (o.ready() && o.version() > requested_at && o.version() == f.version()) return o;
-      EXPECT_TRUE(watch->Read(&f));
+      EXPECT_TRUE(watch->reader->Read(&f));
     }
     return o;
   };
@@ -917,8 +922,6 @@ TEST_F(ServiceTest, OverlaysShowRegionsThatFollowTheThreshold) {
   ASSERT_TRUE(direct.ready());
   EXPECT_EQ(direct.region_count(), 0u);
   EXPECT_EQ(direct.cut_faces_size(), 3 * 3674);  // every node recovered: the original mesh
-  wctx->TryCancel();
-  watch->Finish();
 }
 
 // ---------------------------------------------------------------- chunked frames

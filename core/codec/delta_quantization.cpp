@@ -33,22 +33,19 @@ float float_at_least(double x) {
 
 namespace {
 
-// What a Draco decoder gives for each value: compiled for AVX2 too (no FMA:
-// a fused multiply-add would round differently from Draco's own code).
-struct DecodeArgs {
-  const float* values;
-  float* out;
-  std::size_t n;
-  float min, range;
-  std::int32_t levels;
-};
-[[gnu::always_inline]] inline void decode_values(const DecodeArgs& a) {
+// What a Draco decoder gives for each value (DecodeKernel's contract):
+// compiled for AVX2 too (no FMA: a fused multiply-add would round
+// differently from Draco's own code).
+[[gnu::always_inline]] inline void decode_values(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  const std::size_t n = std::min(values.size(), out.size());
+  const float min = q.min, range = q.range;
+  const std::int32_t levels = max_level(q.bits);
   // The same objects and arithmetic as AttributeQuantizationTransform's
   // GeneratePortableAttribute and InverseTransformAttribute.
   draco::Quantizer quantizer;
-  quantizer.Init(a.range, a.levels);
+  quantizer.Init(range, levels);
   draco::Dequantizer dequantizer;
-  dequantizer.Init(a.range, a.levels);
+  dequantizer.Init(range, levels);
   // Eight at a time, the same float operations written out (GCC left the
   // plain loop, now the tail, scalar: 4.6% of encoding a frame): Draco's Init computes
   // inverse_delta = float(levels) / range and delta = range / float(levels)
@@ -57,31 +54,30 @@ struct DecodeArgs {
   // The tests compare every decoded value with Draco's own decoder.
   using F8 [[gnu::vector_size(32)]] = float;
   using I8 [[gnu::vector_size(32)]] = std::int32_t;
-  const float inverse_delta = static_cast<float>(a.levels) / a.range, delta = dequantizer.DequantizeFloat(1);
+  const float inverse_delta = static_cast<float>(levels) / range, delta = dequantizer.DequantizeFloat(1);
   std::size_t i = 0;
-  for (; i + 8 <= a.n; i += 8) {
+  for (; i + 8 <= n; i += 8) {
     F8 v;
-    std::memcpy(&v, a.values + i, sizeof v);
-    const F8 t = (v - a.min) * inverse_delta + 0.5f;
-    const F8 out = __builtin_convertvector(__builtin_convertvector(t, I8), F8) * delta + a.min;
-    std::memcpy(a.out + i, &out, sizeof out);
+    std::memcpy(&v, values.data() + i, sizeof v);
+    const F8 t = (v - min) * inverse_delta + 0.5f;
+    const F8 decoded = __builtin_convertvector(__builtin_convertvector(t, I8), F8) * delta + min;
+    std::memcpy(out.data() + i, &decoded, sizeof decoded);
   }
-  for (; i < a.n; ++i) a.out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(a.values[i] - a.min)) + a.min;
+  for (; i < n; ++i) out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(values[i] - min)) + min;
 }
-void decode_values_baseline(const DecodeArgs& a) { decode_values(a); }
+void decode_values_baseline(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  decode_values(q, values, out);
+}
 #if FILIGREE_X86_TARGETS
-[[gnu::target("avx2")]] void decode_values_avx2(const DecodeArgs& a) { decode_values(a); }
+[[gnu::target("avx2")]] void decode_values_avx2(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  decode_values(q, values, out);
+}
 #endif
 
-template <void (*Fn)(const DecodeArgs&)>
-void decode_with(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
-  Fn({values.data(), out.data(), std::min(values.size(), out.size()), q.min, q.range, max_level(q.bits)});
-}
-
 std::vector<DecodeKernel> runnable_decode_kernels() {
-  std::vector<DecodeKernel> out = {{"baseline", decode_with<decode_values_baseline>}};
+  std::vector<DecodeKernel> out = {{"baseline", decode_values_baseline}};
 #if FILIGREE_X86_TARGETS
-  if (cpu_has_avx2()) out.push_back({"avx2", decode_with<decode_values_avx2>});
+  if (cpu_has_avx2()) out.push_back({"avx2", decode_values_avx2});
 #endif
   return out;
 }

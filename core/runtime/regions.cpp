@@ -223,10 +223,6 @@ void dense_solve(const double* l, std::size_t n, Vec3* y) {
   throw std::runtime_error("region of " + std::to_string(n) + " vertices could not be factorised");
 }
 
-}  // namespace
-
-namespace {
-
 // A thread's own CHOLMOD workspace and settings, for solves.
 struct ThreadCholmod {
   cholmod_common common;
@@ -265,20 +261,15 @@ struct RegionSolver::Factor {
   // first (std::call_once), then only read.
   bool shared = false;
   std::once_flag once;
+
+  // Heap bytes: CHOLMOD's factor estimated from its size, plus its
+  // workspace and settings.
+  std::size_t bytes() const {
+    std::size_t b = sizeof(Factor) + 32 + vertices.capacity() * sizeof(Index) + dense.capacity() * sizeof(double);
+    if (sparse) b += sizeof(*sparse) + 16 * vertices.size() * sizeof(double);
+    return b;
+  }
 };
-
-namespace {
-
-// Heap bytes of a factor: CHOLMOD's estimated from its size, plus its
-// workspace and settings.
-template <class Factor>
-std::size_t factor_bytes(const Factor& f) {
-  std::size_t bytes = sizeof(Factor) + 32 + f.vertices.capacity() * sizeof(Index) + f.dense.capacity() * sizeof(double);
-  if (f.sparse) bytes += sizeof(*f.sparse) + 16 * f.vertices.size() * sizeof(double);
-  return bytes;
-}
-
-}  // namespace
 
 RegionSolver::RegionSolver(const CotangentLaplacian& laplacian, const std::vector<Vec3>& delta, RegionFactors* shared)
     : laplacian_(laplacian), delta_(delta), shared_(shared) {}
@@ -313,7 +304,7 @@ std::size_t RegionFactors::memory_bytes() const {
   std::lock_guard lock(mutex_);
   std::size_t bytes = 0;
   for (const auto& [key, w] : factors_)
-    if (const auto f = w.lock()) bytes += factor_bytes(*f) + 48;
+    if (const auto f = w.lock()) bytes += f->bytes() + 48;
   return bytes;
 }
 
@@ -538,7 +529,7 @@ std::size_t RegionSolver::solve_all(const Regions& regions, std::vector<Vec3>& x
 std::size_t RegionSolver::memory_bytes() const {
   std::size_t bytes = 0;
   for (const auto& [key, c] : cache_)
-    if (!c.factor->shared) bytes += factor_bytes(*c.factor);
+    if (!c.factor->shared) bytes += c.factor->bytes();
   return bytes;
 }
 
