@@ -111,10 +111,9 @@ bool is_ring_triangulation(std::span<const RingCorners> tris, std::size_t r) {
   return true;
 }
 
-// First created face of node k (valid ring offsets assumed).
-std::size_t first_created(std::span<const Index> ring_offsets, std::size_t original_faces, std::size_t k) {
-  return original_faces + ring_offsets[k] - 2 * k;
-}
+// Index of node k's first face among the created ones (valid ring offsets
+// assumed; Hierarchy::first_created_face adds the original faces).
+std::size_t first_created(std::span<const Index> ring_offsets, std::size_t k) { return ring_offsets[k] - 2 * k; }
 
 // What the checks of a stored hierarchy leave behind for hierarchy_from().
 struct Checked {
@@ -232,7 +231,7 @@ Checked check(const StoredHierarchy& s) {
     later.test_and_set(v);
     fans += size - (s.node_closed[k] ? 0 : 1);
 
-    const std::span<const RingCorners> made = s.created_corners.subspan(first_created(s.ring_offsets, 0, k), size - 2);
+    const std::span<const RingCorners> made = s.created_corners.subspan(first_created(s.ring_offsets, k), size - 2);
     bool outside = false;
     for (const RingCorners& t : made)
       outside |= t[0] >= size || t[1] >= size || t[2] >= size || t[0] == t[1] || t[1] == t[2] || t[0] == t[2];
@@ -251,7 +250,7 @@ Checked check(const StoredHierarchy& s) {
   }
   for (std::size_t k = 0; k < nodes; ++k) {
     const Index* r = s.ring_vertices.data() + s.ring_offsets[k];
-    const std::size_t created = first_created(s.ring_offsets, 0, k), size = s.ring_offsets[k + 1] - s.ring_offsets[k];
+    const std::size_t created = first_created(s.ring_offsets, k), size = s.ring_offsets[k + 1] - s.ring_offsets[k];
     for (std::size_t j = created; j < created + size - 2; ++j) {
       const RingCorners& t = s.created_corners[j];
       if (base(r[t[0]]) && base(r[t[1]]) && base(r[t[2]])) c.base_faces.push_back(static_cast<FaceId>(original + j));
@@ -267,19 +266,14 @@ Checked check(const StoredHierarchy& s) {
     fail("vertex " + str(v) + " has invalid barycentric coordinates");
   return c;
 }
-// Reserves exactly n elements: a loaded hierarchy holds no slack.
-// (Advising these arrays onto transparent huge pages took the load from ~400
-// to ~250 ms where huge pages are cheap, but to 0.8–1.1 s one time in three
-// on a VM that reports free 8 MB blocks to its host, so it is not done.)
-template <class T>
-void reserve_exact(std::vector<T>& v, std::size_t n) {
-  v.reserve(n);
-}
-
-// out = in, allocating exactly; no zero fill before the copy.
+// out = in, allocating exactly (a loaded hierarchy holds no slack); no zero
+// fill before the copy. (Advising these arrays onto transparent huge pages
+// took the load from ~400 to ~250 ms where huge pages are cheap, but to
+// 0.8–1.1 s one time in three on a VM that reports free 8 MB blocks to its
+// host, so it is not done.)
 template <class T>
 void copy_into(std::vector<T>& out, std::span<const T> in) {
-  reserve_exact(out, in.size());
+  out.reserve(in.size());
   if constexpr (std::is_trivially_copyable_v<T>) {
     out.assign(in.begin(), in.end());
   } else {
@@ -425,7 +419,7 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
 
     Checked c = check(s);
     const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
-    reserve_exact(h.base_vertices, n - nodes);
+    h.base_vertices.reserve(n - nodes);
     c.removed_vertices.for_each_clear(n, [&](std::size_t v) { h.base_vertices.push_back(static_cast<Index>(v)); });
     h.base_faces = std::move(c.base_faces);  // reserved exactly by check()
   }

@@ -53,7 +53,6 @@ const NodeGraph& DeformerModel::node_graph() const {
   std::call_once(graph_once_, [this] {
     try {
       graph_ = std::make_unique<const NodeGraph>(*h_);
-      graph_built_.store(true, std::memory_order_release);
     } catch (const HierarchyError&) {
       graph_error_ = std::current_exception();  // the same answer for every later caller, at no cost
     }
@@ -65,7 +64,7 @@ const NodeGraph& DeformerModel::node_graph() const {
 
 std::size_t DeformerModel::memory_bytes() const {
   std::size_t bytes = recovery_->memory_bytes();
-  if (graph_built_.load(std::memory_order_acquire)) bytes += graph_->memory_bytes();
+  if (graph_tried_.load(std::memory_order_acquire) && graph_) bytes += graph_->memory_bytes();
   if (optimisation_built_.load(std::memory_order_acquire)) {
     const Optimisation& o = *optimisation_;
     bytes += o.laplacian.offsets.capacity() * sizeof(Index) + o.laplacian.neighbors.capacity() * sizeof(Index) +

@@ -83,7 +83,6 @@ class DeformerModel {
   mutable std::atomic<bool> optimisation_built_{false};  // lets memory_bytes() look without building
   mutable std::once_flag graph_once_;
   mutable std::unique_ptr<const NodeGraph> graph_;
-  mutable std::atomic<bool> graph_built_{false};
   mutable std::exception_ptr graph_error_;  // set once, under graph_once_
   mutable std::atomic<bool> graph_tried_{false};
 };
