@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
-#include <exception>
 #include <string>
 #include <thread>
 #include <tuple>
 #include <utility>
+
+#include "hierarchy/hierarchy.h"
+#include "util/parallel_for.h"
 
 namespace filigree {
 namespace {
@@ -56,27 +58,6 @@ std::pair<NodeId, std::uint8_t> deleter(const std::vector<NodeId>& node_of, cons
   return {k, k == a ? 0 : k == b ? 1 : 2};
 }
 
-// Runs fn(begin, end) over [0, n) split in `parts` contiguous ranges, on as
-// many threads; rethrows the first exception.
-template <class Fn>
-void in_parts(std::size_t n, std::size_t parts, Fn&& fn) {
-  std::vector<std::exception_ptr> errors(parts);
-  {
-    std::vector<std::jthread> pool;
-    for (std::size_t p = 0; p < parts; ++p) {
-      pool.emplace_back([&, p] {
-        try {
-          fn(n * p / parts, n * (p + 1) / parts);
-        } catch (...) {
-          errors[p] = std::current_exception();
-        }
-      });
-    }
-  }
-  for (const auto& e : errors)
-    if (e) std::rethrow_exception(e);
-}
-
 }  // namespace
 
 NodeGraph::NodeGraph(const Hierarchy& h, std::size_t threads) : h_(&h), vertex_node_(filigree::vertex_nodes(h)) {
@@ -94,7 +75,7 @@ NodeGraph::NodeGraph(const Hierarchy& h, std::size_t threads) : h_(&h), vertex_n
   // Pass 1: each face's deleter, and its corner.
   std::vector<NodeId> face_deleter(faces);
   std::vector<std::uint8_t> face_corner(faces);
-  in_parts(faces, parts, [&](std::size_t begin, std::size_t end) {
+  parallel_ranges(faces, parts, [&](std::size_t begin, std::size_t end) {
     for_each_face_block(h, begin, end, [&](std::size_t first, const FaceBlock& b) {
       for (std::size_t i = 0; i < b.size; ++i) {
         if (i + kAhead < b.size)
@@ -110,7 +91,7 @@ NodeGraph::NodeGraph(const Hierarchy& h, std::size_t threads) : h_(&h), vertex_n
   // atomically.
   std::vector<std::array<Index, 2>> slot(slots, {kNone, kNone});  // face, creator
   std::atomic<std::size_t> deleted{0}, deleted_created{0};
-  in_parts(faces, parts, [&](std::size_t begin, std::size_t end) {
+  parallel_ranges(faces, parts, [&](std::size_t begin, std::size_t end) {
     std::size_t mine = 0, mine_created = 0;
     for_each_face_block(h, begin, end, [&](std::size_t first, const FaceBlock& b) {
       const NodeId* k_of = face_deleter.data() + first;
