@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "bench/sample_stats.h"
 #include "filigree/client.h"
 #include "support/cluster.h"
 #include "support/server_process.h"
@@ -23,14 +24,10 @@
 namespace {
 
 using namespace filigree;
+using bench::percentile;
 using Clock = std::chrono::steady_clock;
 
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
-
-double percentile(std::vector<double> v, double p) {
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())))];
-}
 
 std::vector<float> pose(const SessionMesh& mesh, std::uint64_t i) {
   std::vector<float> p = mesh.base_positions;

@@ -36,6 +36,7 @@
 #include <vector>
 
 #include "bench/streaming_bound.h"
+#include "bench/sample_stats.h"
 #include "bench/subdivide.h"
 #include "hierarchy/hierarchy.h"
 #include "metrics/mesh_metrics.h"
@@ -83,11 +84,6 @@ TriMesh in_session_order(const TriMesh& mesh) { return permute_vertices(mesh, lo
 TriMesh load_clean(const std::string& path) {
   RepairReport report;
   return in_session_order(repair_mesh(read_mesh(path), {}, &report));
-}
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
 // Per-frame stage times of the timed frames.

@@ -32,6 +32,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "bench/sample_stats.h"
 #include "bench/subdivide.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "mesh/mesh_io.h"
@@ -43,6 +44,7 @@
 namespace {
 
 using namespace filigree;
+using bench::percentile;
 using Clock = std::chrono::steady_clock;
 
 struct Result {
@@ -61,12 +63,6 @@ std::size_t delta_bytes(const v1::Frame& f) {
 }
 
 enum class Movement { kWholeBody, kLocal };
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[std::min(v.size() - 1, static_cast<std::size_t>(p * static_cast<double>(v.size())))];
-}
 
 std::unique_ptr<grpc::ClientContext> context(const std::string& id, const std::string& token) {
   auto c = std::make_unique<grpc::ClientContext>();
