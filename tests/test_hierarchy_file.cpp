@@ -24,6 +24,8 @@
 namespace filigree {
 namespace {
 
+using test::rehashed;
+
 class HierarchyFileTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
@@ -76,14 +78,6 @@ void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   EXPECT_EQ(a.build.build_seconds, b.build.build_seconds);
   EXPECT_EQ(a.build.requested_base_vertices, b.build.requested_base_vertices);
   EXPECT_EQ(a.build.threads, b.build.threads);
-}
-
-// A payload edited in place, with the header's checksum made right again: a
-// file from a buggy or malicious producer.
-std::string rehashed(std::string bytes) {
-  const std::uint64_t hash = hash_bytes(bytes.data() + 64, bytes.size() - 64);
-  std::memcpy(bytes.data() + 32, &hash, sizeof hash);
-  return bytes;
 }
 
 // Byte offset of section `tag`'s first element.

@@ -4,11 +4,26 @@
 // needs it.
 
 #include <algorithm>
+#include <cstring>
+#include <string>
 #include <vector>
 
 #include "hierarchy/hierarchy.h"
+#include "util/content_hash.h"
 
 namespace filigree::test {
+
+// A .fgh file's bytes with the header's payload checksum made right again
+// (hierarchy_file.h: a 64-byte header, the XXH3 hash at byte 32): a file
+// edited in place by a buggy or malicious producer. Shorter bytes are
+// returned as they are.
+inline std::string rehashed(std::string bytes) {
+  constexpr std::size_t kHeader = 64, kHashAt = 32;
+  if (bytes.size() < kHeader) return bytes;
+  const std::uint64_t hash = hash_bytes(bytes.data() + kHeader, bytes.size() - kHeader);
+  std::memcpy(bytes.data() + kHashAt, &hash, sizeof hash);
+  return bytes;
+}
 
 // Re-triangulates the hole of the first node with a 4-vertex ring whose
 // ring vertices are all removed later, across its other diagonal: still a
