@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "codec/delta_codec.h"
+#include "codec/draco_library_encoder.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -160,6 +161,54 @@ TEST(DeltaCodec, ComputedDecodeEqualsDracoBitForBit) {
       }
     }
   }
+}
+
+// encode_draco writes Draco's own bytes: for every speed, bit depth and kind
+// of values (noise, smooth walks as real deltas are, a few repeated levels,
+// one to five points, a real mesh's smooth field), what Draco 1.5's encoder
+// writes for the same input. Both of Draco's symbol coders are reached (the
+// method byte follows the fixed 26-byte prefix of this stream).
+TEST(DeltaCodec, EncodeDracoWritesDracosOwnBytes) {
+  constexpr std::size_t kSymbolMethodOffset = 26;
+  std::mt19937 rng(5);
+  int tagged = 0, raw = 0, cases = 0;
+  const auto check = [&](const std::vector<float>& values, std::uint32_t bits, const std::string& what) {
+    const DeltaQuantization q = quantization_over(values, bits);
+    for (int speed : {0, 3, 5, 8, 10}) {
+      SCOPED_TRACE(what + ", " + std::to_string(values.size() / 3) + " points, bits " + std::to_string(bits) +
+                   ", speed " + std::to_string(speed));
+      const std::string ours = encode_draco(values, q, speed);
+      const std::string dracos = encode_with_draco_library(values, q, speed);
+      ASSERT_EQ(ours.size(), dracos.size());
+      ASSERT_TRUE(ours == dracos) << "first difference at byte "
+                                  << std::mismatch(ours.begin(), ours.end(), dracos.begin()).first - ours.begin();
+      ASSERT_GT(ours.size(), kSymbolMethodOffset);
+      (ours[kSymbolMethodOffset] == 0 ? tagged : raw) += 1;
+      ++cases;
+    }
+  };
+  for (int trial = 0; trial < 80; ++trial) {
+    const int points = trial % 10 == 0 ? 1 + trial / 10 % 5 : std::uniform_int_distribution<int>(6, 2500)(rng);
+    const double scale = std::pow(10.0, std::uniform_real_distribution<double>(-5.0, 2.0)(rng));
+    std::vector<float> values(3 * static_cast<std::size_t>(points));
+    float walk = 0.0f;
+    for (float& v : values) {
+      switch (trial % 4) {
+        case 0: v = std::normal_distribution<float>(0.0f, static_cast<float>(scale))(rng); break;
+        case 1: walk += std::normal_distribution<float>(0.0f, static_cast<float>(scale * 0.01))(rng); v = walk; break;
+        case 2: v = static_cast<float>(static_cast<double>(rng() % 3) * scale); break;
+        default: v = std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng);
+      }
+    }
+    check(values, 8 + static_cast<std::uint32_t>(rng() % 17), "trial " + std::to_string(trial));
+  }
+  std::vector<float> field;
+  for (const Vec3& d : smooth_field(test::shipped_mesh("bunny_small.obj")))
+    for (int k = 0; k < 3; ++k) field.push_back(static_cast<float>(d[k]));
+  for (std::uint32_t bits : {12u, 16u, 20u, 24u}) check(field, bits, "bunny field");
+  EXPECT_GT(tagged, 0);
+  EXPECT_GT(raw, 0);
+  EXPECT_EQ(cases, 5 * (80 + 4));
 }
 
 TEST(DeltaCodec, PreservesPointOrder) {

@@ -1,17 +1,17 @@
 // Frame deltas as a Draco point cloud (DESIGN §3, TOOLCHAIN "Draco").
 //
 // Encoding: one float32×3 GENERIC attribute, one value per point in vertex
-// order; PointCloudBuilder::Finalize(false) so no point is merged, and
-// POINT_CLOUD_SEQUENTIAL_ENCODING so point i stays point i (Draco's default
-// for point clouds is the kd-tree, which reorders). Sequential point clouds use
-// difference prediction from the previous point, so the size depends on how
-// spatially coherent the vertex order is.
+// order, sequential so that point i stays point i (Draco's default for point
+// clouds is the kd-tree, which reorders), written by encode_draco
+// (draco_writer.h). Sequential point clouds use difference prediction from
+// the previous point, so the size depends on how spatially coherent the
+// vertex order is.
 //
 // Quantization is explicit, over the deltas' own range with one range for all
 // three axes: origin = min over all components, range = max − min, and Draco's
 // step is range / (2^bits − 1). Draco quantizes and dequantizes in float, so
-// the error is step/2 plus a few float roundings; we measure the real figure
-// by decoding the buffer once and report it as max_error (rounded up).
+// the error is step/2 plus a few float roundings; DeltaQuantization computes
+// the decoded values exactly, and max_error is their largest error (rounded up).
 //
 // Decoding trusts nothing in the buffer. Before Draco sees it, the header is
 // checked against what encode_deltas writes (a sequential point cloud without
@@ -19,8 +19,7 @@
 // cannot make Draco allocate for billions of points; after decoding, the
 // attribute's type, size and mapping are checked before any value is read.
 //
-// Every call builds its own Draco encoder/decoder: nothing is shared between
-// threads.
+// Every call builds its own Draco decoder: nothing is shared between threads.
 
 #include "codec/delta_codec.h"
 
@@ -32,16 +31,11 @@
 #include <memory>
 #include <utility>
 
-#include <draco/attributes/geometry_attribute.h>
 #include <draco/attributes/point_attribute.h>
-#include <draco/compression/config/compression_shared.h>
 #include <draco/compression/decode.h>
-#include <draco/compression/expert_encode.h>
 #include <draco/core/decoder_buffer.h>
 #include <draco/core/draco_types.h>
-#include <draco/core/encoder_buffer.h>
 #include <draco/point_cloud/point_cloud.h>
-#include <draco/point_cloud/point_cloud_builder.h>
 
 namespace filigree {
 namespace {
@@ -155,29 +149,6 @@ void decode_draco(std::string_view bytes, std::uint32_t count, std::span<float> 
 void throw_implausible_delta(double d, std::size_t vertex) {
   if (!std::isfinite(d)) throw DeltaCodecError("delta of vertex " + std::to_string(vertex) + " is not finite");
   throw DeltaCodecError("delta of vertex " + std::to_string(vertex) + " is implausibly large (|" + std::to_string(d) + "| > 1e30)");
-}
-
-std::string encode_draco(std::span<const float> values, const DeltaQuantization& q, int speed) {
-  if (values.empty()) return {};
-  const auto n = static_cast<std::uint32_t>(values.size() / 3);
-  draco::PointCloudBuilder builder;
-  builder.Start(n);
-  const int att_id = builder.AddAttribute(draco::GeometryAttribute::GENERIC, 3, draco::DT_FLOAT32);
-  // Point i gets values[3i … 3i+2]: the same as SetAttributeValueForPoint for
-  // each i in order, in one pass.
-  builder.SetAttributeValuesForAllPoints(att_id, values.data(), 3 * sizeof(float));
-  const std::unique_ptr<draco::PointCloud> cloud = builder.Finalize(/*deduplicate_points=*/false);
-  if (!cloud || cloud->num_points() != n) throw DeltaCodecError("Draco could not build the delta point cloud");
-
-  draco::ExpertEncoder encoder(*cloud);
-  encoder.SetEncodingMethod(draco::POINT_CLOUD_SEQUENTIAL_ENCODING);
-  encoder.SetSpeedOptions(speed, speed);
-  const float origin[3] = {q.min, q.min, q.min};
-  encoder.SetAttributeExplicitQuantization(att_id, static_cast<int>(q.bits), 3, origin, q.range);
-  draco::EncoderBuffer out;
-  const draco::Status status = encoder.EncodeToBuffer(&out);
-  if (!status.ok()) throw DeltaCodecError("Draco could not encode the deltas: " + status.error_msg_string());
-  return std::string(out.data(), out.size());
 }
 
 EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits) {

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "codec/delta_quantization.h"
+#include "codec/draco_writer.h"
 #include "mesh/tri_mesh.h"
 
 namespace filigree {
@@ -38,23 +39,11 @@ inline void check_delta(double d, std::size_t vertex) {
   if (!(d <= kMaxDeltaMagnitude && d >= -kMaxDeltaMagnitude)) throw_implausible_delta(d, vertex);
 }
 
-// Draco's encoding speed (0 smallest … 10 fastest). Measured on 435k real
-// deltas in chunks of 16384 (Draco 1.5.5): 5 gives 1.26 B/vertex in the same
-// time as 10, which gives 1.31; below 5 decoding slows down for < 1% smaller.
-constexpr int kDefaultEncodingSpeed = 5;
-
 // Encodes `deltas` with `bits` (8…24) of quantization over their own range.
 // Throws DeltaCodecError for bad bits or non-finite deltas (and for
 // |delta| > 1e30, which float32 quantization cannot carry).
-// max_error is exact (DeltaQuantization), at most bound(). Thread-safe:
-// every call uses its own Draco encoder.
+// max_error is exact (DeltaQuantization), at most bound(). Thread-safe.
 EncodedDeltas encode_deltas(const std::vector<Vec3>& deltas, std::uint32_t bits);
-
-// Draco-encodes `values` (x y z per point, every value inside q's range; the
-// caller checked them finite) as a sequential point cloud quantized by `q`.
-// Throws DeltaCodecError if Draco fails. Empty values give an empty string.
-std::string encode_draco(std::span<const float> values, const DeltaQuantization& q,
-                         int speed = kDefaultEncodingSpeed);
 
 // Decodes a buffer of `count` points (as decode_deltas) into `out`, 3·count
 // floats. An empty buffer is all zeros.

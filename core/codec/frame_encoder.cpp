@@ -166,7 +166,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
 
 void FrameEncoder::encode_chunk(std::size_t c) {
   Slot& slot = chunks_.at(c);
-  slot.out.bytes = encode_draco(slot.values, slot.out.quantization, options_.speed);
+  encode_draco_into(slot.values, slot.out.quantization, options_.speed, slot.out.bytes);
   if (options_.staging) options_.staging->give(std::exchange(slot.values, {}));
 }
 

@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "codec/delta_quantization.h"
+#include "codec/draco_writer.h"
 #include "mesh/tri_mesh.h"
 #include "util/buffer_pool.h"
 
@@ -33,7 +34,7 @@ struct FrameEncoderOptions {
   std::uint32_t bits = 0;
   double max_error = 0.0;  // absolute; with bits = 0 it must be > 0
   double dense_fraction = 0.5;
-  int speed = 5;  // Draco encoding speed (delta_codec.h)
+  int speed = kDefaultEncodingSpeed;  // Draco encoding speed (draco_writer.h)
   // Where a chunk's staged deltas live from quantize_chunk to encode_chunk;
   // shared by the encoders of many sessions, so an idle one holds none.
   // Null: each chunk keeps its own buffer.
