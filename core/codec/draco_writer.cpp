@@ -20,6 +20,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <numeric>
 #include <vector>
 
@@ -308,6 +309,9 @@ bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out) {
   out.clear();
   if (values.empty()) return;
+  // Draco counts values in int.
+  if (values.size() % 3 != 0 || values.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
+    throw DeltaCodecError("cannot write " + std::to_string(values.size()) + " values as one Draco buffer of points");
   const std::size_t points = values.size() / 3, count = 3 * points;
   thread_local Scratch s;
 
@@ -391,15 +395,27 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   int unique = 0;
   bool raw = false;
   if (raw_possible) {
+    // The lanes cover the small symbols only, where nearly every value
+    // falls: the largest symbol is often the first point's correction, far
+    // above the rest, and clearing and summing lanes up to it would cost
+    // more than counting.
     const std::size_t size = static_cast<std::size_t>(max_value) + 1;
-    s.histogram.assign(kLanes * size, 0);
-    std::uint32_t* h = s.histogram.data();
+    constexpr std::size_t kLaneSymbols = 1024;
+    const std::size_t lane_size = std::min(size, kLaneSymbols);
+    s.histogram.assign(size + (kLanes - 1) * lane_size, 0);
+    std::uint32_t* h = s.histogram.data();  // lane 0, every symbol
+    std::uint32_t* extra = h + size;          // lane l ≥ 1 at extra + (l − 1) · lane_size
     std::size_t i = 0;
-    for (; i + kLanes <= count; i += kLanes)
-      for (std::size_t l = 0; l < kLanes; ++l) ++h[l * size + sym[i + l]];
+    for (; i + kLanes <= count; i += kLanes) {
+      ++h[sym[i]];
+      for (std::size_t l = 1; l < kLanes; ++l) {
+        const std::uint32_t v = sym[i + l];
+        ++(v < lane_size ? extra[(l - 1) * lane_size + v] : h[v]);
+      }
+    }
     for (; i < count; ++i) ++h[sym[i]];
     for (std::size_t l = 1; l < kLanes; ++l)
-      for (std::size_t k = 0; k < size; ++k) h[k] += h[l * size + k];
+      for (std::size_t k = 0; k < lane_size; ++k) h[k] += extra[(l - 1) * lane_size + k];
     const std::int64_t raw_bits = entropy_bits(h, size, static_cast<int>(count), unique) +
                                   table_bits(static_cast<std::int32_t>(max_value), unique);
     raw = !(tagged_bits < raw_bits);

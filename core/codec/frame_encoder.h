@@ -83,6 +83,9 @@ class FrameEncoder {
   void quantize_chunk(std::size_t c, std::span<const Vec3> positions);
   // Draco-encodes chunk c (after quantize_chunk(c)).
   void encode_chunk(std::size_t c);
+  // What encode_chunk(c) will encode: chunk c's present deltas, x y z each
+  // (valid between quantize_chunk(c) and encode_chunk(c)).
+  std::span<const float> staged(std::size_t c) const { return chunks_.at(c).values; }
   // After every chunk: the frame's summary; a keyframe becomes the reference.
   EncodedFrameSummary finish();
 

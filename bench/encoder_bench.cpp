@@ -1,0 +1,111 @@
+// Frame encoding on one thread, without the service around it (issue 11): the
+// shipped Armadillo and its subdivisions (26k, 104k, 1.25M vertices, in
+// locality order, as the server orders them) under an analytic motion on every
+// vertex, encoded by FrameEncoder as keyframes (every vertex sent: the whole-
+// body worst case) with automatic quantization (max error 5e-5 of the
+// diagonal) in chunks of 16384. Per mesh and motion it prints the quantize
+// pass (staging, what moved, the exact error) and the Draco buffers, ours
+// (encode_draco) against Draco 1.5's own encoder on the same chunks, in ns
+// per vertex; the bytes are checked equal on every chunk.
+//
+// Usage: filigree_bench_encoder [--quick] (the quick run skips the 1.25M mesh)
+
+#include <chrono>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bench/sample_stats.h"
+#include "bench/subdivide.h"
+#include "codec/draco_library_encoder.h"
+#include "codec/draco_writer.h"
+#include "codec/frame_encoder.h"
+#include "mesh/mesh_io.h"
+#include "mesh/mesh_validation.h"
+#include "mesh/vertex_order.h"
+#include "runtime/procedural_motion.h"
+
+namespace {
+
+using namespace filigree;
+using Clock = std::chrono::steady_clock;
+
+double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+struct Row {
+  double quantize_ns = 0.0, ours_ns = 0.0, draco_ns = 0.0, bytes_per_vertex = 0.0;
+};
+
+// Medians over `rounds` frames at phases 0.3 … 0.9 of `motion`, after one
+// untimed round.
+Row measure(const TriMesh& mesh, Motion motion, int rounds) {
+  const double diag = bounding_box_diagonal(mesh.positions);
+  const double n = static_cast<double>(mesh.vertex_count());
+  const MotionField field(mesh.positions, motion, 0.0);
+  std::vector<double> quantize, ours, dracos;
+  double bytes = 0.0;
+  // One encoder for every round, as a session keeps one (its buffers are
+  // allocated once; a first round would time the page faults).
+  FrameEncoder encoder(mesh.positions, {.max_error = 5e-5 * diag});
+  for (int r = -1; r < rounds; ++r) {
+    const std::vector<Vec3> posed = field.with_phase(0.3 + 0.6 * std::max(r, 0) / std::max(1, rounds - 1)).apply(mesh.positions);
+    encoder.begin(/*force_keyframe=*/true);
+    auto t = Clock::now();
+    for (std::size_t c = 0; c < encoder.chunk_count(); ++c) encoder.quantize_chunk(c, posed);
+    quantize.push_back(ms_since(t) * 1e6 / n);
+    // Both writers on each chunk's staged values; their bytes must be equal.
+    double ours_ms = 0.0, draco_ms = 0.0, total = 0.0;
+    for (std::size_t c = 0; c < encoder.chunk_count(); ++c) {
+      t = Clock::now();
+      const std::string dracos_bytes =
+          encode_with_draco_library(encoder.staged(c), encoder.chunk(c).quantization, kDefaultEncodingSpeed);
+      draco_ms += ms_since(t);
+      t = Clock::now();
+      encoder.encode_chunk(c);
+      ours_ms += ms_since(t);
+      if (dracos_bytes != encoder.chunk(c).bytes)
+        throw std::runtime_error("chunk " + std::to_string(c) + ": our bytes differ from Draco's");
+      total += static_cast<double>(dracos_bytes.size());
+    }
+    encoder.finish();
+    if (r < 0) continue;  // the warm-up round
+    ours.push_back(ours_ms * 1e6 / n);
+    dracos.push_back(draco_ms * 1e6 / n);
+    bytes += total / n;
+  }
+  return {bench::median(quantize), bench::median(ours), bench::median(dracos), bytes / rounds};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const bool quick = argc > 1 && std::string(argv[1]) == "--quick";
+    const TriMesh armadillo = repair_mesh(read_mesh(FILIGREE_REPO_DATA_DIR "/armadillo.off"), {}, nullptr);
+    struct Case {
+      std::string name;
+      TriMesh mesh;
+    };
+    std::vector<Case> cases;
+    const auto ordered = [](const TriMesh& m) { return permute_vertices(m, locality_order(m.positions)); };
+    cases.push_back({"armadillo (real)", ordered(armadillo)});
+    cases.push_back({"armadillo Loop x1", ordered(bench::subdivide(armadillo, 1, 0))});
+    if (!quick) cases.push_back({"armadillo Loop x2 + sqrt3", ordered(bench::subdivide(armadillo, 2, 1))});
+    std::printf("# Frame encoding, one thread, keyframes (every vertex sent), max error 5e-5 of the diagonal\n\n");
+    std::printf("| mesh | vertices | motion | quantize ns/vertex | Draco buffers, ours ns/vertex | Draco's encoder ns/vertex | "
+                "Draco's / ours | bytes/vertex |\n|---|---:|---|---:|---:|---:|---:|---:|\n");
+    for (const Case& c : cases) {
+      for (Motion m : {Motion::kBend, Motion::kTwist}) {
+        const Row r = measure(c.mesh, m, quick ? 3 : 5);
+        std::printf("| %s | %zu | %s | %.1f | %.1f | %.1f | %.2f | %.3f |\n", c.name.c_str(), c.mesh.vertex_count(), to_string(m),
+                    r.quantize_ns, r.ours_ns, r.draco_ns, r.draco_ns / r.ours_ns, r.bytes_per_vertex);
+        std::fflush(stdout);
+      }
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "filigree_bench_encoder: %s\n", e.what());
+    return 1;
+  }
+}
