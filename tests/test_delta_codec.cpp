@@ -208,6 +208,10 @@ TEST(DeltaCodec, EncodeDracoWritesDracosOwnBytes) {
   for (std::uint32_t bits : {12u, 16u, 20u, 24u}) check(field, bits, "bunny field");
   EXPECT_GT(tagged, 0);
   EXPECT_GT(raw, 0);
+  // Draco reads speeds outside 0…10 in ways of its own (−1 is its default
+  // 5): they are refused.
+  const DeltaQuantization q = quantization_over(field, 14);
+  for (int speed : {-1, 11}) EXPECT_THROW(encode_draco(field, q, speed), DeltaCodecError) << speed;
   EXPECT_EQ(cases, 5 * (80 + 4));
 }
 

@@ -328,5 +328,15 @@ TEST(FrameEncoder, StagingFromASharedPoolGivesTheSameFramesAndHoldsNothingBetwee
   for (std::size_t c = 0; c < expected.chunks.size(); ++c) EXPECT_EQ(a.encoder.chunk(c).bytes, expected.chunks[c].bytes) << c;
 }
 
+TEST(FrameEncoder, RejectsBadOptions) {
+  const std::vector<Vec3> rest(10, Vec3(1.0, 2.0, 3.0));
+  EXPECT_THROW(FrameEncoder(rest, {.chunk_vertices = 0, .max_error = 1e-3}), std::invalid_argument);
+  EXPECT_THROW(FrameEncoder(rest, {.bits = 7}), std::invalid_argument);
+  EXPECT_THROW(FrameEncoder(rest, {.bits = 0, .max_error = 0.0}), std::invalid_argument);
+  for (int speed : {-1, 11})
+    EXPECT_THROW(FrameEncoder(rest, {.max_error = 1e-3, .speed = speed}), std::invalid_argument) << speed;
+  EXPECT_NO_THROW(FrameEncoder(rest, {.max_error = 1e-3, .speed = 10}));
+}
+
 }  // namespace
 }  // namespace filigree

@@ -308,6 +308,7 @@ bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::
 
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out) {
   out.clear();
+  if (speed < 0 || speed > 10) throw DeltaCodecError("Draco encoding speed must be 0…10, got " + std::to_string(speed));
   if (values.empty()) return;
   // Draco counts values in int.
   if (values.size() % 3 != 0 || values.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
@@ -434,8 +435,7 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   w.u8(kQuantizationEncoder);
   w.u8(kPredictionDifference), w.u8(kTransformWrap), w.u8(1);
 
-  // Draco's compression level is 10 − speed; out of 0…10 it keeps its default 7.
-  const int level = speed >= 0 && speed <= 10 ? 10 - speed : 7;
+  const int level = 10 - speed;  // Draco's symbol coding compression level
   const std::size_t symbols_at = out.size();
   // With 2^18 distinct symbols Draco's raw coder gives up; the tagged one
   // still encodes them (only a chunk of over 87381 points can get there).

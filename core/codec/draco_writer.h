@@ -29,7 +29,8 @@ constexpr int kDefaultEncodingSpeed = 5;
 // its contents, keeping its capacity). Preconditions: values.size() is a
 // multiple of 3 and below 2^31; every value is finite and inside [q.min,
 // q.min + q.range]; q.range > 0. Empty values give an empty string. Throws
-// DeltaCodecError where Draco's encoder would fail. Thread-safe (scratch is
+// DeltaCodecError for a speed outside 0…10 and where Draco's encoder would
+// fail. Thread-safe (scratch is
 // per thread, reused: no allocation per chunk in the steady state).
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out);
 
