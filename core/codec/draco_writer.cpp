@@ -67,7 +67,6 @@ struct RansSymbol {
   std::uint32_t bound = 0;       // renormalise while state ≥ this
   std::uint32_t cum = 0;
   std::uint32_t spare = 0;       // precision − prob
-  std::uint32_t prob = 0;
 };
 
 struct Scratch {
@@ -103,7 +102,8 @@ std::int64_t table_bits(std::int32_t max_value, int unique) {
 
 // RAnsSymbolEncoder::Create: frequencies → probabilities that sum to
 // 2^precision_bits, with Draco's rounding and its rescaling of the
-// over-allocated case. False where Draco's Create fails.
+// over-allocated case. False where Draco's Create fails (or would never
+// finish).
 bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int precision_bits, Scratch& s) {
   std::uint64_t total = 0;
   int max_valid = 0;
@@ -160,7 +160,6 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
   s.table.resize(prob.size());
   for (std::size_t i = 0; i < prob.size(); ++i) {
     RansSymbol& t = s.table[i];
-    t.prob = prob[i];
     t.cum = cum;
     cum += prob[i];
     // RAnsEncoder::rans_write renormalises while state ≥ l_base / precision ·
@@ -363,8 +362,8 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
     corr -= corr > max_correction ? max_dif : 0;
     return static_cast<std::uint32_t>(corr << 1) ^ static_cast<std::uint32_t>(corr >> 31);
   };
-  for (std::size_t i = 0; i < 3; ++i) sym[i] = symbol_of(qv[i] - lo);
-  for (std::size_t i = 3; i < count; ++i) sym[i] = symbol_of(qv[i] - qv[i - 3]);
+  for (std::size_t k = 0; k < 3; ++k) sym[k] = symbol_of(qv[k] - lo);
+  for (std::size_t k = 3; k < count; ++k) sym[k] = symbol_of(qv[k] - qv[k - 3]);
 
   // EncodeSymbols: per point the bit length of its largest symbol; the
   // tagged scheme's size estimate from those, the raw scheme's from the
@@ -396,27 +395,27 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   int unique = 0;
   bool raw = false;
   if (raw_possible) {
-    // The lanes cover the small symbols only, where nearly every value
+    // Lanes 1…3 cover the small symbols only, where nearly every value
     // falls: the largest symbol is often the first point's correction, far
-    // above the rest, and clearing and summing lanes up to it would cost
-    // more than counting.
+    // above the rest, and lanes up to it would each have to be cleared and
+    // summed.
     const std::size_t size = static_cast<std::size_t>(max_value) + 1;
     constexpr std::size_t kLaneSymbols = 1024;
     const std::size_t lane_size = std::min(size, kLaneSymbols);
     s.histogram.assign(size + (kLanes - 1) * lane_size, 0);
     std::uint32_t* h = s.histogram.data();  // lane 0, every symbol
     std::uint32_t* extra = h + size;          // lane l ≥ 1 at extra + (l − 1) · lane_size
-    std::size_t i = 0;
-    for (; i + kLanes <= count; i += kLanes) {
-      ++h[sym[i]];
+    std::size_t k = 0;
+    for (; k + kLanes <= count; k += kLanes) {
+      ++h[sym[k]];
       for (std::size_t l = 1; l < kLanes; ++l) {
-        const std::uint32_t v = sym[i + l];
-        ++(v < lane_size ? extra[(l - 1) * lane_size + v] : h[v]);
+        const std::uint32_t symbol = sym[k + l];
+        ++(symbol < lane_size ? extra[(l - 1) * lane_size + symbol] : h[symbol]);
       }
     }
-    for (; i < count; ++i) ++h[sym[i]];
+    for (; k < count; ++k) ++h[sym[k]];
     for (std::size_t l = 1; l < kLanes; ++l)
-      for (std::size_t k = 0; k < lane_size; ++k) h[k] += extra[(l - 1) * lane_size + k];
+      for (std::size_t j = 0; j < lane_size; ++j) h[j] += extra[(l - 1) * lane_size + j];
     const std::int64_t raw_bits = entropy_bits(h, size, static_cast<int>(count), unique) +
                                   table_bits(static_cast<std::int32_t>(max_value), unique);
     raw = !(tagged_bits < raw_bits);
