@@ -165,9 +165,10 @@ TEST(DeltaCodec, ComputedDecodeEqualsDracoBitForBit) {
 
 // encode_draco writes Draco's own bytes: for every speed, bit depth and kind
 // of values (noise, smooth walks as real deltas are, a few repeated levels,
-// one to five points, a real mesh's smooth field), what Draco 1.5's encoder
-// writes for the same input. Both of Draco's symbol coders are reached (the
-// method byte follows the fixed 26-byte prefix of this stream).
+// walks with rare jumps, one to five points, a real mesh's smooth field),
+// what Draco 1.5's encoder writes for the same input. Both of Draco's symbol
+// coders are reached (the method byte follows the fixed 26-byte prefix of
+// this stream).
 TEST(DeltaCodec, EncodeDracoWritesDracosOwnBytes) {
   constexpr std::size_t kSymbolMethodOffset = 26;
   std::mt19937 rng(5);
@@ -193,11 +194,15 @@ TEST(DeltaCodec, EncodeDracoWritesDracosOwnBytes) {
     std::vector<float> values(3 * static_cast<std::size_t>(points));
     float walk = 0.0f;
     for (float& v : values) {
-      switch (trial % 4) {
+      switch (trial % 5) {
         case 0: v = std::normal_distribution<float>(0.0f, static_cast<float>(scale))(rng); break;
         case 1: walk += std::normal_distribution<float>(0.0f, static_cast<float>(scale * 0.01))(rng); v = walk; break;
         case 2: v = static_cast<float>(static_cast<double>(rng() % 3) * scale); break;
-        default: v = std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng);
+        case 3: v = std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng); break;
+        default:  // a slow walk with rare jumps anywhere, as a sparse chunk's present vertices
+          walk += std::normal_distribution<float>(0.0f, static_cast<float>(scale * 0.001))(rng);
+          if (rng() % 50 == 0) walk = std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng);
+          v = walk;
       }
     }
     check(values, 8 + static_cast<std::uint32_t>(rng() % 17), "trial " + std::to_string(trial));
