@@ -22,7 +22,6 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
-#include <utility>
 #include <vector>
 
 #include "codec/delta_codec.h"
@@ -70,37 +69,28 @@ struct RansSymbol {
   std::uint32_t spare = 0;       // precision − prob
 };
 
-// The symbols that occur, ascending, and how often. Draco's tables span
-// every value up to the largest symbol, and the largest is often far above
-// the rest (a sparse chunk's jumps between present vertices): everything
-// here costs what occurs, not that span.
-struct Alphabet {
-  std::vector<std::uint32_t> symbols;
-  std::vector<std::uint32_t> counts;
-  void clear() { symbols.clear(), counts.clear(); }
-  void add(std::uint32_t symbol, std::uint32_t count) { symbols.push_back(symbol), counts.push_back(count); }
-};
-
 struct Scratch {
   std::vector<std::int32_t> quantized;
   std::vector<std::uint32_t> symbols;
   std::vector<std::uint8_t> bit_lengths;  // per point
-  std::vector<std::uint32_t> small_counts;  // kLanes lanes of the symbols below kSmallSymbols; zero between uses
-  std::vector<std::uint32_t> large_counts;  // by symbol, the others; zero between uses
-  std::vector<std::uint32_t> large;         // the large symbols seen
-  Alphabet alphabet;
-  std::vector<std::uint32_t> probabilities;  // per alphabet entry
-  std::vector<std::uint32_t> order;
-  std::vector<RansSymbol> table;  // by symbol (entries of absent symbols are never read)
+  std::vector<std::uint32_t> histogram;
+  std::vector<std::uint32_t> probabilities;
+  std::vector<int> order;
+  std::vector<RansSymbol> table;
   std::vector<std::uint8_t> coded;  // rANS bytes, then the tagged scheme's value bits
 };
 
 // Draco's ComputeShannonEntropy over a histogram: the same sum in the same
 // (ascending) order, so the same double and the same truncation.
-std::int64_t entropy_bits(const Alphabet& a, int total) {
+std::int64_t entropy_bits(const std::uint32_t* histogram, std::size_t size, int total, int& unique) {
+  unique = 0;
   double bits = 0.0;
   const double n = total;
-  for (const std::uint32_t c : a.counts) bits += static_cast<int>(c) * std::log2(static_cast<double>(c) / n);
+  for (std::size_t i = 0; i < size; ++i) {
+    if (histogram[i] == 0) continue;
+    ++unique;
+    bits += static_cast<int>(histogram[i]) * std::log2(static_cast<double>(histogram[i]) / n);
+  }
   return static_cast<std::int64_t>(-bits);
 }
 
@@ -113,47 +103,43 @@ std::int64_t table_bits(std::int32_t max_value, int unique) {
 // RAnsSymbolEncoder::Create: frequencies → probabilities that sum to
 // 2^precision_bits, with Draco's rounding and its rescaling of the
 // over-allocated case. False where Draco's Create fails (or would never
-// finish). Draco sorts every symbol up to the largest by probability
-// (stably) and rescales from the top down, stopping at a probability ≤ 1;
-// absent symbols (probability 0) sort first and are never reached, so
-// sorting the present ones only gives the same rescaling.
-bool rans_probabilities(const Alphabet& a, int precision_bits, Scratch& s) {
-  const std::size_t unique = a.symbols.size();
+// finish).
+bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int precision_bits, Scratch& s) {
   std::uint64_t total = 0;
-  for (const std::uint32_t c : a.counts) total += c;
+  int max_valid = 0;
+  for (int i = 0; i < num_symbols; ++i) {
+    total += frequencies[i];
+    if (frequencies[i] > 0) max_valid = i;
+  }
+  num_symbols = max_valid + 1;
   std::vector<std::uint32_t>& prob = s.probabilities;
-  prob.resize(unique);
+  prob.resize(static_cast<std::size_t>(num_symbols));
   const int precision = 1 << precision_bits;
   const double total_d = static_cast<double>(total), precision_d = precision;
   int total_prob = 0;
-  for (std::size_t i = 0; i < unique; ++i) {
-    const double p = static_cast<double>(a.counts[i]) / total_d;
+  for (int i = 0; i < num_symbols; ++i) {
+    const double p = static_cast<double>(frequencies[i]) / total_d;
     auto r = static_cast<std::uint32_t>(p * precision_d + 0.5f);
-    if (r == 0) r = 1;  // every symbol here occurs
-    prob[i] = r;
+    if (r == 0 && frequencies[i] > 0) r = 1;
+    prob[static_cast<std::size_t>(i)] = r;
     total_prob += static_cast<int>(r);
   }
   if (total_prob != precision) {
-    std::vector<std::uint32_t>& order = s.order;
-    order.resize(unique);
-    std::iota(order.begin(), order.end(), 0u);
-    std::stable_sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) { return prob[x] < prob[y]; });
+    std::vector<int>& order = s.order;
+    order.resize(static_cast<std::size_t>(num_symbols));
+    std::iota(order.begin(), order.end(), 0);
+    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return prob[a] < prob[b]; });
     if (total_prob < precision) {
-      prob[order.back()] += static_cast<std::uint32_t>(precision - total_prob);
+      prob[static_cast<std::size_t>(order.back())] += static_cast<std::uint32_t>(precision - total_prob);
     } else {
-      // Draco's loop runs j = n − 1 … 1 over all n = largest + 1 symbols;
-      // over the present ones that is down to 0 when some symbol is absent
-      // (an absent one then stops it), down to 1 when none is.
-      const std::size_t num_symbols = static_cast<std::size_t>(a.symbols.back()) + 1;
-      const std::size_t last = unique < num_symbols ? 0 : 1;
       std::int32_t error = total_prob - precision;
       while (error > 0) {
         const std::int32_t error_before = error;
         const double scale = precision_d / static_cast<double>(total_prob);
-        for (std::size_t j = unique; j-- > last;) {
-          std::uint32_t& p = prob[order[j]];
+        for (int j = num_symbols - 1; j > 0; --j) {
+          std::uint32_t& p = prob[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])];
           if (p <= 1) {
-            if (j == unique - 1) return false;
+            if (j == num_symbols - 1) return false;
             break;
           }
           const auto reduced = static_cast<std::int32_t>(std::floor(scale * static_cast<double>(p)));
@@ -171,9 +157,9 @@ bool rans_probabilities(const Alphabet& a, int precision_bits, Scratch& s) {
     }
   }
   std::uint32_t cum = 0;
-  if (s.table.size() < static_cast<std::size_t>(a.symbols.back()) + 1) s.table.resize(static_cast<std::size_t>(a.symbols.back()) + 1);
-  for (std::size_t i = 0; i < unique; ++i) {
-    RansSymbol& t = s.table[a.symbols[i]];
+  s.table.resize(prob.size());
+  for (std::size_t i = 0; i < prob.size(); ++i) {
+    RansSymbol& t = s.table[i];
     t.cum = cum;
     cum += prob[i];
     // RAnsEncoder::rans_write renormalises while state ≥ l_base / precision ·
@@ -186,23 +172,25 @@ bool rans_probabilities(const Alphabet& a, int precision_bits, Scratch& s) {
   return cum == static_cast<std::uint32_t>(precision);
 }
 
-// RAnsSymbolEncoder::EncodeTable: the symbol count (largest + 1), then each
-// probability as a 1–3 byte varint whose low two bits count the extra
-// bytes; absent symbols in runs of up to 64, one byte each ((run − 1) << 2 | 3).
-void write_table(Writer& w, const Alphabet& a, const std::vector<std::uint32_t>& prob) {
-  w.varint(static_cast<std::uint64_t>(a.symbols.back()) + 1);
-  std::uint32_t next = 0;  // the first symbol not yet written
-  for (std::size_t i = 0; i < a.symbols.size(); ++i) {
-    for (std::uint32_t gap = a.symbols[i] - next; gap > 0;) {
-      const std::uint32_t run = std::min<std::uint32_t>(gap, 64);
-      w.u8(((run - 1) << 2) | 3u);
-      gap -= run;
-    }
+// RAnsSymbolEncoder::EncodeTable: the symbol count, then each probability as
+// a 1–3 byte varint whose low two bits count the extra bytes, runs of zero
+// probabilities as one byte (offset << 2 | 3).
+void write_table(Writer& w, const std::vector<std::uint32_t>& prob) {
+  w.varint(prob.size());
+  for (std::size_t i = 0; i < prob.size(); ++i) {
     const std::uint32_t p = prob[i];
+    if (p == 0) {
+      std::uint32_t offset = 0;
+      for (; offset < (1u << 6) - 1; ++offset) {
+        if (prob[i + offset + 1] > 0) break;  // the last symbol is never 0
+      }
+      w.u8((offset << 2) | 3u);
+      i += offset;
+      continue;
+    }
     const int extra = p >= (1u << 14) ? 2 : p >= (1u << 6) ? 1 : 0;
     w.u8((p << 2) | static_cast<std::uint32_t>(extra));
     for (int b = 0; b < extra; ++b) w.u8(p >> (8 * (b + 1) - 2));
-    next = a.symbols[i] + 1;
   }
 }
 
@@ -256,11 +244,13 @@ void rans_encode(Writer& w, std::size_t count, int precision_bits, const std::ve
 
 // EncodeTaggedSymbols: each point's bit length rANS-coded (precision 12),
 // then every value in that many bits, least significant bit first.
-void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, const Alphabet& tags, Scratch& s) {
+void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, const std::uint32_t* tag_histogram,
+                  Scratch& s) {
   constexpr int kPrecision = 12;  // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5)
   static_assert(kTagBitLength == 5);
-  if (!rans_probabilities(tags, kPrecision, s)) throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
-  write_table(w, tags, s.probabilities);
+  if (!rans_probabilities(tag_histogram, kMaxTag, kPrecision, s))
+    throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
+  write_table(w, s.probabilities);
   const std::uint8_t* lengths = s.bit_lengths.data();
   rans_encode(w, points, kPrecision, s.table, [lengths](std::size_t i) { return lengths[i]; }, s.coded);
 
@@ -289,8 +279,9 @@ void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, c
 // EncodeRawSymbols: the unique-symbol count's bit length, moved by the
 // compression level, picks the rANS precision; symbols coded directly.
 // Returns false where Draco's would fail (2^18 or more distinct symbols).
-bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, int compression_level, Scratch& s) {
-  int length = most_significant_bit(static_cast<std::uint32_t>(s.alphabet.symbols.size())) + 1;
+bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::uint32_t max_value, int unique,
+               int compression_level, Scratch& s) {
+  int length = most_significant_bit(static_cast<std::uint32_t>(unique)) + 1;
   if (length > kMaxRawBitLength) return false;
   if (compression_level < 4) {
     length -= 2;
@@ -303,10 +294,11 @@ bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, int c
   }
   length = std::clamp(length, 1, kMaxRawBitLength);
   const int precision = std::clamp(3 * length / 2, 12, 20);
-  if (!rans_probabilities(s.alphabet, precision, s)) throw DeltaCodecError("Draco's symbol coder cannot encode these deltas");
+  if (!rans_probabilities(s.histogram.data(), static_cast<int>(max_value) + 1, precision, s))
+    throw DeltaCodecError("Draco's symbol coder cannot encode these deltas");
   w.u8(kRaw);
   w.u8(static_cast<std::uint32_t>(length));
-  write_table(w, s.alphabet, s.probabilities);
+  write_table(w, s.probabilities);
   rans_encode(w, count, precision, s.table, [symbols](std::size_t i) { return symbols[i]; }, s.coded);
   return true;
 }
@@ -390,49 +382,42 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
     ++tag_lanes[p % kLanes][length];
     max_value = std::max(max_value, m);
   }
-  Alphabet tags;
+  std::uint32_t tag_histogram[kMaxTag + 1] = {};
   std::uint64_t total_length = 0;
-  for (std::uint32_t length = 0; length <= kMaxTag; ++length) {
-    std::uint32_t n = 0;
-    for (const auto& lane : tag_lanes) n += lane[length];
-    if (n > 0) tags.add(length, n);
-    total_length += std::uint64_t{n} * length;
+  for (int length = 0; length <= kMaxTag; ++length) {
+    for (const auto& lane : tag_lanes) tag_histogram[length] += lane[length];
+    total_length += std::uint64_t{tag_histogram[length]} * static_cast<std::uint64_t>(length);
   }
-  const auto tag_unique = static_cast<int>(tags.symbols.size());
-  const std::int64_t tagged_bits = entropy_bits(tags, static_cast<int>(points)) + table_bits(tag_unique, tag_unique) +
-                                   static_cast<std::int64_t>(total_length * 3);
+  int tag_unique = 0;
+  const std::int64_t tagged_bits = entropy_bits(tag_histogram, kMaxTag + 1, static_cast<int>(points), tag_unique) +
+                                   table_bits(tag_unique, tag_unique) + static_cast<std::int64_t>(total_length * 3);
   const bool raw_possible = most_significant_bit(std::max(1u, max_value)) + 1 <= kMaxRawBitLength;
+  int unique = 0;
   bool raw = false;
   if (raw_possible) {
-    // Symbols below kSmallSymbols, nearly all of them, are counted in
-    // kLanes lanes; the others (a sparse chunk's jumps) by symbol, each
-    // noted when first seen. Both count arrays are left zero for next time.
-    constexpr std::uint32_t kSmallSymbols = 1024;
-    s.small_counts.resize(kLanes * kSmallSymbols);  // zero: new, or cleared after use
-    if (s.large_counts.size() <= max_value) s.large_counts.resize(static_cast<std::size_t>(max_value) + 1);
-    std::uint32_t* small = s.small_counts.data();
-    std::uint32_t* large_counts = s.large_counts.data();
-    s.large.clear();
-    for (std::size_t k = 0; k < count; ++k) {
-      const std::uint32_t symbol = sym[k];
-      if (symbol < kSmallSymbols) {
-        ++small[(k % kLanes) * kSmallSymbols + symbol];
-      } else if (large_counts[symbol]++ == 0) {
-        s.large.push_back(symbol);
+    // Lanes 1…3 cover the small symbols only, where nearly every value
+    // falls: the largest symbol is often the first point's correction, far
+    // above the rest, and lanes up to it would each have to be cleared and
+    // summed.
+    const std::size_t size = static_cast<std::size_t>(max_value) + 1;
+    constexpr std::size_t kLaneSymbols = 1024;
+    const std::size_t lane_size = std::min(size, kLaneSymbols);
+    s.histogram.assign(size + (kLanes - 1) * lane_size, 0);
+    std::uint32_t* h = s.histogram.data();  // lane 0, every symbol
+    std::uint32_t* extra = h + size;          // lane l ≥ 1 at extra + (l − 1) · lane_size
+    std::size_t k = 0;
+    for (; k + kLanes <= count; k += kLanes) {
+      ++h[sym[k]];
+      for (std::size_t l = 1; l < kLanes; ++l) {
+        const std::uint32_t symbol = sym[k + l];
+        ++(symbol < lane_size ? extra[(l - 1) * lane_size + symbol] : h[symbol]);
       }
     }
-    Alphabet& alphabet = s.alphabet;
-    alphabet.clear();
-    for (std::uint32_t v = 0; v < kSmallSymbols; ++v) {
-      std::uint32_t n = 0;
-      for (std::size_t l = 0; l < kLanes; ++l) n += small[l * kSmallSymbols + v];
-      if (n > 0) alphabet.add(v, n);
-    }
-    std::fill(s.small_counts.begin(), s.small_counts.end(), 0u);
-    std::sort(s.large.begin(), s.large.end());
-    for (const std::uint32_t v : s.large) alphabet.add(v, std::exchange(large_counts[v], 0u));
-    const std::int64_t raw_bits = entropy_bits(alphabet, static_cast<int>(count)) +
-                                  table_bits(static_cast<std::int32_t>(max_value), static_cast<int>(alphabet.symbols.size()));
+    for (; k < count; ++k) ++h[sym[k]];
+    for (std::size_t l = 1; l < kLanes; ++l)
+      for (std::size_t j = 0; j < lane_size; ++j) h[j] += extra[(l - 1) * lane_size + j];
+    const std::int64_t raw_bits = entropy_bits(h, size, static_cast<int>(count), unique) +
+                                  table_bits(static_cast<std::int32_t>(max_value), unique);
     raw = !(tagged_bits < raw_bits);
   }
 
@@ -453,10 +438,10 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   const std::size_t symbols_at = out.size();
   // With 2^18 distinct symbols Draco's raw coder gives up; the tagged one
   // still encodes them (only a chunk of over 87381 points can get there).
-  if (!raw || !write_raw(w, sym, count, level, s)) {
+  if (!raw || !write_raw(w, sym, count, max_value, unique, level, s)) {
     out.resize(symbols_at);
     w.u8(kTagged);
-    write_tagged(w, sym, points, tags, s);
+    write_tagged(w, sym, points, tag_histogram, s);
   }
   w.u32(static_cast<std::uint32_t>(lo));
   w.u32(static_cast<std::uint32_t>(hi));
