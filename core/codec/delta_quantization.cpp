@@ -54,7 +54,7 @@ namespace {
   // The tests compare every decoded value with Draco's own decoder.
   using F8 [[gnu::vector_size(32)]] = float;
   using I8 [[gnu::vector_size(32)]] = std::int32_t;
-  const float inverse_delta = static_cast<float>(levels) / range, delta = dequantizer.DequantizeFloat(1);
+  const float inverse_delta = q.inverse_step(), delta = dequantizer.DequantizeFloat(1);
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
     F8 v;
@@ -116,6 +116,8 @@ std::span<const DecodeKernel> decode_kernels() {
 void DeltaQuantization::decode(std::span<const float> values, std::span<float> out) const {
   decode_kernels().back().decode(*this, values, out);
 }
+
+float DeltaQuantization::inverse_step() const { return static_cast<float>(max_level(bits)) / range; }
 
 double DeltaQuantization::half_step() const { return double{range} / max_level(bits) / 2.0; }
 

@@ -41,6 +41,10 @@ struct DeltaQuantization {
   void decode(std::span<const float> values, std::span<float> out) const;
   // |decoded(v) − v| for every v in the range is at most this (see above).
   double bound() const;
+  // Draco's inverse step, float(2^bits − 1) / range in float (Quantizer::Init):
+  // a value v in range quantizes to ⌊(v − min) · inverse_step() + 0.5⌋, each
+  // operation rounded to float.
+  float inverse_step() const;
   // Half the distance between two levels.
   double half_step() const;
 };

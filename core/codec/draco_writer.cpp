@@ -36,7 +36,6 @@ constexpr std::uint8_t kQuantizationEncoder = 2;  // SEQUENTIAL_ATTRIBUTE_ENCODE
 constexpr std::uint8_t kPredictionDifference = 0, kTransformWrap = 1;
 constexpr std::uint8_t kTagged = 0, kRaw = 1;  // SymbolCodingMethod
 constexpr int kMaxRawBitLength = 18;           // symbol_encoding.cc
-constexpr int kTagBitLength = 5;               // EncodeTaggedSymbols' RAnsSymbolEncoder<5>
 constexpr int kMaxTag = 32;
 
 // Little-endian fields appended to a string (EncoderBuffer::Encode).
@@ -246,8 +245,9 @@ void rans_encode(Writer& w, std::size_t count, int precision_bits, const std::ve
 // then every value in that many bits, least significant bit first.
 void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, const std::uint32_t* tag_histogram,
                   Scratch& s) {
-  constexpr int kPrecision = 12;  // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5)
-  static_assert(kTagBitLength == 5);
+  // EncodeTaggedSymbols' RAnsSymbolEncoder<5>:
+  // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5).
+  constexpr int kPrecision = 12;
   if (!rans_probabilities(tag_histogram, kMaxTag, kPrecision, s))
     throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
   write_table(w, s.probabilities);
@@ -255,7 +255,7 @@ void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, c
   rans_encode(w, points, kPrecision, s.table, [lengths](std::size_t i) { return lengths[i]; }, s.coded);
 
   std::vector<std::uint8_t>& bits = s.coded;
-  bits.assign(3 * points * 4 + 8, 0);
+  bits.resize(3 * points * 4 + 8);  // every byte up to `out` is written below
   std::uint8_t* out = bits.data();
   std::uint64_t acc = 0;
   int filled = 0;
@@ -318,8 +318,7 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   // SequentialQuantizationAttributeEncoder: AttributeQuantizationTransform's
   // floor((v − min) · inverse_delta + 0.5) in float; v ≥ min, so the floor
   // is the truncating conversion (and the loop vectorises).
-  const auto levels = static_cast<std::int32_t>((1u << q.bits) - 1u);
-  const float inverse_delta = static_cast<float>(levels) / q.range, min = q.min;
+  const float inverse_delta = q.inverse_step(), min = q.min;
   s.quantized.resize(count);
   std::int32_t* qv = s.quantized.data();
   const float* v = values.data();

@@ -30,8 +30,9 @@ constexpr int kDefaultEncodingSpeed = 5;
 // multiple of 3 and below 2^31; every value is finite and inside [q.min,
 // q.min + q.range]; q.range > 0. Empty values give an empty string. Throws
 // DeltaCodecError for a speed outside 0…10 and where Draco's encoder would
-// fail. Thread-safe (scratch is
-// per thread, reused: no allocation per chunk in the steady state).
+// fail. Thread-safe. Its scratch is per thread and reused, so the only
+// allocation is `out`'s, when the caller did not keep its capacity (the
+// server moves each chunk's bytes into the frame it sends).
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out);
 
 // The same, returning a new string.
