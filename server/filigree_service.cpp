@@ -887,8 +887,11 @@ namespace {
 
 grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, v1::SessionInfo* response) {
   try {
-    s.set_threshold(threshold, whole_mesh);
+    const std::uint64_t accepted = s.set_threshold(threshold, whole_mesh);
     *response = s.info();
+    // Not the current frame's version: a frame may have been published since
+    // the change, and a client waiting for a frame after it would wait forever.
+    response->set_version(accepted);
   } catch (const StoreUnavailable& e) {
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
   } catch (const HierarchyError& e) {

@@ -471,7 +471,7 @@ bool Session::threshold_needs_preparation(double threshold, bool whole_mesh) con
   return whole_mesh || (threshold > 0.0 && !(m.node_graph_derived() && m.optimisation_data_derived()));
 }
 
-void Session::set_threshold(double threshold, bool whole_mesh) {
+std::uint64_t Session::set_threshold(double threshold, bool whole_mesh) {
   if (whole_mesh || threshold > 0.0) {
     // A finite T needs the hierarchy's node graph, which loading does not
     // check (hierarchy/node_graph.h): derive it now (once per mesh) so that
@@ -499,11 +499,13 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     std::vector<Vec3> out(h.vertex_count());
     (void)warm->deform(rest, out);
   }
-  std::uint64_t seq;
+  std::uint64_t seq, accepted;
   SessionProgress progress;
   {
     std::lock_guard lock(mutex_);
     if (evicted_) throw_evicted();
+    // Frames take their version and options together, under this lock.
+    accepted = assigned_version_;
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
@@ -515,6 +517,7 @@ void Session::set_threshold(double threshold, bool whole_mesh) {
     touch();
   }
   journal(progress, seq);
+  return accepted;
 }
 
 void Session::close() {

@@ -137,8 +137,10 @@ class Session {
   void request_keyframe();
 
   // Throws HierarchyError (and changes nothing) if a finite T is asked of a
-  // hierarchy whose node graph cannot be derived.
-  void set_threshold(double threshold, bool whole_mesh);
+  // hierarchy whose node graph cannot be derived. Returns the version when
+  // the change was accepted: every frame with a larger version applies it,
+  // and one follows.
+  std::uint64_t set_threshold(double threshold, bool whole_mesh);
   // Whether set_threshold(threshold, whole_mesh) would first derive the
   // mesh's node graph and region optimisation's data (once per mesh; ~1 s
   // at 1.25M vertices), or, for whole_mesh, make T = ∞'s factorisation
