@@ -126,7 +126,9 @@ void recovery_bound(const Hierarchy& h, int threads) {
   const double recover_ms = median(recover), copy_ms = median(copied);
   const double fastest_copy_ms = *std::min_element(copied.begin(), copied.end());
   const double n = static_cast<double>(h.vertex_count());
-  std::printf("\n### direct recovery (T = 0) against the streaming bound\n\n");
+  std::printf("\n### direct recovery (T = 0) against the streaming bound\n\nKernel: %s (compiled copies this processor runs: ",
+              std::string(r.kernel()).c_str());
+  for (std::string_view k : DirectRecovery::kernels()) std::printf("%s%s", std::string(k).c_str(), k == DirectRecovery::kernels().back() ? ")\n\n" : ", ");
   std::printf("| vertices | partitions | layout build ms | recover ms (median of 25) | ns/vertex | poses/s | bytes/frame (MB) "
               "| streaming copy ms (median of 25, interleaved) | bound ns/vertex | recover / bound | fastest copy ms | recover / fastest copy |\n"
               "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");

@@ -81,13 +81,23 @@ TEST(DirectRecovery, EqualsThePlainDoubleReference) {
     options.base_vertices = c.base;
     const Hierarchy h = preprocess(c.mesh, options);
     const double diag = bounding_box_diagonal(h.rest_positions);
-    Deformer d(h);  // T = 0: direct recovery only
+    Deformer d(h);  // T = 0: direct recovery only, the fastest kernel
+    // And every compiled copy of the kernel this processor runs.
+    std::vector<DirectRecovery> copies;
+    for (std::string_view kernel : DirectRecovery::kernels()) copies.emplace_back(h, 0, kernel);
+    ASSERT_EQ(copies.back().kernel(), DirectRecovery::kernels().back());
     for (Motion motion : {Motion::kBend, Motion::kTwist, Motion::kBump}) {
       for (const Pose& pose : {procedural_pose(h.base_mesh().positions, motion, 1.0), moved_pose(h, motion, 0.7)}) {
         const std::vector<Vec3> expected = reference_recovery(h, pose);
         const DeformResult r = d.deform(pose);
         // Issue 10 allows 1e-5 of the diagonal; float32 lands well inside it.
         EXPECT_LE(max_distance(r.positions, expected), 1e-6 * diag) << c.name << ", " << to_string(motion);
+        for (const DirectRecovery& copy : copies) {
+          RecoveryWorkspace ws;
+          std::vector<Vec3> out(h.vertex_count());
+          copy.recover(pose.positions, ws, out, 2);
+          EXPECT_LE(max_distance(out, expected), 1e-6 * diag) << c.name << ", " << to_string(motion) << ", kernel " << copy.kernel();
+        }
       }
     }
   }
@@ -132,6 +142,12 @@ TEST(DirectRecovery, WrongSizesAreClearErrors) {
   short_pose.positions.pop_back();
   std::vector<Vec3> out(h.vertex_count());
   EXPECT_THROW(d.deform(short_pose, out), PoseError);
+  try {
+    DirectRecovery unknown(h, 0, "sse9");
+    FAIL() << "an unknown kernel was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("sse9"), std::string::npos) << e.what();
+  }
 }
 
 TEST(DirectRecovery, ModelIsSharedReadOnlyAcrossDeformers) {

@@ -34,6 +34,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <string_view>
 #include <vector>
 
 #include "mesh/tri_mesh.h"
@@ -54,8 +55,15 @@ class DirectRecovery {
 
   // `partitions`: how many threads the layout can use at once; 0 picks one
   // per kNodesPerThread nodes, at most the machine's cores (results never
-  // depend on it, only speed).
-  explicit DirectRecovery(const Hierarchy& h, std::size_t partitions = 0);
+  // depend on it, only speed). `kernel`: one of kernels(), empty for the
+  // fastest; throws std::invalid_argument for a name not in kernels().
+  explicit DirectRecovery(const Hierarchy& h, std::size_t partitions = 0, std::string_view kernel = {});
+
+  // The compiled copies of the kernel this processor runs ("baseline",
+  // "avx2", "avx512"), fastest last. Their results differ only in float
+  // rounding, each within the precision promised above.
+  static std::vector<std::string_view> kernels();
+  std::string_view kernel() const;
 
   // Recovers every node from the base positions `base` (base order) and
   // writes every vertex's position, base vertices included, into `out`
@@ -95,6 +103,7 @@ class DirectRecovery {
  private:
   std::array<double, 3> origin_for(std::span<const Vec3> base) const;
 
+  std::size_t kernel_ = 0;  // index into kernels()
   std::size_t base_count_ = 0, node_count_ = 0;
   std::vector<Index> base_vertices_;       // base order → original id
   std::vector<Index> slot_of_vertex_;      // original id → traversal slot

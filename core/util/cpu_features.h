@@ -22,4 +22,16 @@ inline bool cpu_has_avx2() {
 #endif
 }
 
+// AVX-512 as the kernels use it: the foundation with 256-bit forms (VL),
+// double/quad-word and byte/word instructions, and FMA.
+inline bool cpu_has_avx512() {
+#if FILIGREE_X86_TARGETS
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512dq") &&
+         __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
+
 }  // namespace filigree
