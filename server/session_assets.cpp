@@ -50,6 +50,19 @@ std::shared_ptr<const SessionAssets> SessionAssetsCache::get(const std::shared_p
   return made;
 }
 
+std::size_t SessionAssetsCache::trim_idle_pools() {
+  std::vector<std::shared_ptr<const SessionAssets>> live;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& [h, weak] : assets_)
+      if (auto a = weak.lock()) live.push_back(std::move(a));
+  }
+  std::size_t freed = 0;
+  for (const auto& a : live)
+    freed += a->frames->trim_if_idle() + a->staging->trim_if_idle() + a->model->recovery_scratch().trim_if_idle();
+  return freed;
+}
+
 std::size_t SessionAssetsCache::live() const {
   std::lock_guard lock(mutex_);
   std::size_t n = 0;

@@ -39,6 +39,10 @@ class SessionAssetsCache {
   std::shared_ptr<const SessionAssets> get(const std::shared_ptr<const Hierarchy>& h);
   // Hierarchies with live assets (for tests and stats).
   std::size_t live() const;
+  // The maintenance loop's: meshes whose scratch pools saw no use since the
+  // last call give back what they kept beyond their minimum (BufferPool::
+  // trim_if_idle). Returns the buffers freed.
+  std::size_t trim_idle_pools();
 
  private:
   mutable std::mutex mutex_;

@@ -281,6 +281,8 @@ void SessionRegistry::maintain() {
     }
     if (!shared && e.persisted_version != s->version()) persist(*s);
   }
+  // Scratch kept for a burst of busy sessions goes once their mesh is idle.
+  assets_.trim_idle_pools();
 }
 
 void SessionRegistry::evict(const std::string& id, const Session& s, const char* why) {

@@ -74,6 +74,30 @@ TEST(BufferPool, BuffersBeyondDemandGoWhenDemandFalls) {
   EXPECT_EQ(pool.free_buffers(), 2u);
 }
 
+TEST(BufferPool, AnIdlePoolDropsWhatItKeptForABurstAndABusyOneKeepsIt) {
+  BufferPool<double> pool(2);
+  auto burst = [&pool] {
+    std::vector<std::vector<double>> held;
+    for (int owner = 0; owner < 8; ++owner) held.push_back(pool.take(100));
+    for (auto& buffer : held) pool.give(std::move(buffer));
+  };
+  burst();
+  EXPECT_EQ(pool.trim_if_idle(), 0u) << "takes since the last call: busy";
+  EXPECT_EQ(pool.free_buffers(), 8u);
+  burst();
+  EXPECT_EQ(pool.trim_if_idle(), 0u);
+  EXPECT_EQ(pool.free_buffers(), 8u);
+  // No take since the last call: idle, back to the minimum.
+  EXPECT_EQ(pool.trim_if_idle(), 6u);
+  EXPECT_EQ(pool.free_buffers(), 2u);
+  // A buffer still out is not counted as free, and comes back within bounds.
+  std::vector<double> out = pool.take(100);
+  EXPECT_EQ(pool.trim_if_idle(), 0u);
+  EXPECT_EQ(pool.trim_if_idle(), 0u) << "nothing beyond the minimum";
+  pool.give(std::move(out));
+  EXPECT_EQ(pool.free_buffers(), 2u);
+}
+
 TEST(BufferPool, ConcurrentOwnersEachGetTheirOwnBuffer) {
   BufferPool<int> pool(4);
   std::vector<std::thread> threads;
