@@ -128,7 +128,8 @@ void recovery_bound(const Hierarchy& h, int threads) {
   const double n = static_cast<double>(h.vertex_count());
   std::printf("\n### direct recovery (T = 0) against the streaming bound\n\nKernel: %s (compiled copies this processor runs: ",
               std::string(r.kernel()).c_str());
-  for (std::string_view k : DirectRecovery::kernels()) std::printf("%s%s", std::string(k).c_str(), k == DirectRecovery::kernels().back() ? ")\n\n" : ", ");
+  const std::vector<std::string_view> kernels = DirectRecovery::kernels();
+  for (std::size_t i = 0; i < kernels.size(); ++i) std::printf("%s%s", std::string(kernels[i]).c_str(), i + 1 < kernels.size() ? ", " : ")\n\n");
   std::printf("| vertices | partitions | layout build ms | recover ms (median of 25) | ns/vertex | poses/s | bytes/frame (MB) "
               "| streaming copy ms (median of 25, interleaved) | bound ns/vertex | recover / bound | fastest copy ms | recover / fastest copy |\n"
               "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");

@@ -53,7 +53,7 @@ TEST(BufferPool, KeepsAsManyAsWereBusyAtOnceSoABusySteadyStateAllocatesNothing) 
   for (int round = 0; round < 3 * static_cast<int>(BufferPool<double>::kEpochTakes); ++round) {
     std::vector<std::vector<double>> held;
     for (int owner = 0; owner < 8; ++owner) held.push_back(pool.take(1000));
-    EXPECT_EQ(pool.free_buffers(), 0u) << "round " << round << ": every take found a free buffer";
+    EXPECT_EQ(pool.free_buffers(), 0u) << "round " << round << ": the eight took every free buffer";
     for (auto& buffer : held) pool.give(std::move(buffer));
     ASSERT_EQ(pool.free_buffers(), 8u) << "round " << round;
   }

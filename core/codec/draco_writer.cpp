@@ -307,7 +307,7 @@ bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::
 
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out) {
   out.clear();
-  if (speed < 0 || speed > 10) throw DeltaCodecError("Draco encoding speed must be 0…10, got " + std::to_string(speed));
+  if (!is_encoding_speed(speed)) throw DeltaCodecError("Draco encoding speed must be 0…10, got " + std::to_string(speed));
   if (values.empty()) return;
   // Draco counts values in int.
   if (values.size() % 3 != 0 || values.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))

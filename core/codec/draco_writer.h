@@ -24,6 +24,9 @@ namespace filigree {
 // of 16384 (Draco 1.5.5): 5 gives 1.26 B/vertex in the same time as 10,
 // which gives 1.31; below 5 decoding slows down for < 1% smaller.
 constexpr int kDefaultEncodingSpeed = 5;
+// The speeds the writer takes. (Draco itself reads −1 as its default and
+// others outside 0…10 as level 7; we refuse them instead.)
+constexpr bool is_encoding_speed(int speed) { return speed >= 0 && speed <= 10; }
 
 // Writes `values` (x y z per point) quantized by `q` into `out` (replacing
 // its contents, keeping its capacity). Preconditions: values.size() is a

@@ -26,7 +26,7 @@ constexpr std::size_t kStageBlock = 512;
 
 FrameEncoder::FrameEncoder(std::span<const Vec3> rest, FrameEncoderOptions options) : rest_(rest), options_(options) {
   if (options_.chunk_vertices == 0) throw std::invalid_argument("frame chunks must hold at least one vertex");
-  if (options_.speed < 0 || options_.speed > 10)
+  if (!is_encoding_speed(options_.speed))
     throw std::invalid_argument("Draco encoding speed must be 0…10, got " + std::to_string(options_.speed));
   if (options_.bits != 0 && (options_.bits < 8 || options_.bits > 24))
     throw std::invalid_argument("quantization bits must be 0 (automatic) or 8…24, got " + std::to_string(options_.bits));

@@ -47,10 +47,7 @@ class BufferPool {
         // Demand is the peak of this epoch and the last: older peaks expire,
         // and buffers beyond them go (outside the lock).
         previous_peak_ = std::exchange(peak_, in_use_);
-        while (!free_.empty() && in_use_ + free_.size() > bound()) {
-          surplus.push_back(std::move(free_.back()));
-          free_.pop_back();
-        }
+        take_surplus(surplus);
       }
     }
     buffer.resize(size);
@@ -82,10 +79,7 @@ class BufferPool {
     std::lock_guard lock(mutex_);
     if (std::exchange(takes_at_trim_, takes_) != takes_) return 0;
     peak_ = previous_peak_ = in_use_;
-    while (!free_.empty() && in_use_ + free_.size() > bound()) {
-      surplus.push_back(std::move(free_.back()));
-      free_.pop_back();
-    }
+    take_surplus(surplus);
     return surplus.size();
   }
 
@@ -100,6 +94,14 @@ class BufferPool {
  private:
   // Buffers worth owning, in use and free (mutex_ held).
   std::size_t bound() const { return std::max(in_use_ + min_free_, std::max(peak_, previous_peak_)); }
+  // Moves free buffers beyond bound() into `surplus`, for the caller to free
+  // outside the lock (mutex_ held).
+  void take_surplus(std::vector<std::vector<T>>& surplus) {
+    while (!free_.empty() && in_use_ + free_.size() > bound()) {
+      surplus.push_back(std::move(free_.back()));
+      free_.pop_back();
+    }
+  }
   // Room for one more free buffer; if that allocation fails, give() frees
   // the buffer instead of throwing.
   void reserve_room() noexcept {
