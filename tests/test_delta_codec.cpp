@@ -18,6 +18,7 @@
 
 #include "codec/delta_codec.h"
 #include "codec/draco_library_encoder.h"
+#include "codec/draco_writer.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -372,6 +373,57 @@ TEST(DeltaCodec, CorruptBuffersAreErrorsNeverCrashes) {
   std::printf("[ corrupt  ] %d trials: %d DeltaCodecError, %d decoded to count values\n", trials, errors,
               decoded_ok);
   EXPECT_GT(errors, trials / 2);  // most damage is detected
+}
+
+// Several chunks' coders interleaved in one loop write what each writes
+// alone: groups of 1 to 9 chunks (more than one loop's worth) of 1–40000
+// points, so coders of different lengths drop out at different steps;
+// empty chunks among them; both symbol schemes; every speed's precision.
+TEST(DeltaCodec, InterleavedChunksWriteTheSameBytes) {
+  constexpr std::size_t kSymbolMethodOffset = 26;
+  std::mt19937 rng(11);
+  int tagged = 0, raw = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    const std::size_t n = 1 + static_cast<std::size_t>(trial) % 9;
+    std::vector<std::vector<float>> values(n);
+    std::vector<DeltaQuantization> q(n);
+    for (std::size_t c = 0; c < n; ++c) {
+      if (rng() % 7 == 0) continue;  // an empty chunk: no buffer
+      // Every tenth trial, one chunk of 40000 points at 16 bits and speed 0,
+      // a slow walk with one value in 20 anywhere: over 2^12 distinct
+      // symbols raise the raw coder's precision to 2^20, where a rare
+      // symbol's probability is < 16 and one step can write 3 bytes.
+      const bool large = trial % 10 == 9 && c == 0;
+      const int points = large ? 40000 : rng() % 4 == 0 ? 1 + static_cast<int>(rng() % 5) : std::uniform_int_distribution<int>(6, 6000)(rng);
+      const double scale = std::pow(10.0, std::uniform_real_distribution<double>(-4.0, 1.0)(rng));
+      float walk = 0.0f;
+      for (int i = 0; i < 3 * points; ++i) {
+        // Noise codes tagged at high bit depths; a smooth walk codes raw.
+        walk += std::normal_distribution<float>(0.0f, static_cast<float>(scale * (large ? 1e-4 : 0.01)))(rng);
+        if (large && i % 20 == 0) {  // rare values anywhere in the range: many distinct, rare symbols
+          values[c].push_back(std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng));
+          continue;
+        }
+        values[c].push_back(c % 2 || large ? walk : std::normal_distribution<float>(0.0f, static_cast<float>(scale))(rng));
+      }
+      q[c] = quantization_over(values[c], large ? 16 : 8 + static_cast<std::uint32_t>(rng() % 17));
+    }
+    const int speed = trial % 10 == 9 ? 0 : static_cast<int>(rng() % 11);
+    std::vector<std::string> alone(n), together(n, "stale");
+    std::vector<DracoChunk> chunks;
+    for (std::size_t c = 0; c < n; ++c) {
+      alone[c] = encode_draco(values[c], q[c], speed);
+      chunks.push_back({values[c], q[c], &together[c]});
+    }
+    encode_draco_many(chunks, speed);
+    for (std::size_t c = 0; c < n; ++c) {
+      SCOPED_TRACE("trial " + std::to_string(trial) + ", chunk " + std::to_string(c) + " of " + std::to_string(n));
+      ASSERT_EQ(together[c], alone[c]);
+      if (alone[c].size() > kSymbolMethodOffset) (alone[c][kSymbolMethodOffset] == 0 ? tagged : raw) += 1;
+    }
+  }
+  EXPECT_GT(tagged, 0);
+  EXPECT_GT(raw, 0);
 }
 
 TEST(DeltaCodec, SameBytesFromConcurrentEncoders) {

@@ -328,6 +328,37 @@ TEST(FrameEncoder, StagingFromASharedPoolGivesTheSameFramesAndHoldsNothingBetwee
   for (std::size_t c = 0; c < expected.chunks.size(); ++c) EXPECT_EQ(a.encoder.chunk(c).bytes, expected.chunks[c].bytes) << c;
 }
 
+TEST(FrameEncoder, ChunksEncodedTogetherGiveTheSameBytes) {
+  // As a session's tasks take them: every chunk quantized, then groups of 3
+  // encoded together (the last group short), against one chunk at a time;
+  // dense, sparse and absent chunks alike.
+  const TriMesh bunny = test::shipped_mesh("bunny_small.obj");
+  const std::vector<Vec3>& rest = bunny.positions;
+  const FrameEncoderOptions options{.chunk_vertices = 200, .bits = 0, .max_error = 5e-5 * bounding_box_diagonal(rest)};
+  Sender alone{FrameEncoder(rest, options)};
+  FrameEncoder grouped(rest, options);
+  ASSERT_GT(grouped.chunk_count() % 3, 0u);
+  const Vec3 centre = rest[rest.size() / 3];
+  int sparse = 0;
+  for (int frame = 0; frame < 5; ++frame) {
+    const std::vector<Vec3> posed = frame < 2 ? body_motion(rest, 0.02, 0.1 * frame)
+                                              : bump(body_motion(rest, 0.02, 0.1), rest, centre, 0.1, 0.01 * frame);
+    alone.send(posed);
+    grouped.begin(false);
+    for (std::size_t c = 0; c < grouped.chunk_count(); ++c) grouped.quantize_chunk(c, posed);
+    for (std::size_t c = 0; c < grouped.chunk_count(); c += 3)
+      grouped.encode_chunks(c, std::min<std::size_t>(3, grouped.chunk_count() - c));
+    grouped.finish();
+    for (std::size_t c = 0; c < grouped.chunk_count(); ++c) {
+      ASSERT_EQ(grouped.chunk(c).kind, alone.encoder.chunk(c).kind) << "frame " << frame << " chunk " << c;
+      EXPECT_EQ(grouped.chunk(c).bytes, alone.encoder.chunk(c).bytes) << "frame " << frame << " chunk " << c;
+      sparse += grouped.chunk(c).kind == EncodedChunk::Kind::kSparse;
+    }
+  }
+  EXPECT_GT(sparse, 0);
+  EXPECT_THROW(grouped.encode_chunks(grouped.chunk_count() - 1, 2), std::out_of_range);
+}
+
 TEST(FrameEncoder, RejectsBadOptions) {
   const std::vector<Vec3> rest(10, Vec3(1.0, 2.0, 3.0));
   EXPECT_THROW(FrameEncoder(rest, {.chunk_vertices = 0, .max_error = 1e-3}), std::invalid_argument);

@@ -17,6 +17,7 @@
 #include "codec/draco_writer.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -68,15 +69,21 @@ struct RansSymbol {
   std::uint32_t spare = 0;       // precision − prob
 };
 
-struct Scratch {
-  std::vector<std::int32_t> quantized;
+// What one chunk keeps from its preparation until its coder has run.
+struct ChunkScratch {
   std::vector<std::uint32_t> symbols;
-  std::vector<std::uint8_t> bit_lengths;  // per point
+  std::vector<std::uint32_t> bit_lengths;  // per point (the tagged scheme's rANS symbols)
+  std::vector<RansSymbol> table;
+  std::vector<std::uint8_t> coded;  // rANS bytes, then the tagged scheme's value bits
+};
+
+// What preparing a chunk needs only while it runs: one per thread, shared by
+// the chunks of a group (their scratch together stays near one core's L2).
+struct PrepareScratch {
+  std::vector<std::int32_t> quantized;
   std::vector<std::uint32_t> histogram;
   std::vector<std::uint32_t> probabilities;
   std::vector<int> order;
-  std::vector<RansSymbol> table;
-  std::vector<std::uint8_t> coded;  // rANS bytes, then the tagged scheme's value bits
 };
 
 // Draco's ComputeShannonEntropy over a histogram: the same sum in the same
@@ -103,7 +110,8 @@ std::int64_t table_bits(std::int32_t max_value, int unique) {
 // 2^precision_bits, with Draco's rounding and its rescaling of the
 // over-allocated case. False where Draco's Create fails (or would never
 // finish).
-bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int precision_bits, Scratch& s) {
+bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int precision_bits, PrepareScratch& s,
+                        std::vector<RansSymbol>& table) {
   std::uint64_t total = 0;
   int max_valid = 0;
   for (int i = 0; i < num_symbols; ++i) {
@@ -156,9 +164,9 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
     }
   }
   std::uint32_t cum = 0;
-  s.table.resize(prob.size());
+  table.resize(prob.size());
   for (std::size_t i = 0; i < prob.size(); ++i) {
-    RansSymbol& t = s.table[i];
+    RansSymbol& t = table[i];
     t.cum = cum;
     cum += prob[i];
     // RAnsEncoder::rans_write renormalises while state ≥ l_base / precision ·
@@ -193,37 +201,115 @@ void write_table(Writer& w, const std::vector<std::uint32_t>& prob) {
   }
 }
 
-// RAnsEncoder::rans_write over symbols[count − 1 … 0] (rANS encodes in
-// reverse), then write_end and RAnsSymbolEncoder::EndEncoding: the byte
-// count as a varint, then the bytes. One symbol is a chain of dependent
-// steps, so each is cut short (a branch-free renormalisation, three
-// comparisons and one 4-byte store, measured 35% slower: it lengthens the
-// chain more than the mispredictions it saves):
+// One rANS coder (RAnsEncoder::rans_write) over symbols[count − 1 … 0]
+// (rANS encodes in reverse), writing forward into its chunk's scratch.
+struct RansStream {
+  const std::uint32_t* next = nullptr;  // one past the next symbol to encode
+  std::size_t left = 0;
+  const RansSymbol* table = nullptr;
+  std::uint8_t* out = nullptr;
+  std::uint32_t state = 0;
+};
+
+// One symbol is a chain of dependent steps, each cut short:
 // - ⌊x/p⌋ is the high half of x·m with m = ⌈2^64/p⌉ = (2^64 + r)/p, 0 ≤ r < p:
 //   x·m/2^64 = x/p + x·r/(p·2^64), and x·r < 2^30 · 2^20 < 2^64 (x < 1024 · p
 //   after renormalisation, p ≤ 2^20), so the floor is exact (p = 1: x itself);
 // - (x/p)·precision + x mod p + cum is x + ⌊x/p⌋·(precision − p) + cum.
-template <typename SymbolAt>
-void rans_encode(Writer& w, std::size_t count, int precision_bits, const std::vector<RansSymbol>& table,
-                 SymbolAt symbol_at, std::vector<std::uint8_t>& bytes) {
-  const std::uint32_t l_base = 4u << precision_bits;
-  // The state before renormalisation is < 1024 · precision ≤ 2^30 and a bound
-  // is ≥ 1024: ≤ 3 bytes per symbol, then the state.
-  bytes.resize(3 * count + 8);
-  std::uint8_t* out = bytes.data();
-  std::uint32_t state = l_base;
-  const RansSymbol* t = table.data();
-  for (std::size_t i = count; i-- > 0;) {
-    const RansSymbol& s = t[symbol_at(i)];
-    while (state >= s.bound) {
-      *out++ = static_cast<std::uint8_t>(state);
-      state >>= 8;
-    }
-    const std::uint64_t r = state;
-    const auto q = static_cast<std::uint64_t>((static_cast<unsigned __int128>(r) * s.reciprocal) >> 64) + (r & s.identity);
-    state = static_cast<std::uint32_t>(r + q * s.spare + s.cum);
+inline std::uint32_t rans_put(std::uint32_t x, const RansSymbol& s) {
+  const std::uint64_t r = x;
+  const auto q = static_cast<std::uint64_t>((static_cast<unsigned __int128>(r) * s.reciprocal) >> 64) + (r & s.identity);
+  return static_cast<std::uint32_t>(r + q * s.spare + s.cum);
+}
+
+// Renormalisation as Draco's loop: emit the low byte while x ≥ bound.
+// Alone, the fastest: a branch-free step lengthens the one chain more than
+// the mispredictions cost (measured 35% slower).
+inline void rans_step_loop(std::uint32_t& x, std::uint8_t*& out, const RansSymbol& s) {
+  while (x >= s.bound) {
+    *out++ = static_cast<std::uint8_t>(x);
+    x >>= 8;
   }
-  state -= l_base;
+  x = rans_put(x, s);
+}
+
+// The same, branch-free: the loop runs n = [x ≥ b] + [x/2^8 ≥ b] + [x/2^16
+// ≥ b] times (x < 2^30 and b ≥ 2^10, so never a fourth), writing the low n
+// bytes of x in order, which one little-endian 4-byte store does (the bytes
+// beyond n are overwritten or past the end). With several coders in one loop
+// the longer chain is hidden and no misprediction stalls all of them.
+static_assert(std::endian::native == std::endian::little, "the branch-free renormalisation stores x little-endian");
+inline void rans_step_flat(std::uint32_t& x, std::uint8_t*& out, const RansSymbol& s) {
+  const std::uint32_t n = static_cast<std::uint32_t>(x >= s.bound) + static_cast<std::uint32_t>((x >> 8) >= s.bound) +
+                          static_cast<std::uint32_t>((x >> 16) >= s.bound);
+  std::memcpy(out, &x, sizeof x);
+  out += n;
+  x >>= 8 * n;
+  x = rans_put(x, s);
+}
+
+// K coders, each with symbols left, in one loop until the first runs out.
+template <int K>
+void rans_run(RansStream* const* streams) {
+  std::uint32_t x[K];
+  const std::uint32_t* next[K];
+  const RansSymbol* table[K];
+  std::uint8_t* out[K];
+  std::size_t steps = streams[0]->left;
+  for (int k = 0; k < K; ++k) {
+    const RansStream& r = *streams[k];
+    x[k] = r.state, next[k] = r.next, table[k] = r.table, out[k] = r.out;
+    steps = std::min(steps, r.left);
+  }
+  for (std::size_t j = 0; j < steps; ++j) {
+    if constexpr (K == 1) {
+      rans_step_loop(x[0], out[0], table[0][*--next[0]]);
+    } else {
+#pragma GCC unroll 4
+      for (int k = 0; k < K; ++k) rans_step_flat(x[k], out[k], table[k][*--next[k]]);
+    }
+  }
+  for (int k = 0; k < K; ++k) {
+    RansStream& r = *streams[k];
+    r.state = x[k], r.next = next[k], r.out = out[k], r.left -= steps;
+  }
+}
+
+// Runs every coder to its end, as many at once as still have symbols.
+void rans_run_all(std::span<RansStream*> streams) {
+  std::size_t n = 0;
+  for (RansStream* r : streams)
+    if (r->left > 0) streams[n++] = r;
+  while (n > 0) {
+    switch (n) {
+      case 1: rans_run<1>(streams.data()); break;
+      case 2: rans_run<2>(streams.data()); break;
+      case 3: rans_run<3>(streams.data()); break;
+      default: rans_run<4>(streams.data()); break;
+    }
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < std::min<std::size_t>(n, 4); ++k)
+      if (streams[k]->left > 0) streams[kept++] = streams[k];
+    for (std::size_t k = 4; k < n; ++k) streams[kept++] = streams[k];
+    n = kept;
+  }
+}
+
+// Where a coder starts: its symbols, its table, room for its bytes (a
+// symbol writes ≤ 3 bytes, as the state before renormalisation is
+// < 1024 · precision ≤ 2^30 and a bound is ≥ 1024; then the final state, and
+// the branch-free step's 4-byte store).
+RansStream rans_start(const std::uint32_t* symbols, std::size_t count, int precision_bits, const std::vector<RansSymbol>& table,
+                      std::vector<std::uint8_t>& bytes) {
+  bytes.resize(3 * count + 8);
+  return {symbols + count, count, table.data(), bytes.data(), 4u << precision_bits};
+}
+
+// RAnsEncoder::write_end and RAnsSymbolEncoder::EndEncoding: the final
+// state, then the byte count as a varint and the bytes.
+void rans_finish(Writer& w, RansStream& r, int precision_bits, const std::vector<std::uint8_t>& bytes) {
+  std::uint8_t* out = r.out;
+  const std::uint32_t state = r.state - (4u << precision_bits);
   if (state < (1u << 6)) {
     *out++ = static_cast<std::uint8_t>(state);
   } else if (state < (1u << 14)) {
@@ -241,26 +327,16 @@ void rans_encode(Writer& w, std::size_t count, int precision_bits, const std::ve
   w.bytes(bytes.data(), written);
 }
 
-// EncodeTaggedSymbols: each point's bit length rANS-coded (precision 12),
-// then every value in that many bits, least significant bit first.
-void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, const std::uint32_t* tag_histogram,
-                  Scratch& s) {
-  // EncodeTaggedSymbols' RAnsSymbolEncoder<5>:
-  // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5).
-  constexpr int kPrecision = 12;
-  if (!rans_probabilities(tag_histogram, kMaxTag, kPrecision, s))
-    throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
-  write_table(w, s.probabilities);
-  const std::uint8_t* lengths = s.bit_lengths.data();
-  rans_encode(w, points, kPrecision, s.table, [lengths](std::size_t i) { return lengths[i]; }, s.coded);
-
-  std::vector<std::uint8_t>& bits = s.coded;
+// EncodeTaggedSymbols' values after its rANS-coded bit lengths: every value
+// in its point's bit length, least significant bit first.
+void write_tagged_values(Writer& w, const std::uint32_t* symbols, const std::uint32_t* lengths, std::size_t points,
+                         std::vector<std::uint8_t>& bits) {
   bits.resize(3 * points * 4 + 8);  // every byte up to `out` is written below
   std::uint8_t* out = bits.data();
   std::uint64_t acc = 0;
   int filled = 0;
   for (std::size_t p = 0; p < points; ++p) {
-    const int n = lengths[p];
+    const auto n = static_cast<int>(lengths[p]);
     for (int c = 0; c < 3; ++c) {
       const std::uint64_t v = n == 32 ? symbols[3 * p + c] : symbols[3 * p + c] & ((std::uint64_t{1} << n) - 1);
       acc |= v << filled;
@@ -276,13 +352,12 @@ void write_tagged(Writer& w, const std::uint32_t* symbols, std::size_t points, c
   w.bytes(bits.data(), static_cast<std::size_t>(out - bits.data()));
 }
 
-// EncodeRawSymbols: the unique-symbol count's bit length, moved by the
-// compression level, picks the rANS precision; symbols coded directly.
-// Returns false where Draco's would fail (2^18 or more distinct symbols).
-bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::uint32_t max_value, int unique,
-               int compression_level, Scratch& s) {
-  int length = most_significant_bit(static_cast<std::uint32_t>(unique)) + 1;
-  if (length > kMaxRawBitLength) return false;
+// The raw scheme's precision (EncodeRawSymbols): the unique-symbol count's
+// bit length, moved by the compression level. 0 where Draco's would fail
+// (2^18 or more distinct symbols).
+int raw_precision_bits(int unique, int compression_level, int& length) {
+  length = most_significant_bit(static_cast<std::uint32_t>(unique)) + 1;
+  if (length > kMaxRawBitLength) return 0;
   if (compression_level < 4) {
     length -= 2;
   } else if (compression_level < 6) {
@@ -293,34 +368,39 @@ bool write_raw(Writer& w, const std::uint32_t* symbols, std::size_t count, std::
     length += 1;
   }
   length = std::clamp(length, 1, kMaxRawBitLength);
-  const int precision = std::clamp(3 * length / 2, 12, 20);
-  if (!rans_probabilities(s.histogram.data(), static_cast<int>(max_value) + 1, precision, s))
-    throw DeltaCodecError("Draco's symbol coder cannot encode these deltas");
-  w.u8(kRaw);
-  w.u8(static_cast<std::uint32_t>(length));
-  write_table(w, s.probabilities);
-  rans_encode(w, count, precision, s.table, [symbols](std::size_t i) { return symbols[i]; }, s.coded);
-  return true;
+  return std::clamp(3 * length / 2, 12, 20);
 }
 
-}  // namespace
+// One chunk between its symbols' preparation and its entropy coding.
+struct PendingChunk {
+  ChunkScratch* s = nullptr;
+  std::string* out = nullptr;
+  bool tagged = false;
+  std::size_t points = 0;
+  int precision_bits = 0;
+  RansStream rans;
+  std::int32_t lo = 0, hi = 0;
+  DeltaQuantization q;
+};
 
-void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out) {
+// Everything before the rANS bytes: the quantized symbols, the choice of
+// scheme, and `out` up to the frequency table. False for no values (`out`
+// stays empty).
+bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, int speed, PrepareScratch& prep, ChunkScratch& s, std::string& out,
+                   PendingChunk& pending) {
   out.clear();
-  if (!is_encoding_speed(speed)) throw DeltaCodecError("Draco encoding speed must be 0…10, got " + std::to_string(speed));
-  if (values.empty()) return;
+  if (values.empty()) return false;
   // Draco counts values in int.
   if (values.size() % 3 != 0 || values.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
     throw DeltaCodecError("cannot write " + std::to_string(values.size()) + " values as one Draco buffer of points");
   const std::size_t points = values.size() / 3, count = 3 * points;
-  thread_local Scratch s;
 
   // SequentialQuantizationAttributeEncoder: AttributeQuantizationTransform's
   // floor((v − min) · inverse_delta + 0.5) in float; v ≥ min, so the floor
   // is the truncating conversion (and the loop vectorises).
   const float inverse_delta = q.inverse_step(), min = q.min;
-  s.quantized.resize(count);
-  std::int32_t* qv = s.quantized.data();
+  prep.quantized.resize(count);
+  std::int32_t* qv = prep.quantized.data();
   const float* v = values.data();
   const auto quantize = [&](float x) { return static_cast<std::int32_t>((x - min) * inverse_delta + 0.5f); };
   // Four at a time (GCC keeps a float min/max reduction scalar, since it
@@ -377,7 +457,7 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   for (std::size_t p = 0; p < points; ++p) {
     const std::uint32_t m = std::max({sym[3 * p], sym[3 * p + 1], sym[3 * p + 2]});
     const int length = most_significant_bit(m | 1u) + 1;
-    s.bit_lengths[p] = static_cast<std::uint8_t>(length);
+    s.bit_lengths[p] = static_cast<std::uint32_t>(length);
     ++tag_lanes[p % kLanes][length];
     max_value = std::max(max_value, m);
   }
@@ -401,8 +481,8 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
     const std::size_t size = static_cast<std::size_t>(max_value) + 1;
     constexpr std::size_t kLaneSymbols = 1024;
     const std::size_t lane_size = std::min(size, kLaneSymbols);
-    s.histogram.assign(size + (kLanes - 1) * lane_size, 0);
-    std::uint32_t* h = s.histogram.data();  // lane 0, every symbol
+    prep.histogram.assign(size + (kLanes - 1) * lane_size, 0);
+    std::uint32_t* h = prep.histogram.data();  // lane 0, every symbol
     std::uint32_t* extra = h + size;          // lane l ≥ 1 at extra + (l − 1) · lane_size
     std::size_t k = 0;
     for (; k + kLanes <= count; k += kLanes) {
@@ -433,20 +513,72 @@ void encode_draco_into(std::span<const float> values, const DeltaQuantization& q
   w.u8(kQuantizationEncoder);
   w.u8(kPredictionDifference), w.u8(kTransformWrap), w.u8(1);
 
-  const int level = 10 - speed;  // Draco's symbol coding compression level
-  const std::size_t symbols_at = out.size();
+  pending = {&s, &out, false, points, 0, {}, lo, hi, q};
   // With 2^18 distinct symbols Draco's raw coder gives up; the tagged one
   // still encodes them (only a chunk of over 87381 points can get there).
-  if (!raw || !write_raw(w, sym, count, max_value, unique, level, s)) {
-    out.resize(symbols_at);
+  int length = 0;
+  const int raw_bits = raw ? raw_precision_bits(unique, 10 - speed, length) : 0;  // 10 − speed: Draco's compression level
+  if (raw_bits != 0) {
+    if (!rans_probabilities(prep.histogram.data(), static_cast<int>(max_value) + 1, raw_bits, prep, s.table))
+      throw DeltaCodecError("Draco's symbol coder cannot encode these deltas");
+    w.u8(kRaw);
+    w.u8(static_cast<std::uint32_t>(length));
+    write_table(w, prep.probabilities);
+    pending.precision_bits = raw_bits;
+    pending.rans = rans_start(sym, count, raw_bits, s.table, s.coded);
+  } else {
+    // EncodeTaggedSymbols' RAnsSymbolEncoder<5>:
+    // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5).
+    constexpr int kTagPrecision = 12;
+    if (!rans_probabilities(tag_histogram, kMaxTag, kTagPrecision, prep, s.table))
+      throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
     w.u8(kTagged);
-    write_tagged(w, sym, points, tag_histogram, s);
+    write_table(w, prep.probabilities);
+    pending.tagged = true;
+    pending.precision_bits = kTagPrecision;
+    pending.rans = rans_start(s.bit_lengths.data(), points, kTagPrecision, s.table, s.coded);
   }
-  w.u32(static_cast<std::uint32_t>(lo));
-  w.u32(static_cast<std::uint32_t>(hi));
-  for (int c = 0; c < 3; ++c) w.f32(q.min);
-  w.f32(q.range);
-  w.u8(q.bits);
+  return true;
+}
+
+// Everything after the rANS coder ran: its bytes, the tagged scheme's
+// values, the wrap transform's range and the quantization.
+void finish_chunk(PendingChunk& p) {
+  Writer w(*p.out);
+  ChunkScratch& s = *p.s;
+  rans_finish(w, p.rans, p.precision_bits, s.coded);
+  if (p.tagged) write_tagged_values(w, s.symbols.data(), s.bit_lengths.data(), p.points, s.coded);
+  w.u32(static_cast<std::uint32_t>(p.lo));
+  w.u32(static_cast<std::uint32_t>(p.hi));
+  for (int c = 0; c < 3; ++c) w.f32(p.q.min);
+  w.f32(p.q.range);
+  w.u8(p.q.bits);
+}
+
+}  // namespace
+
+void encode_draco_many(std::span<const DracoChunk> chunks, int speed) {
+  if (!is_encoding_speed(speed)) throw DeltaCodecError("Draco encoding speed must be 0…10, got " + std::to_string(speed));
+  thread_local PrepareScratch prep;
+  thread_local std::array<ChunkScratch, kDracoInterleave> scratch;
+  for (std::size_t first = 0; first < chunks.size(); first += kDracoInterleave) {
+    const std::size_t n = std::min(kDracoInterleave, chunks.size() - first);
+    std::array<PendingChunk, kDracoInterleave> pending;
+    std::array<RansStream*, kDracoInterleave> streams;
+    std::size_t active = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const DracoChunk& c = chunks[first + k];
+      if (prepare_chunk(c.values, c.quantization, speed, prep, scratch[active], *c.out, pending[active])) ++active;
+    }
+    for (std::size_t k = 0; k < active; ++k) streams[k] = &pending[k].rans;
+    rans_run_all(std::span(streams.data(), active));
+    for (std::size_t k = 0; k < active; ++k) finish_chunk(pending[k]);
+  }
+}
+
+void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out) {
+  const DracoChunk chunk{values, q, &out};
+  encode_draco_many(std::span(&chunk, 1), speed);
 }
 
 std::string encode_draco(std::span<const float> values, const DeltaQuantization& q, int speed) {

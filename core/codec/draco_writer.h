@@ -11,6 +11,7 @@
 // per symbol, 48–58 ns per vertex; this is a few flat passes over the chunk.
 // Every client keeps decoding with Draco (libdraco, draco3d).
 
+#include <cstddef>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -37,6 +38,24 @@ constexpr bool is_encoding_speed(int speed) { return speed >= 0 && speed <= 10; 
 // allocation is `out`'s, when the caller did not keep its capacity (the
 // server moves each chunk's bytes into the frame it sends).
 void encode_draco_into(std::span<const float> values, const DeltaQuantization& q, int speed, std::string& out);
+
+// One chunk for encode_draco_many: what encode_draco_into takes.
+struct DracoChunk {
+  std::span<const float> values;
+  DeltaQuantization quantization;
+  std::string* out = nullptr;
+};
+
+// The most chunks whose entropy coders encode_draco_many runs in one loop.
+inline constexpr std::size_t kDracoInterleave = 4;
+
+// Writes every chunk's buffer, byte for byte what encode_draco_into writes
+// for it, with the same preconditions, taking them kDracoInterleave at a
+// time. rANS is a chain of dependent steps per value and Draco's stream has
+// one coder per buffer, so a lone chunk leaves most of a core idle; the
+// coders of a group run in one loop and overlap. On a throw every out's
+// contents are unspecified. Thread-safe, like encode_draco_into.
+void encode_draco_many(std::span<const DracoChunk> chunks, int speed);
 
 // The same, returning a new string.
 std::string encode_draco(std::span<const float> values, const DeltaQuantization& q,

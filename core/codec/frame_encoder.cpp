@@ -1,6 +1,7 @@
 #include "codec/frame_encoder.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -166,10 +167,20 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   if (all_zero) slot.values.clear();  // nothing for Draco: an empty buffer means zeros
 }
 
-void FrameEncoder::encode_chunk(std::size_t c) {
-  Slot& slot = chunks_.at(c);
-  encode_draco_into(slot.values, slot.out.quantization, options_.speed, slot.out.bytes);
-  if (options_.staging) options_.staging->give(std::exchange(slot.values, {}));
+void FrameEncoder::encode_chunks(std::size_t first, std::size_t count) {
+  if (first > chunks_.size() || count > chunks_.size() - first)
+    throw std::out_of_range("chunks " + std::to_string(first) + "+" + std::to_string(count) + " of " + std::to_string(chunks_.size()));
+  std::array<DracoChunk, kDracoInterleave> group;
+  for (std::size_t c = first; c < first + count; c += group.size()) {
+    const std::size_t n = std::min(group.size(), first + count - c);
+    for (std::size_t k = 0; k < n; ++k) {
+      Slot& slot = chunks_[c + k];
+      group[k] = {slot.values, slot.out.quantization, &slot.out.bytes};
+    }
+    encode_draco_many(std::span(group.data(), n), options_.speed);
+  }
+  if (options_.staging)
+    for (std::size_t c = first; c < first + count; ++c) options_.staging->give(std::exchange(chunks_[c].values, {}));
 }
 
 EncodedFrameSummary FrameEncoder::finish() {
