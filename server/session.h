@@ -203,6 +203,7 @@ class Session {
     std::map<std::string, v1::Change> changes;
     std::shared_ptr<v1::Overlays> overlays;
     bool force_keyframe = false, single = false;
+    std::size_t chunk_parts = 1;  // tasks the chunks are encoded in
     std::chrono::steady_clock::time_point encode_start{};
     // The single buffer (FRAME_FORMAT_SINGLE), when one is made.
     std::vector<float> single_values;
@@ -223,11 +224,13 @@ class Session {
   // the next compute (every part quantized, or the compute failed).
   void release_frame();
   void compute_task();
-  // Part c of a frame's encoding: chunk c, or the single buffer (c ==
-  // chunk_count). Quantizing reads frame_; encoding does not.
-  void quantize_part_of(InFlight& f, std::size_t c);
-  void encode_part_of(InFlight& f, std::size_t c);
-  void part_task(InFlight* f, std::size_t c);
+  // Part p of a frame's encoding: the p-th of f.chunk_parts even runs of
+  // chunks, or the single buffer (p == f.chunk_parts). Quantizing reads
+  // frame_; encoding does not.
+  std::pair<std::size_t, std::size_t> chunks_of_part(const InFlight& f, std::size_t p) const;
+  void quantize_part_of(InFlight& f, std::size_t p);
+  void encode_part_of(InFlight& f, std::size_t p);
+  void part_task(InFlight* f, std::size_t p);
   // Whether frames should carry the single buffer now (mutex_ held).
   bool want_single_locked() const;
   // `frame` with a single buffer transcoded from its chunks (decoded as a
