@@ -21,6 +21,7 @@
 //
 // Usage: filigree_bench_service [server-binary] [--format single|chunked]
 //        [--quick] (the quick run skips the ≥ 1M mesh and the 16 sessions)
+//        [--large] (only the ≥ 1M mesh's single-watcher drives: for profiling)
 
 #include <algorithm>
 #include <chrono>
@@ -284,13 +285,15 @@ std::vector<double> run_many(v1::Filigree::Stub& stub, const std::string& bytes,
 
 int main_impl(int argc, char** argv) {
   std::string server_binary = FILIGREE_SERVER_BINARY;
-  bool quick = false;
+  bool quick = false, large_only = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--format" && i + 1 < argc) {
       g_format = std::string(argv[++i]) == "single" ? v1::FRAME_FORMAT_SINGLE : v1::FRAME_FORMAT_CHUNKED;
     } else if (a == "--quick") {
       quick = true;
+    } else if (a == "--large") {
+      large_only = true;
     } else {
       server_binary = a;
     }
@@ -315,7 +318,9 @@ int main_impl(int argc, char** argv) {
   // Armadillo subdivided (Loop twice, √3 once, 1.25M), in locality order.
   const std::string shared = FILIGREE_SHARED_DATA_DIR;
   std::vector<Case> cases;
-  if (std::filesystem::exists(shared + "/camel.off") && std::filesystem::exists(shared + "/bunny.off")) {
+  if (large_only) {
+    // only the ≥ 1M mesh, below
+  } else if (std::filesystem::exists(shared + "/camel.off") && std::filesystem::exists(shared + "/bunny.off")) {
     cases.push_back({"camel (real, 9.8k)", repair_mesh(read_mesh(shared + "/camel.off"), {}, &report)});
     cases.push_back({"bunny Loop x1", bench::subdivide(repair_mesh(read_mesh(shared + "/bunny.off"), {}, &report), 1, 0)});
   } else {
@@ -348,6 +353,7 @@ int main_impl(int argc, char** argv) {
       int watchers;
     };
     for (const Run r : {Run{Movement::kWholeBody, 1}, Run{Movement::kWholeBody, 8}, Run{Movement::kLocal, 1}}) {
+      if (large_only && r.watchers > 1) continue;
       const Result res = run(*stub, created, r.watchers, poses, r.motion);
       std::printf("| %s | %zu | %s | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f | %.3f | %.1f%% | %.2e | %zu |\n",
                   c.name.c_str(), c.mesh.vertex_count(), r.motion == Movement::kWholeBody ? "whole body" : "local bump",
@@ -370,6 +376,11 @@ int main_impl(int argc, char** argv) {
               kWarmupFrames + 5);
   for (const Memory& m : memory) std::printf("| %s | %zu | %.0f | %.0f |\n", m.name.c_str(), m.vertices, m.first, m.further);
 
+  if (large_only) {
+    server.terminate();
+    std::filesystem::remove_all(data_dir);
+    return 0;
+  }
   // Many sessions of the ≈150k mesh sharing the machine's cores.
   const double n_many = static_cast<double>(cases[1].mesh.vertex_count());
   std::printf("\nMany sessions of %s (%.0f vertices), each driven closed-loop with the whole-body motion for 10 s.\n\n"
