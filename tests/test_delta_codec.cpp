@@ -394,14 +394,17 @@ TEST(DeltaCodec, InterleavedChunksWriteTheSameBytes) {
       // symbols raise the raw coder's precision to 2^20, where a rare
       // symbol's probability is < 16 and one step can write 3 bytes.
       const bool large = trial % 10 == 9 && c == 0;
-      const int points = large ? 40000 : rng() % 4 == 0 ? 1 + static_cast<int>(rng() % 5) : std::uniform_int_distribution<int>(6, 6000)(rng);
+      int points = 40000;
+      if (!large)
+        points = rng() % 4 == 0 ? 1 + static_cast<int>(rng() % 5) : std::uniform_int_distribution<int>(6, 6000)(rng);
       const double scale = std::pow(10.0, std::uniform_real_distribution<double>(-4.0, 1.0)(rng));
       float walk = 0.0f;
       for (int i = 0; i < 3 * points; ++i) {
         // Noise codes tagged at high bit depths; a smooth walk codes raw.
         walk += std::normal_distribution<float>(0.0f, static_cast<float>(scale * (large ? 1e-4 : 0.01)))(rng);
         if (large && i % 20 == 0) {  // rare values anywhere in the range: many distinct, rare symbols
-          values[c].push_back(std::uniform_real_distribution<float>(static_cast<float>(-scale), static_cast<float>(scale))(rng));
+          const auto bound = static_cast<float>(scale);
+          values[c].push_back(std::uniform_real_distribution<float>(-bound, bound)(rng));
           continue;
         }
         values[c].push_back(c % 2 || large ? walk : std::normal_distribution<float>(0.0f, static_cast<float>(scale))(rng));

@@ -386,8 +386,8 @@ struct PendingChunk {
 // Everything before the rANS bytes: the quantized symbols, the choice of
 // scheme, and `out` up to the frequency table. False for no values (`out`
 // stays empty).
-bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, int speed, PrepareScratch& prep, ChunkScratch& s, std::string& out,
-                   PendingChunk& pending) {
+bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, int speed, PrepareScratch& prep,
+                   ChunkScratch& s, std::string& out, PendingChunk& pending) {
   out.clear();
   if (values.empty()) return false;
   // Draco counts values in int.

@@ -169,7 +169,8 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
 
 void FrameEncoder::encode_chunks(std::size_t first, std::size_t count) {
   if (first > chunks_.size() || count > chunks_.size() - first)
-    throw std::out_of_range("chunks " + std::to_string(first) + "+" + std::to_string(count) + " of " + std::to_string(chunks_.size()));
+    throw std::out_of_range("chunks " + std::to_string(first) + "+" + std::to_string(count) + " of " +
+                            std::to_string(chunks_.size()));
   std::array<DracoChunk, kDracoInterleave> group;
   for (std::size_t c = first; c < first + count; c += group.size()) {
     const std::size_t n = std::min(group.size(), first + count - c);
