@@ -1046,6 +1046,13 @@ SessionRecord Session::record() const {
   return r;
 }
 
+SessionProgress Session::progress() const {
+  std::lock_guard cut_lock(cut_mutex_);
+  CutSnapshot cut = deformer_->cut_snapshot();
+  std::lock_guard lock(mutex_);
+  return {record_.options, record_.pose, record_.version, handles_locked(), handles_pending_locked(), std::move(cut)};
+}
+
 std::shared_ptr<const PublishedFrame> Session::current_frame() const {
   std::lock_guard lock(mutex_);
   return current_;

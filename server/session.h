@@ -180,6 +180,9 @@ class Session {
   // With the handles and, for an adaptive cut, the cut of the latest frame
   // (O(nodes): waits for a frame computing now).
   SessionRecord record() const;
+  // What of record() changes while the session runs, without copying what
+  // never does (the upload's ids are 4 bytes per vertex).
+  SessionProgress progress() const;
   const SessionAssets& assets() const { return *assets_; }
   std::shared_ptr<const PublishedFrame> current_frame() const;
 

@@ -206,11 +206,13 @@ std::vector<std::shared_ptr<Session>> SessionRegistry::loaded() const {
 
 void SessionRegistry::persist(const Session& s) {
   try {
-    const SessionRecord r = s.record();
-    if (!store_.save(r)) return;
+    // Only what changed since the session was created: the rest of its
+    // record (the upload's ids, its rig, its tokens) is stored once.
+    const SessionProgress p = s.progress();
+    if (!store_.save_progress(s.id(), p)) return;
     std::lock_guard lock(mutex_);
-    const auto it = sessions_.find(r.id);
-    if (it != sessions_.end()) it->second.persisted_version = r.version;
+    const auto it = sessions_.find(s.id());
+    if (it != sessions_.end()) it->second.persisted_version = p.version;
   } catch (const std::exception& e) {
     spdlog::error("event=persist_failed session={} error=\"{}\"", s.id(), e.what());
   }

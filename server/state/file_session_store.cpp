@@ -1,6 +1,7 @@
 #include "server/state/file_session_store.h"
 
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace filigree::server {
@@ -14,6 +15,34 @@ std::filesystem::path FileSessionStore::file_of(const std::string& id) const {
   return dir_ / (id + ".session");
 }
 
+namespace {
+
+std::filesystem::path progress_file(const std::filesystem::path& record_file) {
+  std::filesystem::path p = record_file;
+  return p.replace_extension(".progress");
+}
+
+// Write then rename: a crash leaves the old file, never half a new one.
+void write_atomically(const std::filesystem::path& file, const std::string& bytes) {
+  const auto tmp = std::filesystem::path(file.string() + ".partial");
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out.write(bytes.data(), static_cast<std::streamsize>(bytes.size())))
+      throw StoreUnavailable("cannot write " + tmp.string());
+  }
+  std::filesystem::rename(tmp, file);
+}
+
+std::optional<std::string> read_file(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return std::nullopt;
+  std::stringstream bytes;
+  bytes << in.rdbuf();
+  return bytes.str();
+}
+
+}  // namespace
+
 bool FileSessionStore::create(const SessionRecord& r) {
   if (exists(r.id)) return false;
   return save(r);
@@ -22,37 +51,43 @@ bool FileSessionStore::create(const SessionRecord& r) {
 bool FileSessionStore::save(const SessionRecord& r) {
   const auto file = file_of(r.id);
   if (file.empty()) return true;  // memory only
-  // Write then rename: a crash leaves the old record, never half a new one.
-  const auto tmp = std::filesystem::path(file.string() + ".partial");
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    const std::string bytes = encode_session_record(r);
-    if (!out.write(bytes.data(), static_cast<std::streamsize>(bytes.size())))
-      throw StoreUnavailable("cannot write " + tmp.string());
-  }
-  std::filesystem::rename(tmp, file);
+  write_atomically(file, encode_session_record(r));
+  // The record holds everything now; progress older than it is ignored on
+  // load anyway, so a crash before this removal loses nothing.
+  std::filesystem::remove(progress_file(file));
   return true;
 }
 
 bool FileSessionStore::save_progress(const std::string& id, const SessionProgress& p) {
-  std::optional<SessionRecord> r = load(id);
-  if (!r) return false;
-  apply_progress(p, *r);
-  return save(*r);
+  const auto file = file_of(id);
+  if (file.empty()) return true;  // memory only
+  if (!std::filesystem::exists(file)) return false;
+  write_atomically(progress_file(file), encode_session_progress(p));
+  return true;
 }
 
 std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
   const auto file = file_of(id);
   if (file.empty()) return std::nullopt;
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return std::nullopt;
-  std::stringstream bytes;
-  bytes << in.rdbuf();
+  const std::optional<std::string> bytes = read_file(file);
+  if (!bytes) return std::nullopt;
+  SessionRecord r;
   try {
-    return decode_session_record(bytes.str());
+    r = decode_session_record(*bytes);
   } catch (const std::exception& e) {
     throw SessionUnusable("the record " + file.string() + " is unreadable: " + e.what());
   }
+  const auto progress = progress_file(file);
+  if (const std::optional<std::string> p = read_file(progress)) {
+    SessionRecord with = r;
+    try {
+      apply_session_progress(*p, with);
+    } catch (const std::exception& e) {
+      throw SessionUnusable("the progress " + progress.string() + " is unreadable: " + e.what());
+    }
+    if (with.version >= r.version) r = std::move(with);
+  }
+  return r;
 }
 
 bool FileSessionStore::exists(const std::string& id) {
@@ -62,7 +97,9 @@ bool FileSessionStore::exists(const std::string& id) {
 
 void FileSessionStore::remove(const std::string& id) {
   const auto file = file_of(id);
-  if (!file.empty()) std::filesystem::remove(file);
+  if (file.empty()) return;
+  std::filesystem::remove(progress_file(file));
+  std::filesystem::remove(file);
 }
 
 std::vector<std::string> FileSessionStore::list() {
