@@ -22,7 +22,6 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <numeric>
 #include <vector>
 
 #include "codec/delta_codec.h"
@@ -124,18 +123,33 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
   const int precision = 1 << precision_bits;
   const double total_d = static_cast<double>(total), precision_d = precision;
   int total_prob = 0;
+  // Symbols that never occur (most of the range of a sparse chunk, up to its
+  // largest correction) get probability 0 without Draco's division: 0/total
+  // rounds to 0 all the same.
   for (int i = 0; i < num_symbols; ++i) {
+    if (frequencies[i] == 0) {
+      prob[static_cast<std::size_t>(i)] = 0;
+      continue;
+    }
     const double p = static_cast<double>(frequencies[i]) / total_d;
     auto r = static_cast<std::uint32_t>(p * precision_d + 0.5f);
-    if (r == 0 && frequencies[i] > 0) r = 1;
+    if (r == 0) r = 1;
     prob[static_cast<std::size_t>(i)] = r;
     total_prob += static_cast<int>(r);
   }
   if (total_prob != precision) {
+    // Draco sorts every symbol by probability, stably. Those of probability
+    // 0 come first, and the correction below never reaches them: it walks
+    // down from the most probable and stops at the first p ≤ 1 (a symbol
+    // that occurs has p ≥ 1). So only the symbols that occur are sorted,
+    // in the same relative order; `zeros` says whether any were left out.
     std::vector<int>& order = s.order;
-    order.resize(static_cast<std::size_t>(num_symbols));
-    std::iota(order.begin(), order.end(), 0);
+    order.clear();
+    for (int i = 0; i < num_symbols; ++i)
+      if (prob[static_cast<std::size_t>(i)] > 0) order.push_back(i);
     std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return prob[a] < prob[b]; });
+    const int occurring = static_cast<int>(order.size());
+    const bool zeros = occurring < num_symbols;
     if (total_prob < precision) {
       prob[static_cast<std::size_t>(order.back())] += static_cast<std::uint32_t>(precision - total_prob);
     } else {
@@ -143,10 +157,12 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
       while (error > 0) {
         const std::int32_t error_before = error;
         const double scale = precision_d / static_cast<double>(total_prob);
-        for (int j = num_symbols - 1; j > 0; --j) {
+        // Draco's loop runs down to its order's second entry; here that is
+        // the first when symbols of probability 0 were left out before it.
+        for (int j = occurring - 1; j >= (zeros ? 0 : 1); --j) {
           std::uint32_t& p = prob[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])];
           if (p <= 1) {
-            if (j == num_symbols - 1) return false;
+            if (j == occurring - 1) return false;
             break;
           }
           const auto reduced = static_cast<std::int32_t>(std::floor(scale * static_cast<double>(p)));
@@ -163,9 +179,12 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
       }
     }
   }
+  // Entries of symbols that never occur are never read by the coder: they
+  // keep whatever an earlier chunk left there.
   std::uint32_t cum = 0;
   table.resize(prob.size());
   for (std::size_t i = 0; i < prob.size(); ++i) {
+    if (prob[i] == 0) continue;
     RansSymbol& t = table[i];
     t.cum = cum;
     cum += prob[i];
