@@ -1,6 +1,7 @@
 #include "server/state/file_session_store.h"
 
 #include <fstream>
+#include <mutex>
 #include <optional>
 #include <sstream>
 
@@ -51,6 +52,7 @@ bool FileSessionStore::create(const SessionRecord& r) {
 bool FileSessionStore::save(const SessionRecord& r) {
   const auto file = file_of(r.id);
   if (file.empty()) return true;  // memory only
+  std::lock_guard lock(write_mutex_);
   write_atomically(file, encode_session_record(r));
   // The record holds everything now; progress older than it is ignored on
   // load anyway, so a crash before this removal loses nothing.
@@ -61,8 +63,12 @@ bool FileSessionStore::save(const SessionRecord& r) {
 bool FileSessionStore::save_progress(const std::string& id, const SessionProgress& p) {
   const auto file = file_of(id);
   if (file.empty()) return true;  // memory only
+  const std::string bytes = encode_session_progress(p);
+  // Under the lock, so that a session removed meanwhile gets no progress
+  // file, whichever comes first.
+  std::lock_guard lock(write_mutex_);
   if (!std::filesystem::exists(file)) return false;
-  write_atomically(progress_file(file), encode_session_progress(p));
+  write_atomically(progress_file(file), bytes);
   return true;
 }
 
@@ -98,6 +104,7 @@ bool FileSessionStore::exists(const std::string& id) {
 void FileSessionStore::remove(const std::string& id) {
   const auto file = file_of(id);
   if (file.empty()) return;
+  std::lock_guard lock(write_mutex_);
   std::filesystem::remove(progress_file(file));
   std::filesystem::remove(file);
 }

@@ -9,6 +9,7 @@
 // unless it is older than the record.
 
 #include <filesystem>
+#include <mutex>
 
 #include "server/state/session_store.h"
 
@@ -39,6 +40,9 @@ class FileSessionStore final : public SessionStore {
   // Empty for an id that is not a session id (hex only: no path escapes).
   std::filesystem::path file_of(const std::string& id) const;
   const std::filesystem::path dir_;
+  // Orders writes and removals: the maintenance loop may save a session's
+  // progress while it is being closed.
+  std::mutex write_mutex_;
 };
 
 }  // namespace filigree::server
