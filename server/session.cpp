@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 #include <tuple>
+#include <utility>
 
 #include <spdlog/spdlog.h>
 
@@ -78,21 +79,9 @@ void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::Fr
 // error within this fraction of the rest mesh's diagonal.
 constexpr double kAutomaticError = 5e-5;
 
-// Vertices per frame chunk: 16384, or for a mesh of fewer than 2·threads
-// such chunks, an even split into 2·threads of them (at least 2048 each), so
-// that a small mesh's frame still encodes on every thread, two coders
-// interleaved per task. Chunks of 4096 cost no more bytes than 16384 on the
-// 26k Armadillo (1.480 against 1.492 B/vertex, encoder bench), and 20% more
-// time per vertex on one thread.
-std::uint32_t chunk_vertices_for(std::size_t vertices, std::size_t threads) {
-  constexpr std::size_t kLargest = 16384, kSmallest = 2048;
-  const std::size_t chunks = 2 * std::max<std::size_t>(threads, 1);
-  return static_cast<std::uint32_t>(std::clamp((vertices + chunks - 1) / chunks, kSmallest, kLargest));
-}
-
-FrameEncoderOptions encoder_options(const v1::SessionOptions& o, const SessionAssets& assets, std::size_t threads) {
+FrameEncoderOptions encoder_options(const v1::SessionOptions& o, const SessionAssets& assets) {
   FrameEncoderOptions e;
-  e.chunk_vertices = chunk_vertices_for(assets.hierarchy().vertex_count(), threads);
+  e.chunk_vertices = assets.chunk_vertices;
   e.bits = o.quantization_bits();
   e.max_error = kAutomaticError * std::max(assets.rest_diagonal, 1e-30);
   e.staging = assets.staging;
@@ -133,7 +122,7 @@ std::size_t encoding_parts(std::size_t chunks, std::size_t threads, bool alone) 
 Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
                  Journal journal)
     : assets_(std::move(assets)), scheduler_(scheduler), lane_(scheduler.lane()),
-      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, *assets_, scheduler.threads())),
+      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, *assets_)),
       record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = assets_->hierarchy();
   const v1::BaseMesh& base = assets_->base;
@@ -1034,19 +1023,21 @@ v1::SessionState Session::state(v1::FrameFormat format) {
 }
 
 SessionRecord Session::record() const {
-  // No frame may change the cut between its snapshot and the copy of the
-  // pose; the O(nodes) snapshot is taken outside mutex_ (it blocks no call).
-  std::lock_guard cut_lock(cut_mutex_);
-  CutSnapshot cut = deformer_->cut_snapshot();
-  std::lock_guard lock(mutex_);
-  SessionRecord r = record_;
-  r.handles = handles_locked();
-  r.handles_pending = handles_pending_locked();
-  r.cut = std::move(cut);
+  SessionProgress p = progress();
+  SessionRecord r;
+  {
+    // What progress does not carry never changes after construction.
+    std::lock_guard lock(mutex_);
+    r = record_;
+  }
+  r.cut = std::exchange(p.cut, {});  // the live cut, even an empty one
+  apply_progress(p, r);              // which p, now without a cut, keeps
   return r;
 }
 
 SessionProgress Session::progress() const {
+  // No frame may change the cut between its snapshot and the copy of the
+  // pose; the O(nodes) snapshot is taken outside mutex_ (it blocks no call).
   std::lock_guard cut_lock(cut_mutex_);
   CutSnapshot cut = deformer_->cut_snapshot();
   std::lock_guard lock(mutex_);

@@ -4,6 +4,8 @@
 // meshes as clients receive them. Built once per hierarchy, read-only, and
 // freed when the last session holding it goes.
 
+#include <cstddef>
+#include <cstdint>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -24,6 +26,9 @@ struct SessionAssets {
   v1::BaseMesh base;
   v1::RestMesh rest;  // positions and faces; a session adds its upload's ids when it answers
   double rest_diagonal = 1.0;
+  // Vertices per frame chunk, the same for every session of the mesh (see
+  // chunk_vertices_for in session_assets.cpp).
+  std::uint32_t chunk_vertices = 0;
   // Scratch the sessions of this mesh take in turn, so that an idle session
   // holds none (issue 10: a further session ≤ 64 B/vertex): frame positions
   // from compute to quantization, chunk deltas from quantization to encoding.
@@ -35,8 +40,9 @@ struct SessionAssets {
 
 class SessionAssetsCache {
  public:
-  // The assets of `h`: the ones live sessions already share, or new ones.
-  std::shared_ptr<const SessionAssets> get(const std::shared_ptr<const Hierarchy>& h);
+  // The assets of `h`: the ones live sessions already share, or new ones
+  // for frames encoded on `threads` threads (which sets their chunk size).
+  std::shared_ptr<const SessionAssets> get(const std::shared_ptr<const Hierarchy>& h, std::size_t threads);
   // Hierarchies with live assets (for tests and stats).
   std::size_t live() const;
   // The maintenance loop's: meshes whose scratch pools saw no use since the

@@ -67,7 +67,7 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.owner = std::move(owner);
   if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
   Journal journal = journal_for(r.id);
-  auto made = std::make_shared<Session>(std::move(r), assets_.get(h), scheduler_, std::move(journal));
+  auto made = std::make_shared<Session>(std::move(r), assets_.get(h, scheduler_.threads()), scheduler_, std::move(journal));
   confirm_lease(made->id());
   auto s = insert(std::move(made));
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
@@ -127,7 +127,7 @@ std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_
       return nullptr;
     }
     auto h = cache_.load(r->hierarchy_key);
-    s = std::make_shared<Session>(std::move(*r), assets_.get(h), scheduler_, journal_for(id));
+    s = std::make_shared<Session>(std::move(*r), assets_.get(h, scheduler_.threads()), scheduler_, journal_for(id));
   } catch (const StoreUnavailable&) {
     store_.release(id);
     throw;

@@ -27,6 +27,8 @@ std::string bytes_of(const std::filesystem::path& file) {
   return s.str();
 }
 
+constexpr const char* kId = "0123456789abcdef0123";
+
 class FileSessionStoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -38,7 +40,7 @@ class FileSessionStoreTest : public ::testing::Test {
   // A record as a 100k-vertex upload leaves it: its ids dominate its size.
   static SessionRecord created() {
     SessionRecord r;
-    r.id = "0123456789abcdef0123";
+    r.id = kId;
     r.hierarchy_key = "abc";
     r.editor_token.assign(32, 'e');
     r.viewer_token.assign(32, 'v');
@@ -58,7 +60,7 @@ class FileSessionStoreTest : public ::testing::Test {
     p.cut.scores = {0.5f, 0.0f, 2.0f};
     return p;
   }
-  std::filesystem::path file(const char* extension) const { return dir_ / (std::string(created().id) + extension); }
+  std::filesystem::path file(const char* extension) const { return dir_ / (std::string(kId) + extension); }
 
   std::filesystem::path dir_;
   std::unique_ptr<FileSessionStore> store_;

@@ -2,6 +2,7 @@
 // one hierarchy object, one deformer model, one copy of the rest mesh; and
 // all of it goes when the last session does.
 
+#include <algorithm>
 #include <condition_variable>
 #include <filesystem>
 #include <mutex>
@@ -65,6 +66,28 @@ TEST_F(SessionSharing, TwoSessionsOfOneMeshShareOneHierarchyAndModel) {
   auto c = registry_->create(hierarchy_of(test::torus(24, 12), other_key), other_key, {}, {});
   EXPECT_NE(&c->assets(), &a->assets());
   EXPECT_EQ(registry_->live_meshes(), 2u);
+}
+
+TEST_F(SessionSharing, ASmallMeshsFramesAreSplitForEveryFrameThread) {
+  // 10242 vertices, under 2 · 2 chunks of 16384: with two frame threads its
+  // frames come in 4 even chunks (two per thread), with one in 2.
+  std::string key;
+  auto h = hierarchy_of(test::icosphere(5), key);
+  ASSERT_EQ(h->vertex_count(), 10242u);
+  for (const unsigned threads : {2u, 1u}) {
+    RegistryLimits limits;
+    limits.frame_threads = threads;
+    SessionRegistry registry(*cache_, *store_, limits);
+    const auto s = registry.create(h, key, {}, {});
+    const v1::Frame& frame = s->current_frame()->frame;
+    ASSERT_EQ(frame.chunks_size(), static_cast<int>(2 * threads)) << threads << " threads";
+    const std::uint32_t size = (10242u + 2 * threads - 1) / (2 * threads);
+    for (int k = 0; k < frame.chunks_size(); ++k) {
+      EXPECT_EQ(frame.chunks(k).first_vertex(), k * size);
+      EXPECT_EQ(frame.chunks(k).vertex_count(), std::min(size, 10242u - k * size)) << "chunk " << k;
+    }
+    registry.close(s->id());
+  }
 }
 
 TEST_F(SessionSharing, HierarchyIsFreedWhenItsLastSessionCloses) {

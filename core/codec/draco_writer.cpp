@@ -294,23 +294,22 @@ void rans_run(RansStream* const* streams) {
   }
 }
 
-// Runs every coder to its end, as many at once as still have symbols.
+// Runs up to kDracoInterleave coders to their ends, as many at once as still
+// have symbols.
 void rans_run_all(std::span<RansStream*> streams) {
-  std::size_t n = 0;
-  for (RansStream* r : streams)
-    if (r->left > 0) streams[n++] = r;
-  while (n > 0) {
+  static_assert(kDracoInterleave == 4, "rans_run_all runs up to four coders");
+  while (true) {
+    std::size_t n = 0;
+    for (RansStream* r : streams)
+      if (r->left > 0) streams[n++] = r;
+    streams = streams.first(n);
     switch (n) {
+      case 0: return;
       case 1: rans_run<1>(streams.data()); break;
       case 2: rans_run<2>(streams.data()); break;
       case 3: rans_run<3>(streams.data()); break;
       default: rans_run<4>(streams.data()); break;
     }
-    std::size_t kept = 0;
-    for (std::size_t k = 0; k < std::min<std::size_t>(n, 4); ++k)
-      if (streams[k]->left > 0) streams[kept++] = streams[k];
-    for (std::size_t k = 4; k < n; ++k) streams[kept++] = streams[k];
-    n = kept;
   }
 }
 
