@@ -153,12 +153,19 @@ TEST(DeltaCodec, ComputedDecodeEqualsDracoBitForBit) {
       ASSERT_FALSE(decode_kernels().empty());
       for (const DecodeKernel& k : decode_kernels()) {
         SCOPED_TRACE(k.name);
-        std::vector<float> computed(values.size());
+        std::vector<float> computed(values.size()), measured(values.size());
         k.decode(q, values, computed);
+        // The measuring copy decodes the same, and its largest difference
+        // is the largest float |decoded − value|.
+        const float worst = k.decode_measured(q, values, measured);
+        float want_worst = 0.0f;
         for (std::size_t i = 0; i < values.size(); ++i) {
           ASSERT_EQ(computed[i], decoded[i]) << "value " << i << " = " << values[i];
+          ASSERT_EQ(measured[i], decoded[i]) << "value " << i << " = " << values[i];
           ASSERT_LE(std::abs(double{decoded[i]} - values[i]), q.bound()) << "value " << i;
+          want_worst = std::max(want_worst, std::abs(decoded[i] - values[i]));
         }
+        EXPECT_EQ(worst, want_worst);
       }
     }
   }

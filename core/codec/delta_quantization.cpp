@@ -36,7 +36,10 @@ namespace {
 // What a Draco decoder gives for each value (DecodeKernel's contract):
 // compiled for AVX2 too (no FMA: a fused multiply-add would round
 // differently from Draco's own code).
-[[gnu::always_inline]] inline void decode_values(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+// With `measure`, also the largest |decoded − value|, each difference
+// computed in float.
+template <bool measure>
+[[gnu::always_inline]] inline float decode_values(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
   const std::size_t n = std::min(values.size(), out.size());
   const float min = q.min, range = q.range;
   const std::int32_t levels = max_level(q.bits);
@@ -55,6 +58,7 @@ namespace {
   using F8 [[gnu::vector_size(32)]] = float;
   using I8 [[gnu::vector_size(32)]] = std::int32_t;
   const float inverse_delta = q.inverse_step(), delta = dequantizer.DequantizeFloat(1);
+  F8 worst = {};
   std::size_t i = 0;
   for (; i + 8 <= n; i += 8) {
     F8 v;
@@ -62,22 +66,41 @@ namespace {
     const F8 t = (v - min) * inverse_delta + 0.5f;
     const F8 decoded = __builtin_convertvector(__builtin_convertvector(t, I8), F8) * delta + min;
     std::memcpy(out.data() + i, &decoded, sizeof decoded);
+    if constexpr (measure) {
+      F8 e = decoded - v;
+      e = e < 0.0f ? -e : e;
+      worst = e > worst ? e : worst;
+    }
   }
-  for (; i < n; ++i) out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(values[i] - min)) + min;
+  float out_worst = 0.0f;
+  if constexpr (measure)
+    for (int k = 0; k < 8; ++k) out_worst = std::max(out_worst, worst[k]);
+  for (; i < n; ++i) {
+    const float v = values[i];
+    out[i] = dequantizer.DequantizeFloat(quantizer.QuantizeFloat(v - min)) + min;
+    if constexpr (measure) out_worst = std::max(out_worst, std::abs(out[i] - v));
+  }
+  return out_worst;
 }
 void decode_values_baseline(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
-  decode_values(q, values, out);
+  decode_values<false>(q, values, out);
+}
+float decode_measured_baseline(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  return decode_values<true>(q, values, out);
 }
 #if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] void decode_values_avx2(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
-  decode_values(q, values, out);
+  decode_values<false>(q, values, out);
+}
+[[gnu::target("avx2")]] float decode_measured_avx2(const DeltaQuantization& q, std::span<const float> values, std::span<float> out) {
+  return decode_values<true>(q, values, out);
 }
 #endif
 
 std::vector<DecodeKernel> runnable_decode_kernels() {
-  std::vector<DecodeKernel> out = {{"baseline", decode_values_baseline}};
+  std::vector<DecodeKernel> out = {{"baseline", decode_values_baseline, decode_measured_baseline}};
 #if FILIGREE_X86_TARGETS
-  if (cpu_has_avx2()) out.push_back({"avx2", decode_values_avx2});
+  if (cpu_has_avx2()) out.push_back({"avx2", decode_values_avx2, decode_measured_avx2});
 #endif
   return out;
 }
@@ -117,6 +140,12 @@ void DeltaQuantization::decode(std::span<const float> values, std::span<float> o
   decode_kernels().back().decode(*this, values, out);
 }
 
+double DeltaQuantization::decode_measured(std::span<const float> values, std::span<float> out) const {
+  // A float difference rounds once, to within 2^-24 of itself: 2^-22 more
+  // covers that and the rounding of this product.
+  return double{decode_kernels().back().decode_measured(*this, values, out)} * (1.0 + 0x1p-22);
+}
+
 float DeltaQuantization::inverse_step() const { return static_cast<float>(max_level(bits)) / range; }
 
 double DeltaQuantization::half_step() const { return double{range} / max_level(bits) / 2.0; }
@@ -137,6 +166,12 @@ DeltaQuantization quantization_over(std::span<const float> values, std::uint32_t
   q.bits = bits;
   if (values.empty()) return q;
   const auto [lo, hi] = value_range(values.data(), values.size());
+  return quantization_over_range(lo, hi, bits);
+}
+
+DeltaQuantization quantization_over_range(float lo, float hi, std::uint32_t bits) {
+  DeltaQuantization q;
+  q.bits = bits;
   // An origin at or below the smallest value that survives the option
   // strings, then a range that still reaches the largest value on Draco's
   // grid (its quantizer must not go past 2^bits − 1).

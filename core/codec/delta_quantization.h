@@ -39,6 +39,9 @@ struct DeltaQuantization {
   // out[i] = what a Draco decoder gives for values[i] (each in [min, min +
   // range]); out may be values. Sizes must match.
   void decode(std::span<const float> values, std::span<float> out) const;
+  // The same, and returns an upper bound on max |out[i] − values[i]| (0 for
+  // no values), tight to a few float roundings.
+  double decode_measured(std::span<const float> values, std::span<float> out) const;
   // |decoded(v) − v| for every v in the range is at most this (see above).
   double bound() const;
   // Draco's inverse step, float(2^bits − 1) / range in float (Quantizer::Init):
@@ -53,6 +56,9 @@ struct DeltaQuantization {
 struct DecodeKernel {
   const char* name;  // "baseline", "avx2"
   void (*decode)(const DeltaQuantization& q, std::span<const float> values, std::span<float> out);
+  // decode, returning max |out[i] − values[i]| computed in float (each
+  // difference rounded once).
+  float (*decode_measured)(const DeltaQuantization& q, std::span<const float> values, std::span<float> out);
 };
 
 // Every copy this CPU can run, the one decode() uses last (tests compare
@@ -64,6 +70,8 @@ std::span<const DecodeKernel> decode_kernels();
 // largest, both exactly as Draco will read them back (multiples of 1e-6, so
 // the range is at least 1e-6). Values must be finite and |v| ≤ 1e30.
 DeltaQuantization quantization_over(std::span<const float> values, std::uint32_t bits);
+// The same for values whose smallest is `lo` and largest `hi` (lo ≤ hi).
+DeltaQuantization quantization_over_range(float lo, float hi, std::uint32_t bits);
 
 // The fewest bits (8…24) whose half step over `range` is at most `error`
 // (24 when none is).

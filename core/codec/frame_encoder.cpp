@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -20,8 +21,16 @@ namespace {
   throw std::logic_error("an implausible delta that is not there");
 }
 
-// Vertices per block of the staging pass: its per-coordinate masks stay in L1.
-constexpr std::size_t kStageBlock = 512;
+// The first i' ≥ i below `end` whose bit is `set` (end if none).
+std::size_t next_bit(const std::vector<std::uint64_t>& bits, std::size_t i, std::size_t end, bool set) {
+  while (i < end) {
+    std::uint64_t word = bits[i / 64] ^ (set ? 0 : ~std::uint64_t{0});
+    word &= ~std::uint64_t{0} << (i % 64);
+    if (word) return std::min(end, (i / 64) * 64 + static_cast<std::size_t>(std::countr_zero(word)));
+    i = (i / 64 + 1) * 64;
+  }
+  return end;
+}
 
 }  // namespace
 
@@ -58,92 +67,66 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   // error (automatic bits), or the keyframe's own error (fixed bits).
   const double tolerance = options_.bits == 0 ? options_.max_error : keyframe_error_;
 
-  // Pass 1: validate, stage the deltas in float32 (as Draco will store them),
-  // and which vertices moved away from the keyframe (and, to know when a
-  // fresh keyframe pays off, from the previous frame).
-  slot.changed.assign(count, 1);
+  // The one pass over the positions (delta_staging.h): the deltas staged in
+  // float32 (as Draco will store them), which vertices moved away from the
+  // keyframe and how many from the previous frame (to know when a fresh
+  // keyframe pays off), and what the error statement below needs.
   if (options_.staging && slot.values.capacity() == 0) {
     slot.values = options_.staging->take(3 * count);
   } else {
     slot.values.resize(3 * count);
   }
-  // One pass over the positions: the staged floats and, against the keyframe
-  // and the previous frame, what moved. No branch per value (one flag for
-  // the whole range): a bad delta is named afterwards, on the slow path.
+  slot.moved.resize((count + 63) / 64);
   const Vec3* pos = positions.data() + a;
   const Vec3* rest = rest_.data() + a;
-  float* staged = slot.values.data();
-  const float* key = keyframe_.data() + 3 * a;
-  const float* last = (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a;
-  std::uint8_t* flags = slot.changed.data();
   const bool compare = !force_;
-  bool plausible = true;
-  std::size_t changed = 0, moved_since_last = 0;
-  std::uint8_t from_key[3 * kStageBlock], from_last[3 * kStageBlock];
-  for (std::size_t b = 0; b < count; b += kStageBlock) {
-    const std::size_t n = std::min(kStageBlock, count - b), o = 3 * b;
-    if (!compare) {
-      plausible &= stage_deltas(pos[b].data(), rest[b].data(), 3 * n, staged + o);
-      continue;
-    }
-    plausible &= stage_and_compare_deltas(pos[b].data(), rest[b].data(), key + o, last + o, tolerance, 3 * n, staged + o, from_key, from_last);
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::uint8_t moved = from_key[3 * i] | from_key[3 * i + 1] | from_key[3 * i + 2];
-      flags[b + i] = moved;
-      changed += moved;
-      moved_since_last += from_last[3 * i] | from_last[3 * i + 1] | from_last[3 * i + 2];
-    }
-  }
-  if (!plausible) throw_bad_delta(pos, rest, a, count);
-  if (!compare) changed = count;
+  const float* key = compare ? keyframe_.data() + 3 * a : nullptr;
+  const float* last = compare ? (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a : nullptr;
+  const StagingSummary st = stage_vertices(pos->data(), rest->data(), key, last, tolerance, count, slot.values.data(), slot.moved.data());
+  if (!st.plausible) throw_bad_delta(pos, rest, a, count);
+  const std::size_t changed = st.moved;
   const bool dense = force_ || static_cast<double>(changed) > options_.dense_fraction * static_cast<double>(count);
-  if (dense) std::fill(slot.changed.begin(), slot.changed.end(), std::uint8_t{1});
   out.kind = dense ? EncodedChunk::Kind::kDense : changed ? EncodedChunk::Kind::kSparse : EncodedChunk::Kind::kAbsent;
   out.present = static_cast<std::uint32_t>(dense ? count : changed);
-  out.moved_since_last = static_cast<std::uint32_t>(force_ ? count : moved_since_last);
+  out.moved_since_last = static_cast<std::uint32_t>(st.moved_since_last);
   out.runs.clear();
   out.bytes.clear();
   out.max_error = 0.0;
 
-  // Runs of (skip, take) for a sparse chunk.
   if (out.kind == EncodedChunk::Kind::kSparse) {
-    std::size_t i = 0;
-    while (i < count) {
-      std::size_t skip = 0, take = 0;
-      while (i < count && !slot.changed[i]) ++skip, ++i;
-      while (i < count && slot.changed[i]) ++take, ++i;
-      if (take == 0) break;  // trailing unchanged vertices need no run
-      out.runs.push_back(static_cast<std::uint32_t>(skip));
-      out.runs.push_back(static_cast<std::uint32_t>(take));
+    // Runs of (skip, take); trailing unmoved vertices need none.
+    for (std::size_t done = 0, i = next_bit(slot.moved, 0, count, true); i < count; i = next_bit(slot.moved, done, count, true)) {
+      const std::size_t end = next_bit(slot.moved, i, count, false);
+      out.runs.push_back(static_cast<std::uint32_t>(i - done));
+      out.runs.push_back(static_cast<std::uint32_t>(end - i));
+      done = end;
     }
+    // Only the present deltas, in order.
+    compact_moved(slot.values.data(), slot.moved.data(), count);
   }
+  slot.values.resize(3 * static_cast<std::size_t>(out.present));
+  const float lo = dense ? st.lo : st.moved_lo, hi = dense ? st.hi : st.moved_hi;
+  const bool all_zero = out.present == 0 || (lo == 0.0f && hi == 0.0f);
 
-  // Only the present deltas, in order (in place: j ≤ i).
-  if (!dense) {
-    // Branch-free: every vertex is copied down, j advances past present ones.
-    float* v = slot.values.data();
-    for (std::size_t i = 0, j = 0; i < count; ++i) {
-      const float x = v[3 * i], y = v[3 * i + 1], z = v[3 * i + 2];
-      v[3 * j] = x, v[3 * j + 1] = y, v[3 * j + 2] = z;
-      j += slot.changed[i];
-    }
-    slot.values.resize(3 * static_cast<std::size_t>(out.present));
-  }
-  const bool all_zero = std::all_of(slot.values.begin(), slot.values.end(), [](float v) { return v == 0.0f; });
-
-  // Quantization: fixed bits, or the fewest whose exact error meets the target.
-  DeltaQuantization q = quantization_over(slot.values, options_.bits ? options_.bits : 8);
+  // Quantization: fixed bits, or the fewest whose error meets the target.
+  DeltaQuantization q = out.present ? quantization_over_range(lo, hi, options_.bits ? options_.bits : 8) : DeltaQuantization{};
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
-  // Pass 2: the decoded values and the exact error, present vertices from the
-  // quantization (or exactly 0), absent ones from the keyframe; straight into
-  // decoded_, a sparse chunk run by run.
+  // Pass 2, over the staged floats only: what clients will decode, straight
+  // into decoded_ (absent vertices keep the keyframe's, a sparse chunk is
+  // decoded run by run), and the stated error. An absent vertex's error is
+  // exact (from the pass above); a present one's is |decoded − s| + |s − d|
+  // at most, both measured (d the delta in double, s its float): an upper
+  // bound above the exact error by at most twice the staging's rounding
+  // (2^-24 of the largest delta).
   float* dec = decoded_.data() + 3 * a;
+  const auto present_error = [&](double decode_error) { return (decode_error + st.rounding) * (1.0 + 0x1p-50); };
   while (true) {
+    double decode_error = 0.0;
     if (dense) {
       if (all_zero) {
         std::fill_n(dec, 3 * count, 0.0f);
       } else {
-        q.decode(slot.values, std::span<float>(dec, 3 * count));
+        decode_error = q.decode_measured(slot.values, std::span<float>(dec, 3 * count));
       }
     } else {
       std::copy_n(keyframe_.data() + 3 * a, 3 * count, dec);
@@ -153,12 +136,13 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
         if (all_zero) {
           std::fill_n(dec + 3 * i, 3 * take, 0.0f);
         } else {
-          q.decode(std::span<const float>(slot.values).subspan(3 * j, 3 * take), std::span<float>(dec + 3 * i, 3 * take));
+          decode_error = std::max(decode_error, q.decode_measured(std::span<const float>(slot.values).subspan(3 * j, 3 * take),
+                                                                  std::span<float>(dec + 3 * i, 3 * take)));
         }
         i += take, j += take;
       }
     }
-    const double error = max_delta_error(dec, pos->data(), rest->data(), 3 * count);
+    const double error = std::max(out.present ? present_error(decode_error) : 0.0, dense ? 0.0 : st.unmoved_error);
     out.max_error = error;
     if (options_.bits != 0 || all_zero || out.present == 0 || error <= options_.max_error || q.bits >= 24) break;
     ++q.bits;  // float rounding pushed past the target: one more bit

@@ -50,12 +50,15 @@ struct EncodedChunk {
   std::vector<std::uint32_t> runs;      // kSparse: skip, take, skip, take …
   std::string bytes;                    // Draco buffer; empty: every present delta is 0
   DeltaQuantization quantization;
-  double max_error = 0.0;               // over the whole range (absent vertices too)
+  // Over the whole range (absent vertices too): an upper bound on what a
+  // client's decode is off by, above the exact error by at most twice the
+  // float32 rounding of the largest delta (2^-24 of it).
+  double max_error = 0.0;
 };
 
 struct EncodedFrameSummary {
   bool keyframe = false;
-  double max_error = 0.0;         // over every vertex, exact
+  double max_error = 0.0;         // over every vertex, as EncodedChunk::max_error
   std::size_t present_vertices = 0;
   std::size_t bytes = 0;          // Draco bytes + 4 per run
 };
@@ -76,8 +79,8 @@ class FrameEncoder {
   // Starts a frame; every chunk must then be quantized, encoded, and the
   // frame finished. force_keyframe: every chunk whole (the first frame is).
   void begin(bool force_keyframe);
-  // Reads positions[range of chunk c] (posed, original order, every vertex):
-  // decides what is present, quantizes it and computes the exact error.
+  // Reads positions[range of chunk c] (posed, original order, every vertex),
+  // once: decides what is present, quantizes it and bounds the error.
   // After it returns the positions of that range are not read again.
   // Throws DeltaCodecError for a non-finite or implausible delta.
   void quantize_chunk(std::size_t c, std::span<const Vec3> positions);
@@ -103,8 +106,8 @@ class FrameEncoder {
  private:
   struct Slot {
     EncodedChunk out;
-    std::vector<float> values;      // present deltas, x y z
-    std::vector<std::uint8_t> changed;
+    std::vector<float> values;       // present deltas, x y z
+    std::vector<std::uint64_t> moved;  // bit i: vertex first + i moved from the keyframe
   };
   std::span<const Vec3> rest_;
   FrameEncoderOptions options_;

@@ -22,6 +22,15 @@ inline bool cpu_has_avx2() {
 #endif
 }
 
+inline bool cpu_has_bmi2() {
+#if FILIGREE_X86_TARGETS
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("bmi2");
+#else
+  return false;
+#endif
+}
+
 // AVX-512 as the kernels use it: the foundation with 256-bit forms (VL),
 // double/quad-word and byte/word instructions, and FMA.
 inline bool cpu_has_avx512() {
