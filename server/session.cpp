@@ -656,8 +656,12 @@ void Session::start_encode_locked() {
 }
 
 std::pair<std::size_t, std::size_t> Session::chunks_of_part(const InFlight& f, std::size_t p) const {
-  const std::size_t n = encoder_.chunk_count();
-  return {p * n / f.chunk_parts, (p + 1) * n / f.chunk_parts};
+  // The longer runs first: workers take parts in order, each the next when
+  // done, so the short ones at the end even out the finish (alternating
+  // sizes gave one worker every long run).
+  const std::size_t n = encoder_.chunk_count(), size = n / f.chunk_parts, longer = n % f.chunk_parts;
+  const std::size_t first = p * size + std::min(p, longer);
+  return {first, first + size + (p < longer ? 1 : 0)};
 }
 
 void Session::quantize_part_of(InFlight& f, std::size_t p) {
