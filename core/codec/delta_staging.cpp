@@ -78,6 +78,16 @@ struct Running {
 // values. The block's scratch stays in L1.
 constexpr std::size_t kBlock = 256;
 
+// One value: s = float(d) for d = p − q, what float32 lost, and whether d is
+// implausible (no branch). Returns d.
+[[gnu::always_inline]] inline double stage_value(double p, double q, float& s, double& lost, unsigned& bad) {
+  const double d = p - q;
+  bad |= !(std::abs(d) <= kMaxDeltaMagnitude);  // true for NaN too
+  s = static_cast<float>(d);
+  lost = std::abs(double{s} - d);
+  return d;
+}
+
 [[gnu::always_inline]] inline StagingSummary stage_blocks(const double* __restrict pos, const double* __restrict rest,
                                                           const float* __restrict key, const float* __restrict last, double tolerance,
                                                           std::size_t vertices, float* __restrict staged, std::uint64_t* moved) {
@@ -95,22 +105,14 @@ constexpr std::size_t kBlock = 256;
       const float* k = key + 3 * b;
       const float* l = last + 3 * b;
       for (std::size_t j = 0; j < values; ++j) {
-        const double d = p[j] - q[j];
-        bad |= !(std::abs(d) <= kMaxDeltaMagnitude);
-        const float f = static_cast<float>(d);
-        s[j] = f;
-        lost[j] = std::abs(double{f} - d);
+        const double d = stage_value(p[j], q[j], s[j], lost[j], bad);
         from_key[j] = std::abs(d - double{k[j]});
         beyond_key[j] = from_key[j] > tolerance;
         beyond_last[j] = std::abs(d - double{l[j]}) > tolerance;
       }
     } else {
       for (std::size_t j = 0; j < values; ++j) {
-        const double d = p[j] - q[j];
-        bad |= !(std::abs(d) <= kMaxDeltaMagnitude);
-        const float f = static_cast<float>(d);
-        s[j] = f;
-        lost[j] = std::abs(double{f} - d);
+        stage_value(p[j], q[j], s[j], lost[j], bad);
         beyond_key[j] = beyond_last[j] = 1;
         from_key[j] = 0.0;
       }
