@@ -164,10 +164,13 @@ std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { 
 // the per-vertex work stays in mask registers; reductions are lane-wise
 // (min, max: exact in any order) and folded at the end.
 // GCC 12's AVX-512 intrinsics start from _mm512_undefined_*(), which its
-// own uninitialised-use warnings flag once inlined (GCC bug 105593).
+// own uninitialised-use warnings flag once inlined (GCC bug 105593; clang
+// has neither the warning nor the bug).
+#if !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #define FILIGREE_AVX512 gnu::target("avx512f,avx512vl,avx512dq,avx512bw,bmi2")
 
 [[FILIGREE_AVX512]] inline __m512d abs_pd(__m512d x) { return _mm512_abs_pd(x); }
@@ -262,7 +265,9 @@ std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { 
   return compact_plain(v, moved, i, vertices, j / 3);
 }
 #undef FILIGREE_AVX512
+#if !defined(__clang__)
 #pragma GCC diagnostic pop
+#endif
 #endif
 
 std::vector<StagingKernels> runnable_kernels() {

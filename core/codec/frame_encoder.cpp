@@ -109,7 +109,8 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   const bool all_zero = out.present == 0 || (lo == 0.0f && hi == 0.0f);
 
   // Quantization: fixed bits, or the fewest whose error meets the target.
-  DeltaQuantization q = out.present ? quantization_over_range(lo, hi, options_.bits ? options_.bits : 8) : DeltaQuantization{};
+  DeltaQuantization q{.bits = options_.bits ? options_.bits : 8u};
+  if (out.present) q = quantization_over_range(lo, hi, q.bits);
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
   // Pass 2, over the staged floats only: what clients will decode, straight
   // into decoded_ (absent vertices keep the keyframe's, a sparse chunk is
