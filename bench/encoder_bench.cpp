@@ -4,7 +4,7 @@
 // vertex, encoded by FrameEncoder as keyframes (every vertex sent: the whole-
 // body worst case) with automatic quantization (max error 5e-5 of the
 // diagonal) in chunks of 16384. Per mesh and motion it prints the quantize
-// pass (staging, what moved, the exact error) and the Draco buffers, ours
+// pass (staging, what moved, the error bound) and the Draco buffers, ours
 // (encode_draco) against Draco 1.5's own encoder on the same chunks, in ns
 // per vertex; the bytes are checked equal on every chunk. Then the quantize
 // pass of the frame just after each keyframe, which a driven session mostly
