@@ -114,13 +114,14 @@ std::string encode_session_progress(const SessionProgress& progress) {
   return p.SerializeAsString();
 }
 
-void apply_session_progress(const std::string& bytes, SessionRecord& r) {
+SessionProgress decode_session_progress(const std::string& bytes) {
   internal::SessionRecord p;
   if (!p.ParseFromString(bytes) || p.format_version() != 1) throw std::runtime_error("unreadable session progress");
   // Progress written before handles were kept has none: the same as the
   // writer had (it dropped them on a restart too).
-  apply_progress({p.options(), {p.pose().begin(), p.pose().end()}, p.version(), handles_of(p), p.handles_pending(), cut_of(p)},
-                 r);
+  return {p.options(), {p.pose().begin(), p.pose().end()}, p.version(), handles_of(p), p.handles_pending(), cut_of(p)};
 }
+
+void apply_session_progress(const std::string& bytes, SessionRecord& r) { apply_progress(decode_session_progress(bytes), r); }
 
 }  // namespace filigree::server

@@ -76,6 +76,7 @@ SessionRecord decode_session_record(const std::string& bytes);
 // the cut), and applied onto a record; throws std::runtime_error for
 // unreadable bytes.
 std::string encode_session_progress(const SessionProgress& p);
+SessionProgress decode_session_progress(const std::string& bytes);
 void apply_session_progress(const std::string& bytes, SessionRecord& r);
 
 }  // namespace filigree::server

@@ -42,40 +42,11 @@ struct Running {
   }
 };
 
-// One vertex, scalar (the AVX-512 copy's tail). Returns whether it moved.
-[[gnu::always_inline]] inline bool stage_vertex(const double* pos, const double* rest, const float* key, const float* last,
-                                                double tolerance, float* staged, Running& r) {
-  bool moved = key == nullptr, since = key == nullptr;
-  double unmoved = 0;
-  float lo = kInf, hi = -kInf;
-  for (int k = 0; k < 3; ++k) {
-    const double d = pos[k] - rest[k];
-    r.plausible &= std::abs(d) <= kMaxDeltaMagnitude;  // false for NaN too
-    const float s = static_cast<float>(d);
-    staged[k] = s;
-    r.rounding = std::max(r.rounding, std::abs(double{s} - d));
-    lo = std::min(lo, s), hi = std::max(hi, s);
-    if (key) {
-      const double e = std::abs(d - double{key[k]});
-      moved |= e > tolerance;
-      since |= std::abs(d - double{last[k]}) > tolerance;
-      unmoved = std::max(unmoved, e);
-    }
-  }
-  r.moved += moved, r.moved_since_last += since;
-  r.lo = std::min(r.lo, lo), r.hi = std::max(r.hi, hi);
-  if (moved) {
-    r.moved_lo = std::min(r.moved_lo, lo), r.moved_hi = std::max(r.moved_hi, hi);
-  } else {
-    r.unmoved_error = std::max(r.unmoved_error, unmoved);
-  }
-  return moved;
-}
-
-// The plain and AVX2 copies: blocks of vertices whose per-value work is one
-// flat loop over x y z (GCC vectorises it with AVX: a double comparison
-// made a byte needs it), then a scalar loop per vertex combining its three
-// values. The block's scratch stays in L1.
+// The plain and AVX2 copies (and the AVX-512 copy's last vertices): blocks of
+// vertices whose per-value work is one flat loop over x y z (GCC vectorises
+// it with AVX: a double comparison made a byte needs it), then a scalar loop
+// per vertex combining its three values. The block's scratch stays in L1.
+// Adds to `r`; `moved` starts at the first vertex's word.
 constexpr std::size_t kBlock = 256;
 
 // One value: s = float(d) for d = p − q, what float32 lost, and whether d is
@@ -88,11 +59,10 @@ constexpr std::size_t kBlock = 256;
   return d;
 }
 
-[[gnu::always_inline]] inline StagingSummary stage_blocks(const double* __restrict pos, const double* __restrict rest,
-                                                          const float* __restrict key, const float* __restrict last, double tolerance,
-                                                          std::size_t vertices, float* __restrict staged, std::uint64_t* moved) {
+[[gnu::always_inline]] inline void stage_blocks(const double* __restrict pos, const double* __restrict rest,
+                                                const float* __restrict key, const float* __restrict last, double tolerance,
+                                                std::size_t vertices, float* __restrict staged, std::uint64_t* moved, Running& r) {
   std::fill_n(moved, (vertices + 63) / 64, std::uint64_t{0});
-  Running r;
   double lost[3 * kBlock], from_key[3 * kBlock];
   std::uint8_t beyond_key[3 * kBlock], beyond_last[3 * kBlock];
   for (std::size_t b = 0; b < vertices; b += kBlock) {
@@ -131,7 +101,6 @@ constexpr std::size_t kBlock = 256;
       r.unmoved_error = std::max(r.unmoved_error, m ? 0.0 : std::max({from_key[j], from_key[j + 1], from_key[j + 2]}));
     }
   }
-  return r.finish();
 }
 
 // Branch-free: every vertex is copied down, j advances past moved ones.
@@ -147,19 +116,24 @@ constexpr std::size_t kBlock = 256;
 
 StagingSummary stage_baseline(const double* p, const double* r, const float* k, const float* l, double t, std::size_t n, float* s,
                               std::uint64_t* m) {
-  return stage_blocks(p, r, k, l, t, n, s, m);
+  Running run;
+  stage_blocks(p, r, k, l, t, n, s, m, run);
+  return run.finish();
 }
 std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { return compact_plain(v, m, 0, n, 0); }
 
 #if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] StagingSummary stage_avx2(const double* p, const double* r, const float* k, const float* l, double t, std::size_t n,
                                                   float* s, std::uint64_t* m) {
-  return stage_blocks(p, r, k, l, t, n, s, m);
+  Running run;
+  stage_blocks(p, r, k, l, t, n, s, m, run);
+  return run.finish();
 }
 [[gnu::target("avx2")]] std::size_t compact_avx2(float* v, const std::uint64_t* m, std::size_t n) { return compact_plain(v, m, 0, n, 0); }
 
 // The AVX-512 copy: eight vertices (24 values, three registers of doubles) at
-// a time. A vertex's three comparison bits are folded into one with shifts
+// a time, up to the last whole word of bits (the rest as the plain copy
+// does). A vertex's three comparison bits are folded into one with shifts
 // and picked out with pext, and spread back over its values with pdep, so
 // the per-vertex work stays in mask registers; reductions are lane-wise
 // (min, max: exact in any order) and folded at the end.
@@ -173,27 +147,26 @@ std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { 
 #endif
 #define FILIGREE_AVX512 gnu::target("avx512f,avx512vl,avx512dq,avx512bw,bmi2")
 
-[[FILIGREE_AVX512]] inline __m512d abs_pd(__m512d x) { return _mm512_abs_pd(x); }
-
 [[FILIGREE_AVX512]] StagingSummary stage_avx512(const double* pos, const double* rest, const float* key, const float* last,
                                                double tolerance, std::size_t vertices, float* staged, std::uint64_t* moved) {
-  std::fill_n(moved, (vertices + 63) / 64, std::uint64_t{0});
+  const std::size_t whole = vertices / 64 * 64;
+  std::fill_n(moved, whole / 64, std::uint64_t{0});
   const __m512d limit = _mm512_set1_pd(kMaxDeltaMagnitude), tol = _mm512_set1_pd(tolerance);
   __m512d rounding = _mm512_setzero_pd(), unmoved = _mm512_setzero_pd();
   __m256 lo = _mm256_set1_ps(kInf), hi = _mm256_set1_ps(-kInf), mlo = lo, mhi = hi;
   __mmask8 ok = 0xFF;
   std::size_t count = 0, since = 0;
   std::size_t i = 0;
-  for (; i + 8 <= vertices; i += 8) {
+  for (; i < whole; i += 8) {
     const std::size_t o = 3 * i;
     __m512d d[3];
     __m256 s[3];
     for (int k = 0; k < 3; ++k) {
       d[k] = _mm512_sub_pd(_mm512_loadu_pd(pos + o + 8 * k), _mm512_loadu_pd(rest + o + 8 * k));
-      ok &= _mm512_cmp_pd_mask(abs_pd(d[k]), limit, _CMP_LE_OQ);  // false for NaN too
+      ok &= _mm512_cmp_pd_mask(_mm512_abs_pd(d[k]), limit, _CMP_LE_OQ);  // false for NaN too
       s[k] = _mm512_cvtpd_ps(d[k]);
       _mm256_storeu_ps(staged + o + 8 * k, s[k]);
-      rounding = _mm512_max_pd(rounding, abs_pd(_mm512_sub_pd(_mm512_cvtps_pd(s[k]), d[k])));
+      rounding = _mm512_max_pd(rounding, _mm512_abs_pd(_mm512_sub_pd(_mm512_cvtps_pd(s[k]), d[k])));
       lo = _mm256_min_ps(lo, s[k]), hi = _mm256_max_ps(hi, s[k]);
     }
     std::uint32_t vertex_moved = 0xFF;
@@ -201,9 +174,9 @@ std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { 
       __m512d e[3];
       std::uint32_t beyond_key = 0, beyond_last = 0;
       for (int k = 0; k < 3; ++k) {
-        e[k] = abs_pd(_mm512_sub_pd(d[k], _mm512_cvtps_pd(_mm256_loadu_ps(key + o + 8 * k))));
+        e[k] = _mm512_abs_pd(_mm512_sub_pd(d[k], _mm512_cvtps_pd(_mm256_loadu_ps(key + o + 8 * k))));
         beyond_key |= std::uint32_t{_mm512_cmp_pd_mask(e[k], tol, _CMP_GT_OQ)} << (8 * k);
-        const __m512d f = abs_pd(_mm512_sub_pd(d[k], _mm512_cvtps_pd(_mm256_loadu_ps(last + o + 8 * k))));
+        const __m512d f = _mm512_abs_pd(_mm512_sub_pd(d[k], _mm512_cvtps_pd(_mm256_loadu_ps(last + o + 8 * k))));
         beyond_last |= std::uint32_t{_mm512_cmp_pd_mask(f, tol, _CMP_GT_OQ)} << (8 * k);
       }
       // Value bits 3v, 3v+1, 3v+2 belong to vertex v.
@@ -232,11 +205,8 @@ std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { 
   _mm256_store_ps(lanes[0], lo), _mm256_store_ps(lanes[1], hi), _mm256_store_ps(lanes[2], mlo), _mm256_store_ps(lanes[3], mhi);
   r.lo = *std::min_element(lanes[0], lanes[0] + 8), r.hi = *std::max_element(lanes[1], lanes[1] + 8);
   r.moved_lo = *std::min_element(lanes[2], lanes[2] + 8), r.moved_hi = *std::max_element(lanes[3], lanes[3] + 8);
-  for (; i < vertices; ++i) {
-    const bool m = stage_vertex(pos + 3 * i, rest + 3 * i, key ? key + 3 * i : nullptr, last ? last + 3 * i : nullptr, tolerance,
-                                staged + 3 * i, r);
-    moved[i / 64] |= std::uint64_t{m} << (i % 64);
-  }
+  stage_blocks(pos + 3 * whole, rest + 3 * whole, key ? key + 3 * whole : nullptr, last ? last + 3 * whole : nullptr, tolerance,
+               vertices - whole, staged + 3 * whole, moved + whole / 64, r);
   return r.finish();
 }
 

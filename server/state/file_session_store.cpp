@@ -84,14 +84,14 @@ std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
     throw SessionUnusable("the record " + file.string() + " is unreadable: " + e.what());
   }
   const auto progress = progress_file(file);
-  if (const std::optional<std::string> p = read_file(progress)) {
-    SessionRecord with = r;
+  if (const std::optional<std::string> bytes = read_file(progress)) {
+    SessionProgress p;
     try {
-      apply_session_progress(*p, with);
+      p = decode_session_progress(*bytes);
     } catch (const std::exception& e) {
       throw SessionUnusable("the progress " + progress.string() + " is unreadable: " + e.what());
     }
-    if (with.version >= r.version) r = std::move(with);
+    if (p.version >= r.version) apply_progress(p, r);
   }
   return r;
 }
