@@ -291,11 +291,10 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
   // (for the service's sessions, whose vertex order is that curve, runs of
   // ids). A tile's nodes run together, so their ring reads and output writes
   // stay within a cache-sized window instead of every level sweeping the
-  // whole mesh. Partitions (for threads) are contiguous runs of tiles.
+  // whole mesh. Partitions (for threads) are contiguous runs of the curve.
   const std::vector<Index> curve = locality_order(h.rest_positions);
   std::vector<Index> rank(h.vertex_count());
   for (Index i = 0; i < curve.size(); ++i) rank[curve[i]] = i;
-  const std::size_t tiles = h.vertex_count() / kTileVertices + 1;
   partitions_ = partitions ? partitions
                            : std::clamp<std::size_t>(n_nodes / kNodesPerThread, 1,
                                                      std::min<std::size_t>(kMaxPartitions, std::max(1u, std::thread::hardware_concurrency())));
@@ -306,7 +305,9 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
   std::vector<std::uint32_t> tile(n_nodes), part(n_nodes), phase(n_nodes, 0);
   for (std::size_t k = n_nodes; k-- > 0;) {
     tile[k] = static_cast<std::uint32_t>(rank[h.node_vertex[k]] / kTileVertices);
-    part[k] = static_cast<std::uint32_t>(tile[k] * partitions_ / tiles);
+    // Partitions split the curve evenly, not by whole tiles: a mesh of a
+    // tile or two still uses every thread.
+    part[k] = static_cast<std::uint32_t>(std::uint64_t{rank[h.node_vertex[k]]} * partitions_ / h.vertex_count());
     for_each_dependency(k, [&](NodeId p) { phase[k] = std::max(phase[k], phase[p] + (part[p] != part[k] ? 1u : 0u)); });
     for_each_dependency(k, [&](NodeId p) {
       if (part[p] == part[k] && phase[p] == phase[k]) tile[k] = std::max(tile[k], tile[p]);

@@ -4,11 +4,11 @@
 // of geometry/ring_frame.h), parents before children.
 //
 // The hierarchy is laid out once for the traversal (this object, immutable and
-// shared by every deformer of a mesh). Nodes go tile by tile — runs of a
-// few thousand vertices along a Morton curve — and within a tile level by
+// shared by every deformer of a mesh). Nodes go tile by tile — runs of
+// kTileVertices vertices along a Morton curve — and within a tile level by
 // level (a level only reads levels above it), so ring reads and output
 // writes stay in a cache-sized window rather than every level sweeping the
-// whole mesh; threads take contiguous runs of tiles, a node whose parent
+// whole mesh; threads take contiguous runs of the curve, a node whose parent
 // lies in another thread's run waiting for a later phase. Nodes of one
 // tile and level form blocks of kLanes; each block stores its rings padded to
 // its largest ring, as structure of arrays (ring slot × lane), so that a
@@ -78,8 +78,11 @@ class DirectRecovery {
   static constexpr std::size_t kNodesPerThread = 100000;
   static constexpr std::size_t kMaxPartitions = 8;
   // Vertices per tile of the traversal: a tile's positions (16 B each) and
-  // results (24 B) stay within a core's L2 while it runs.
-  static constexpr std::size_t kTileVertices = 4096;
+  // results (24 B), 640 KiB, stay within a core's L2 (1 MiB on Zen 4) while
+  // it runs. Blocks never span two tiles' levels, so larger tiles pad fewer
+  // lanes: at 1.25M vertices 16384 has 5% fewer blocks than 4096, a frame
+  // 4-7% faster, its layout built in 1.4 s instead of 2.0.
+  static constexpr std::size_t kTileVertices = 16384;
 
   std::size_t vertex_count() const { return slot_of_vertex_.size(); }
   // Floats a RecoveryWorkspace holds during recover().
