@@ -56,6 +56,7 @@ static_assert(W == 8, "the kernel's vectors hold one block");
   std::memcpy(&v, p, sizeof v);
   return v;
 }
+[[gnu::always_inline]] inline void store8(float* p, F8 v) { std::memcpy(p, &v, sizeof v); }
 // Per lane; with -fno-math-errno (set for this file) it becomes one vsqrtps.
 [[gnu::always_inline]] inline F8 sqrt8(F8 v) {
   F8 r;
@@ -146,9 +147,13 @@ static_assert(W == 8, "the kernel's vectors hold one block");
   const F8 r15 = __builtin_shufflevector(u0, u2, 2, 3, 10, 11, 6, 7, 14, 15);
   const F8 r26 = __builtin_shufflevector(u1, u3, 0, 1, 8, 9, 4, 5, 12, 13);
   const F8 r37 = __builtin_shufflevector(u1, u3, 2, 3, 10, 11, 6, 7, 14, 15);
-  const F8 rows[4] = {__builtin_shufflevector(r04, r15, 0, 1, 2, 3, 8, 9, 10, 11), __builtin_shufflevector(r26, r37, 0, 1, 2, 3, 8, 9, 10, 11),
-                      __builtin_shufflevector(r04, r15, 4, 5, 6, 7, 12, 13, 14, 15), __builtin_shufflevector(r26, r37, 4, 5, 6, 7, 12, 13, 14, 15)};
-  std::memcpy(p + 4 * b.out, rows, sizeof rows);
+  // Each row pair stored from its register: as one array, GCC staged the rows
+  // on the stack and copied them with 64-byte loads that straddle two 32-byte
+  // stores (no store forwarding: a stall per block).
+  store8(p + 4 * b.out, __builtin_shufflevector(r04, r15, 0, 1, 2, 3, 8, 9, 10, 11));
+  store8(p + 4 * b.out + W, __builtin_shufflevector(r26, r37, 0, 1, 2, 3, 8, 9, 10, 11));
+  store8(p + 4 * b.out + 2 * W, __builtin_shufflevector(r04, r15, 4, 5, 6, 7, 12, 13, 14, 15));
+  store8(p + 4 * b.out + 3 * W, __builtin_shufflevector(r26, r37, 4, 5, 6, 7, 12, 13, 14, 15));
 
   // The caller's doubles: origin + float result + the rest error. Written
   // once, straight into the caller's order: a scattered store does not stall
