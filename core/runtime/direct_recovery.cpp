@@ -74,7 +74,8 @@ static_assert(W == 8, "the kernel's vectors hold one block");
 [[gnu::always_inline]] inline void recover_block(const Block& b, float* __restrict p, const Output& o) {
   F8 ax[kMaxRing], ay[kMaxRing], az[kMaxRing];
   F8 cx{}, cy{}, cz{};
-  for (std::size_t i = 0; i < b.ring; ++i) {
+  std::size_t i = 0;
+  do {  // a block has at least one ring slot (ring[0] is read below)
     // Gather eight xyzw rows and transpose them to x, y, z lanes: pairs of
     // rows per register, then in-register shuffles (fewer instructions than
     // inserting 24 scalars).
@@ -95,22 +96,26 @@ static_assert(W == 8, "the kernel's vectors hold one block");
     const F8 w = load8(b.weight + i * W);
     ax[i] = x, ay[i] = y, az[i] = z;
     cx += w * x, cy += w * y, cz += w * z;
-  }
+  } while (++i < b.ring);
   U8 meta;
   std::memcpy(&meta, b.meta, sizeof meta);
   const F8 size = __builtin_convertvector(__builtin_convertvector(meta & 0x7f, I8), F8);
   const F8 edges = size - __builtin_convertvector(__builtin_convertvector(meta >> 7, I8), F8);  // open rings lose the closing edge
-  for (std::size_t i = 0; i < b.ring; ++i) ax[i] -= cx, ay[i] -= cy, az[i] -= cz;
+  // The ring relative to the centre, one vertex ahead of the edge loop (the
+  // last edge closes on ring[0]): computed on the fly, not stored back.
+  const F8 x0 = ax[0] - cx, y0 = ay[0] - cy, z0 = az[0] - cz;
   F8 nx{}, ny{}, nz{}, radius{};
   const F8 zero{}, one = splat(1.0f);
-  for (std::size_t i = 0; i < b.ring; ++i) {
-    const std::size_t j = i + 1 == b.ring ? 0 : i + 1;
-    const F8 fi = splat(static_cast<float>(i));
-    radius += select(fi < size, sqrt8(ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i]), zero);
+  F8 xi = x0, yi = y0, zi = z0, fi{};
+  for (i = 0; i < b.ring; ++i, fi += one) {
+    const bool last = i + 1 == b.ring;
+    const F8 xj = last ? x0 : ax[i + 1] - cx, yj = last ? y0 : ay[i + 1] - cy, zj = last ? z0 : az[i + 1] - cz;
+    radius += select(fi < size, sqrt8(xi * xi + yi * yi + zi * zi), zero);
     const F8 e = select(fi < edges, one, zero);
-    nx += e * (ay[i] * az[j] - az[i] * ay[j]);
-    ny += e * (az[i] * ax[j] - ax[i] * az[j]);
-    nz += e * (ax[i] * ay[j] - ay[i] * ax[j]);
+    nx += e * (yi * zj - zi * yj);
+    ny += e * (zi * xj - xi * zj);
+    nz += e * (xi * yj - yi * xj);
+    xi = xj, yi = yj, zi = zj;
   }
   F8 s = radius / size;
   s = select(s > 1e-30f, s, one);  // a degenerate ring keeps scale 1, as ring_frame does
@@ -120,8 +125,8 @@ static_assert(W == 8, "the kernel's vectors hold one block");
   const F8 n0 = nx * inv_n, n1 = ny * inv_n, n2 = select(has_normal, nz * inv_n, one);
   // Tangent: ring[0]'s direction in the tangent plane; when ring[0] lies on
   // the normal axis, X or Y projected instead (deterministic, as ring_frame).
-  const F8 d0 = n0 * ax[0] + n1 * ay[0] + n2 * az[0];
-  F8 t0 = ax[0] - n0 * d0, t1 = ay[0] - n1 * d0, t2 = az[0] - n2 * d0;
+  const F8 d0 = n0 * x0 + n1 * y0 + n2 * z0;
+  F8 t0 = x0 - n0 * d0, t1 = y0 - n1 * d0, t2 = z0 - n2 * d0;
   const F8 tiny = 1e-6f * s;
   const I8 on_axis = t0 * t0 + t1 * t1 + t2 * t2 <= tiny * tiny;
   const F8 f0 = select(n0 < 0.9f && n0 > -0.9f, one, zero), f1 = one - f0;
