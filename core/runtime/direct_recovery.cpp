@@ -47,7 +47,6 @@ using F8 [[gnu::vector_size(32)]] = float;
 using I8 [[gnu::vector_size(32)]] = std::int32_t;
 using U8 [[gnu::vector_size(8)]] = std::uint8_t;
 using F4 [[gnu::vector_size(16)]] = float;
-using F16 [[gnu::vector_size(64)]] = float;
 using D8 [[gnu::vector_size(64)]] = double;
 static_assert(W == 8, "the kernel's vectors hold one block");
 
@@ -66,13 +65,12 @@ static_assert(W == 8, "the kernel's vectors hold one block");
 }
 [[gnu::always_inline]] inline F8 select(I8 mask, F8 a, F8 b) { return mask ? a : b; }
 
-// One block of W nodes, lane-parallel (kWide: the AVX-512 copy's gather): the frame of geometry/ring_frame.cpp
+// One block of W nodes, lane-parallel: the frame of geometry/ring_frame.cpp
 // written out (centre, mean radius, vector-area normal, tangent towards
 // ring[0]) and eq. 3.10. Padding ring slots repeat ring[0] with weight 0, so
 // the edge from a ring's last vertex to the first padding slot is the
 // closing edge and padding–padding edges vanish (a × a = 0); masks drop the
 // padding from the radius and the closing edge of open rings.
-template <bool kWide>
 [[gnu::always_inline]] inline void recover_block(const Block& b, float* __restrict p, const Output& o) {
   F8 ax[kMaxRing], ay[kMaxRing], az[kMaxRing];
   F8 cx{}, cy{}, cz{};
@@ -84,33 +82,17 @@ template <bool kWide>
     const std::uint32_t* slot = b.slot + i * W;
     F4 r[W];
     for (std::size_t l = 0; l < W; ++l) std::memcpy(&r[l], p + slot[l], sizeof(F4));
-    F8 x, y, z;
-    if constexpr (kWide) {
-      // Four rows per 16-float register, then one two-source permute per
-      // coordinate (vpermt2ps): AVX-512 only, where it measured 0.93-0.96x a
-      // 1.25M frame; elsewhere a 16-float vector is two registers.
-      const F16 lo = __builtin_shufflevector(__builtin_shufflevector(r[0], r[1], 0, 1, 2, 3, 4, 5, 6, 7),
-                                             __builtin_shufflevector(r[2], r[3], 0, 1, 2, 3, 4, 5, 6, 7), 0, 1, 2, 3, 4, 5, 6, 7, 8, 9,
-                                             10, 11, 12, 13, 14, 15);
-      const F16 hi = __builtin_shufflevector(__builtin_shufflevector(r[4], r[5], 0, 1, 2, 3, 4, 5, 6, 7),
-                                             __builtin_shufflevector(r[6], r[7], 0, 1, 2, 3, 4, 5, 6, 7), 0, 1, 2, 3, 4, 5, 6, 7, 8, 9,
-                                             10, 11, 12, 13, 14, 15);
-      x = __builtin_shufflevector(lo, hi, 0, 4, 8, 12, 16, 20, 24, 28);
-      y = __builtin_shufflevector(lo, hi, 1, 5, 9, 13, 17, 21, 25, 29);
-      z = __builtin_shufflevector(lo, hi, 2, 6, 10, 14, 18, 22, 26, 30);
-    } else {
-      const F8 a0 = __builtin_shufflevector(r[0], r[4], 0, 1, 2, 3, 4, 5, 6, 7);
-      const F8 a1 = __builtin_shufflevector(r[1], r[5], 0, 1, 2, 3, 4, 5, 6, 7);
-      const F8 a2 = __builtin_shufflevector(r[2], r[6], 0, 1, 2, 3, 4, 5, 6, 7);
-      const F8 a3 = __builtin_shufflevector(r[3], r[7], 0, 1, 2, 3, 4, 5, 6, 7);
-      const F8 t0 = __builtin_shufflevector(a0, a1, 0, 8, 1, 9, 4, 12, 5, 13);    // x0 x1 y0 y1 | x4 x5 y4 y5
-      const F8 t1 = __builtin_shufflevector(a2, a3, 0, 8, 1, 9, 4, 12, 5, 13);    // x2 x3 y2 y3 | x6 x7 y6 y7
-      const F8 t2 = __builtin_shufflevector(a0, a1, 2, 10, 3, 11, 6, 14, 7, 15);  // z0 z1 w0 w1 | z4 z5 w4 w5
-      const F8 t3 = __builtin_shufflevector(a2, a3, 2, 10, 3, 11, 6, 14, 7, 15);
-      x = __builtin_shufflevector(t0, t1, 0, 1, 8, 9, 4, 5, 12, 13);
-      y = __builtin_shufflevector(t0, t1, 2, 3, 10, 11, 6, 7, 14, 15);
-      z = __builtin_shufflevector(t2, t3, 0, 1, 8, 9, 4, 5, 12, 13);
-    }
+    const F8 a0 = __builtin_shufflevector(r[0], r[4], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a1 = __builtin_shufflevector(r[1], r[5], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a2 = __builtin_shufflevector(r[2], r[6], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 a3 = __builtin_shufflevector(r[3], r[7], 0, 1, 2, 3, 4, 5, 6, 7);
+    const F8 t0 = __builtin_shufflevector(a0, a1, 0, 8, 1, 9, 4, 12, 5, 13);    // x0 x1 y0 y1 | x4 x5 y4 y5
+    const F8 t1 = __builtin_shufflevector(a2, a3, 0, 8, 1, 9, 4, 12, 5, 13);    // x2 x3 y2 y3 | x6 x7 y6 y7
+    const F8 t2 = __builtin_shufflevector(a0, a1, 2, 10, 3, 11, 6, 14, 7, 15);  // z0 z1 w0 w1 | z4 z5 w4 w5
+    const F8 t3 = __builtin_shufflevector(a2, a3, 2, 10, 3, 11, 6, 14, 7, 15);
+    const F8 x = __builtin_shufflevector(t0, t1, 0, 1, 8, 9, 4, 5, 12, 13);
+    const F8 y = __builtin_shufflevector(t0, t1, 2, 3, 10, 11, 6, 7, 14, 15);
+    const F8 z = __builtin_shufflevector(t2, t3, 0, 1, 8, 9, 4, 5, 12, 13);
     const F8 w = load8(b.weight + i * W);
     ax[i] = x, ay[i] = y, az[i] = z;
     cx += w * x, cy += w * y, cz += w * z;
@@ -210,7 +192,6 @@ struct Layout {
   std::size_t base;
 };
 
-template <bool kWide>
 [[gnu::always_inline]] inline void recover_blocks(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& out) {
   const Output o = out;  // a local copy: stores through o.xyz cannot alias it
   for (std::size_t k = first; k < end; ++k) {
@@ -241,7 +222,7 @@ template <bool kWide>
       for (std::size_t i = t.block_ring[ahead]; i < t.block_ring[ahead + 1]; ++i, slot += W)
         for (std::size_t l = 0; l < W; ++l) __builtin_prefetch(p + slot[l], 0, 3);
     }
-    recover_block<kWide>(b, p, o);
+    recover_block(b, p, o);
   }
 }
 
@@ -258,15 +239,15 @@ struct KernelCopy {
 };
 
 void recover_blocks_baseline(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) {
-  recover_blocks<false>(t, first, end, p, o);
+  recover_blocks(t, first, end, p, o);
 }
 #if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] void recover_blocks_avx2(const Layout& t, std::size_t first, std::size_t end, float* p, const Output& o) {
-  recover_blocks<false>(t, first, end, p, o);
+  recover_blocks(t, first, end, p, o);
 }
 [[gnu::target("avx512f,avx512vl,avx512dq,avx512bw,fma")]] void recover_blocks_avx512(const Layout& t, std::size_t first, std::size_t end,
                                                                                     float* p, const Output& o) {
-  recover_blocks<true>(t, first, end, p, o);
+  recover_blocks(t, first, end, p, o);
 }
 #endif
 
