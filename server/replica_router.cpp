@@ -35,6 +35,10 @@ std::shared_ptr<grpc::Channel> ReplicaRouter::channel_for(const std::string& ses
     args.SetMaxReceiveMessageSize(-1);  // SessionInfo of a large mesh; the owner enforces its limits
     args.SetMaxSendMessageSize(-1);
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // its own connection, not one shared by equal channels
+    // Frames come back through this channel: a fixed window, as the client
+    // library's (client/lib/include/filigree/channel_arguments.h says why).
+    args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+    args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 16 << 20);
     channel = grpc::CreateCustomChannel(where.address, credentials_, args);
   }
   return channel;

@@ -4,6 +4,8 @@
 #include <optional>
 #include <random>
 
+#include "filigree/channel_arguments.h"
+
 namespace filigree {
 namespace {
 
@@ -22,10 +24,7 @@ constexpr char kServiceConfig[] = R"({"methodConfig": [{
 
 std::shared_ptr<grpc::Channel> make_channel(const std::string& target,
                                             const std::shared_ptr<grpc::ChannelCredentials>& credentials) {
-  grpc::ChannelArguments args;
-  // A SessionInfo carries the whole rest mesh: 1M vertices ≈ 36 MiB, over
-  // gRPC's 4 MiB default.
-  args.SetMaxReceiveMessageSize(-1);
+  grpc::ChannelArguments args = frame_channel_arguments();
   args.SetServiceConfigJSON(kServiceConfig);
   return grpc::CreateCustomChannel(target, credentials, args);
 }
