@@ -38,7 +38,7 @@ std::shared_ptr<grpc::Channel> ReplicaRouter::channel_for(const std::string& ses
     // Frames come back through this channel: a fixed window, as the client
     // library's (client/lib/include/filigree/channel_arguments.h says why).
     args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
-    args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 16 << 20);
+    args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 4 << 20);
     channel = grpc::CreateCustomChannel(where.address, credentials_, args);
   }
   return channel;

@@ -476,7 +476,7 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
     }));
     const healthPkg = grpc.loadPackageDefinition(protoLoader.loadSync(healthCheck.protoPath, LOADER_OPTIONS));
     // A fixed frame window, as the C++ client's (filigree/channel_arguments.h).
-    client = new filigree.filigree.v1.Filigree(address, grpc.credentials.createInsecure(), { 'grpc-node.flow_control_window': 16 << 20 });
+    client = new filigree.filigree.v1.Filigree(address, grpc.credentials.createInsecure(), { 'grpc-node.flow_control_window': 4 << 20 });
     health = new healthPkg.grpc.health.v1.Health(address, grpc.credentials.createInsecure());
     draco = await draco3d.createDecoderModule({});
     F = await loadFrameModule(ROOT);
