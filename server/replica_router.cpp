@@ -7,6 +7,7 @@
 #include <grpcpp/security/credentials.h>
 #include <grpcpp/support/channel_arguments.h>
 
+#include "filigree/channel_arguments.h"
 #include "server/session_registry.h"
 
 namespace filigree::server {
@@ -31,14 +32,11 @@ std::shared_ptr<grpc::Channel> ReplicaRouter::channel_for(const std::string& ses
   std::lock_guard lock(mutex_);
   auto& channel = channels_[key];
   if (!channel) {
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(-1);  // SessionInfo of a large mesh; the owner enforces its limits
+    // A client's settings (SessionInfo of a large mesh unlimited, the owner
+    // enforces its limits; frames come back with the fixed frame window).
+    grpc::ChannelArguments args = frame_channel_arguments();
     args.SetMaxSendMessageSize(-1);
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // its own connection, not one shared by equal channels
-    // Frames come back through this channel: a fixed window, as the client
-    // library's (client/lib/include/filigree/channel_arguments.h says why).
-    args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
-    args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 4 << 20);
     channel = grpc::CreateCustomChannel(where.address, credentials_, args);
   }
   return channel;

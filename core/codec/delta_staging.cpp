@@ -114,20 +114,23 @@ constexpr std::size_t kBlock = 256;
   return j;
 }
 
-StagingSummary stage_baseline(const double* p, const double* r, const float* k, const float* l, double t, std::size_t n, float* s,
-                              std::uint64_t* m) {
+[[gnu::always_inline]] inline StagingSummary stage_plain(const double* p, const double* r, const float* k, const float* l, double t,
+                                                        std::size_t n, float* s, std::uint64_t* m) {
   Running run;
   stage_blocks(p, r, k, l, t, n, s, m, run);
   return run.finish();
+}
+
+StagingSummary stage_baseline(const double* p, const double* r, const float* k, const float* l, double t, std::size_t n, float* s,
+                              std::uint64_t* m) {
+  return stage_plain(p, r, k, l, t, n, s, m);
 }
 std::size_t compact_baseline(float* v, const std::uint64_t* m, std::size_t n) { return compact_plain(v, m, 0, n, 0); }
 
 #if FILIGREE_X86_TARGETS
 [[gnu::target("avx2")]] StagingSummary stage_avx2(const double* p, const double* r, const float* k, const float* l, double t, std::size_t n,
                                                   float* s, std::uint64_t* m) {
-  Running run;
-  stage_blocks(p, r, k, l, t, n, s, m, run);
-  return run.finish();
+  return stage_plain(p, r, k, l, t, n, s, m);
 }
 [[gnu::target("avx2")]] std::size_t compact_avx2(float* v, const std::uint64_t* m, std::size_t n) { return compact_plain(v, m, 0, n, 0); }
 
