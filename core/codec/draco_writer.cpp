@@ -61,12 +61,25 @@ int most_significant_bit(std::uint32_t n) { return 31 ^ std::countl_zero(n); }  
 
 // One symbol of a rANS alphabet, with what encoding it needs precomputed.
 struct RansSymbol {
-  std::uint64_t reciprocal = 0;  // ⌈2^64 / prob⌉ for prob ≥ 2; 0 for prob 1
-  std::uint64_t identity = 0;    // all ones for prob 1 (x / 1 = x), else 0
+  std::uint64_t reciprocal = 0;  // ⌈2^64 / prob⌉ for prob ≥ 2; 2^64 − 1 for prob 1 (see rans_put)
   std::uint32_t bound = 0;       // renormalise while state ≥ this
-  std::uint32_t cum = 0;
+  std::uint32_t cum = 0;         // cumulative probability; for prob 1, plus `spare` (see rans_put)
   std::uint32_t spare = 0;       // precision − prob
 };
+
+// ⌈2^64/p⌉ = ⌊(2^64 − 1)/p⌋ + 1 (p ≥ 2), for the probabilities below 2^12
+// that most symbols of a chunk have: a 64-bit division per symbol and chunk
+// was most of building a table (a chunk of 2443 points has some 300 symbols).
+constexpr std::size_t kTabledReciprocals = 1 << 12;
+constexpr std::array<std::uint64_t, kTabledReciprocals> kReciprocals = [] {
+  std::array<std::uint64_t, kTabledReciprocals> r{};
+  for (std::size_t p = 2; p < r.size(); ++p) r[p] = ~std::uint64_t{0} / p + 1;
+  return r;
+}();
+std::uint64_t reciprocal_of(std::uint32_t p) {
+  if (p == 1) return ~std::uint64_t{0};
+  return p < kTabledReciprocals ? kReciprocals[p] : ~std::uint64_t{0} / p + 1;
+}
 
 // What one chunk keeps from its preparation until its coder has run.
 struct ChunkScratch {
@@ -81,21 +94,33 @@ struct ChunkScratch {
 struct PrepareScratch {
   std::vector<std::int32_t> quantized;
   std::vector<std::uint32_t> histogram;
+  std::vector<std::uint32_t> present;  // the symbols that occur, ascending
   std::vector<std::uint32_t> probabilities;
-  std::vector<int> order;
+  std::vector<std::uint64_t> order;  // (probability, symbol) of the symbols of probability ≥ 2
 };
+
+// The symbols of histogram[0, size) that occur, ascending, into `present`
+// (resized to hold them). The loops after it run over these only: a
+// chunk's few hundred symbols are scattered over thousands of entries, and
+// branching on each entry mispredicted often.
+std::span<const std::uint32_t> occurring_symbols(const std::uint32_t* histogram, std::size_t size,
+                                                 std::vector<std::uint32_t>& present) {
+  if (present.size() < size) present.resize(size);
+  std::uint32_t* out = present.data();
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < size; ++i) {
+    out[n] = static_cast<std::uint32_t>(i);
+    n += histogram[i] != 0;
+  }
+  return {out, n};
+}
 
 // Draco's ComputeShannonEntropy over a histogram: the same sum in the same
 // (ascending) order, so the same double and the same truncation.
-std::int64_t entropy_bits(const std::uint32_t* histogram, std::size_t size, int total, int& unique) {
-  unique = 0;
+std::int64_t entropy_bits(const std::uint32_t* histogram, std::span<const std::uint32_t> present, int total) {
   double bits = 0.0;
   const double n = total;
-  for (std::size_t i = 0; i < size; ++i) {
-    if (histogram[i] == 0) continue;
-    ++unique;
-    bits += static_cast<int>(histogram[i]) * std::log2(static_cast<double>(histogram[i]) / n);
-  }
+  for (const std::uint32_t i : present) bits += static_cast<int>(histogram[i]) * std::log2(static_cast<double>(histogram[i]) / n);
   return static_cast<std::int64_t>(-bits);
 }
 
@@ -109,82 +134,78 @@ std::int64_t table_bits(std::int32_t max_value, int unique) {
 // 2^precision_bits, with Draco's rounding and its rescaling of the
 // over-allocated case. False where Draco's Create fails (or would never
 // finish).
-bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int precision_bits, PrepareScratch& s,
-                        std::vector<RansSymbol>& table) {
+bool rans_probabilities(const std::uint32_t* frequencies, std::span<const std::uint32_t> present, int precision_bits,
+                        PrepareScratch& s, std::vector<RansSymbol>& table) {
   std::uint64_t total = 0;
-  int max_valid = 0;
-  for (int i = 0; i < num_symbols; ++i) {
-    total += frequencies[i];
-    if (frequencies[i] > 0) max_valid = i;
-  }
-  num_symbols = max_valid + 1;
+  for (const std::uint32_t i : present) total += frequencies[i];
+  const int num_symbols = static_cast<int>(present.back()) + 1;
+  // Entries of symbols that never occur are 0 in Draco's; none is read here.
   std::vector<std::uint32_t>& prob = s.probabilities;
   prob.resize(static_cast<std::size_t>(num_symbols));
   const int precision = 1 << precision_bits;
   const double total_d = static_cast<double>(total), precision_d = precision;
   int total_prob = 0;
-  // Symbols that never occur (most of the range of a sparse chunk, up to its
-  // largest correction) get probability 0 without Draco's division: 0/total
-  // rounds to 0 all the same.
-  for (int i = 0; i < num_symbols; ++i) {
-    if (frequencies[i] == 0) {
-      prob[static_cast<std::size_t>(i)] = 0;
-      continue;
-    }
+  for (const std::uint32_t i : present) {
     const double p = static_cast<double>(frequencies[i]) / total_d;
     auto r = static_cast<std::uint32_t>(p * precision_d + 0.5f);
     if (r == 0) r = 1;
-    prob[static_cast<std::size_t>(i)] = r;
+    prob[i] = r;
     total_prob += static_cast<int>(r);
   }
-  if (total_prob != precision) {
-    // Draco sorts every symbol by probability, stably. Those of probability
-    // 0 come first, and the correction below never reaches them: it walks
-    // down from the most probable and stops at the first p ≤ 1 (a symbol
-    // that occurs has p ≥ 1). So only the symbols that occur are sorted,
-    // in the same relative order; `zeros` says whether any were left out.
-    std::vector<int>& order = s.order;
+  if (total_prob < precision) {
+    // Draco sorts every symbol by probability, stably, and gives the
+    // difference to the last: the most probable, the last of equals.
+    std::uint32_t top = present.front();
+    for (const std::uint32_t i : present)
+      if (prob[i] >= prob[top]) top = i;
+    prob[top] += static_cast<std::uint32_t>(precision - total_prob);
+  } else if (total_prob > precision) {
+    // Draco's correction walks its stable ascending order down from the
+    // most probable and stops at the first p ≤ 1. Those of probability 0,
+    // then those of 1 (every other symbol that occurs), come first in that
+    // order, so only the symbols of p ≥ 2 are sorted, by (p, index): the
+    // stable order. `small` counts the ones of p = 1 before them and
+    // `zeros` says whether any of p = 0 come before those.
+    std::vector<std::uint64_t>& order = s.order;
     order.clear();
-    for (int i = 0; i < num_symbols; ++i)
-      if (prob[static_cast<std::size_t>(i)] > 0) order.push_back(i);
-    std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return prob[a] < prob[b]; });
-    const int occurring = static_cast<int>(order.size());
+    for (const std::uint32_t i : present)
+      if (prob[i] >= 2) order.push_back(std::uint64_t{prob[i]} << 32 | i);
+    std::sort(order.begin(), order.end());
+    const int occurring = static_cast<int>(present.size());
+    const int small = occurring - static_cast<int>(order.size());
     const bool zeros = occurring < num_symbols;
-    if (total_prob < precision) {
-      prob[static_cast<std::size_t>(order.back())] += static_cast<std::uint32_t>(precision - total_prob);
-    } else {
-      std::int32_t error = total_prob - precision;
-      while (error > 0) {
-        const std::int32_t error_before = error;
-        const double scale = precision_d / static_cast<double>(total_prob);
-        // Draco's loop runs down to its order's second entry; here that is
-        // the first when symbols of probability 0 were left out before it.
-        for (int j = occurring - 1; j >= (zeros ? 0 : 1); --j) {
-          std::uint32_t& p = prob[static_cast<std::size_t>(order[static_cast<std::size_t>(j)])];
-          if (p <= 1) {
-            if (j == occurring - 1) return false;
-            break;
-          }
-          const auto reduced = static_cast<std::int32_t>(std::floor(scale * static_cast<double>(p)));
-          auto fix = static_cast<std::int32_t>(p - static_cast<std::uint32_t>(reduced));
-          if (fix == 0) fix = 1;
-          if (fix >= static_cast<std::int32_t>(p)) fix = static_cast<std::int32_t>(p) - 1;
-          if (fix > error) fix = error;
-          p -= static_cast<std::uint32_t>(fix);
-          total_prob -= fix;
-          error -= fix;
-          if (total_prob == precision) break;
+    std::uint32_t one = 1;  // what the walk reads for a symbol of probability 1
+    std::int32_t error = total_prob - precision;
+    while (error > 0) {
+      const std::int32_t error_before = error;
+      const double scale = precision_d / static_cast<double>(total_prob);
+      // Draco's loop runs down to its order's second entry; here that is
+      // the first when symbols of probability 0 were left out before it.
+      for (int j = occurring - 1; j >= (zeros ? 0 : 1); --j) {
+        std::uint32_t& p =
+            j < small ? one : prob[static_cast<std::size_t>(order[static_cast<std::size_t>(j - small)] & 0xffffffffu)];
+        if (p <= 1) {
+          if (j == occurring - 1) return false;
+          break;
         }
-        if (error == error_before) return false;  // Draco would loop for ever here
+        const auto reduced = static_cast<std::int32_t>(std::floor(scale * static_cast<double>(p)));
+        auto fix = static_cast<std::int32_t>(p - static_cast<std::uint32_t>(reduced));
+        if (fix == 0) fix = 1;
+        if (fix >= static_cast<std::int32_t>(p)) fix = static_cast<std::int32_t>(p) - 1;
+        if (fix > error) fix = error;
+        p -= static_cast<std::uint32_t>(fix);
+        total_prob -= fix;
+        error -= fix;
+        if (total_prob == precision) break;
       }
+      if (error == error_before) return false;  // Draco would loop for ever here
     }
   }
   // Entries of symbols that never occur are never read by the coder: they
   // keep whatever an earlier chunk left there.
   std::uint32_t cum = 0;
   table.resize(prob.size());
-  for (std::size_t i = 0; i < prob.size(); ++i) {
-    if (prob[i] == 0) continue;
+  for (const std::uint32_t i : present) {
     RansSymbol& t = table[i];
     t.cum = cum;
     cum += prob[i];
@@ -192,28 +213,26 @@ bool rans_probabilities(const std::uint32_t* frequencies, int num_symbols, int p
     // IO_BASE · prob = 4 · 256 · prob.
     t.bound = 1024u * prob[i];
     t.spare = static_cast<std::uint32_t>(precision) - prob[i];
-    t.reciprocal = prob[i] >= 2 ? ~std::uint64_t{0} / prob[i] + 1 : 0;  // ⌊(2^64 − 1)/p⌋ + 1 = ⌈2^64/p⌉
-    t.identity = prob[i] == 1 ? ~std::uint64_t{0} : 0;
+    t.reciprocal = reciprocal_of(prob[i]);
+    if (prob[i] == 1) t.cum += t.spare;
   }
   return cum == static_cast<std::uint32_t>(precision);
 }
 
 // RAnsSymbolEncoder::EncodeTable: the symbol count, then each probability as
-// a 1–3 byte varint whose low two bits count the extra bytes, runs of zero
-// probabilities as one byte (offset << 2 | 3).
-void write_table(Writer& w, const std::vector<std::uint32_t>& prob) {
-  w.varint(prob.size());
-  for (std::size_t i = 0; i < prob.size(); ++i) {
-    const std::uint32_t p = prob[i];
-    if (p == 0) {
-      std::uint32_t offset = 0;
-      for (; offset < (1u << 6) - 1; ++offset) {
-        if (prob[i + offset + 1] > 0) break;  // the last symbol is never 0
-      }
-      w.u8((offset << 2) | 3u);
-      i += offset;
-      continue;
+// a 1–3 byte varint whose low two bits count the extra bytes, runs of up to
+// 64 zero probabilities as one byte ((run − 1) << 2 | 3).
+void write_table(Writer& w, const std::vector<std::uint32_t>& prob, std::span<const std::uint32_t> present) {
+  w.varint(present.back() + 1);
+  std::uint32_t next = 0;  // the first symbol not yet written
+  for (const std::uint32_t i : present) {
+    for (std::uint32_t zeros = i - next; zeros > 0;) {
+      const std::uint32_t run = std::min(zeros, 64u);
+      w.u8(((run - 1) << 2) | 3u);
+      zeros -= run;
     }
+    next = i + 1;
+    const std::uint32_t p = prob[i];
     const int extra = p >= (1u << 14) ? 2 : p >= (1u << 6) ? 1 : 0;
     w.u8((p << 2) | static_cast<std::uint32_t>(extra));
     for (int b = 0; b < extra; ++b) w.u8(p >> (8 * (b + 1) - 2));
@@ -233,11 +252,13 @@ struct RansStream {
 // One symbol is a chain of dependent steps, each cut short:
 // - ⌊x/p⌋ is the high half of x·m with m = ⌈2^64/p⌉ = (2^64 + r)/p, 0 ≤ r < p:
 //   x·m/2^64 = x/p + x·r/(p·2^64), and x·r < 2^30 · 2^20 < 2^64 (x < 1024 · p
-//   after renormalisation, p ≤ 2^20), so the floor is exact (p = 1: x itself);
+//   after renormalisation, p ≤ 2^20), so the floor is exact;
 // - (x/p)·precision + x mod p + cum is x + ⌊x/p⌋·(precision − p) + cum.
+// For p = 1, m = 2^64 − 1 gives ⌊x − x/2^64⌋ = x − 1 (x ≥ 1), one short,
+// which the table's cum + spare makes up (no select in the chain).
 inline std::uint32_t rans_put(std::uint32_t x, const RansSymbol& s) {
   const std::uint64_t r = x;
-  const auto q = static_cast<std::uint64_t>((static_cast<unsigned __int128>(r) * s.reciprocal) >> 64) + (r & s.identity);
+  const auto q = static_cast<std::uint64_t>((static_cast<unsigned __int128>(r) * s.reciprocal) >> 64);
   return static_cast<std::uint32_t>(r + q * s.spare + s.cum);
 }
 
@@ -485,11 +506,19 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
     for (const auto& lane : tag_lanes) tag_histogram[length] += lane[length];
     total_length += std::uint64_t{tag_histogram[length]} * static_cast<std::uint64_t>(length);
   }
-  int tag_unique = 0;
-  const std::int64_t tagged_bits = entropy_bits(tag_histogram, kMaxTag + 1, static_cast<int>(points), tag_unique) +
+  std::uint32_t tag_present_symbols[kMaxTag + 1];
+  std::span<const std::uint32_t> tag_present;
+  {
+    std::size_t n = 0;
+    for (std::uint32_t length = 0; length <= kMaxTag; ++length)
+      if (tag_histogram[length] != 0) tag_present_symbols[n++] = length;
+    tag_present = std::span<const std::uint32_t>(tag_present_symbols, n);
+  }
+  const auto tag_unique = static_cast<int>(tag_present.size());
+  const std::int64_t tagged_bits = entropy_bits(tag_histogram, tag_present, static_cast<int>(points)) +
                                    table_bits(tag_unique, tag_unique) + static_cast<std::int64_t>(total_length * 3);
   const bool raw_possible = most_significant_bit(std::max(1u, max_value)) + 1 <= kMaxRawBitLength;
-  int unique = 0;
+  std::span<const std::uint32_t> present;
   bool raw = false;
   if (raw_possible) {
     // Lanes 1…3 cover the small symbols only, where nearly every value
@@ -513,8 +542,9 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
     for (; k < count; ++k) ++h[sym[k]];
     for (std::size_t l = 1; l < kLanes; ++l)
       for (std::size_t j = 0; j < lane_size; ++j) h[j] += extra[(l - 1) * lane_size + j];
-    const std::int64_t raw_bits = entropy_bits(h, size, static_cast<int>(count), unique) +
-                                  table_bits(static_cast<std::int32_t>(max_value), unique);
+    present = occurring_symbols(h, size, prep.present);
+    const std::int64_t raw_bits = entropy_bits(h, present, static_cast<int>(count)) +
+                                  table_bits(static_cast<std::int32_t>(max_value), static_cast<int>(present.size()));
     raw = !(tagged_bits < raw_bits);
   }
 
@@ -535,23 +565,26 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
   // With 2^18 distinct symbols Draco's raw coder gives up; the tagged one
   // still encodes them (only a chunk of over 87381 points can get there).
   int length = 0;
-  const int raw_bits = raw ? raw_precision_bits(unique, 10 - speed, length) : 0;  // 10 − speed: Draco's compression level
+  const int raw_bits = raw ? raw_precision_bits(static_cast<int>(present.size()), 10 - speed, length) : 0;  // 10 − speed: Draco's compression level
   if (raw_bits != 0) {
-    if (!rans_probabilities(prep.histogram.data(), static_cast<int>(max_value) + 1, raw_bits, prep, s.table))
+    if (!rans_probabilities(prep.histogram.data(), present, raw_bits, prep, s.table))
       throw DeltaCodecError("Draco's symbol coder cannot encode these deltas");
     w.u8(kRaw);
     w.u8(static_cast<std::uint32_t>(length));
-    write_table(w, prep.probabilities);
+    write_table(w, prep.probabilities, present);
     pending.precision_bits = raw_bits;
     pending.rans = rans_start(sym, count, raw_bits, s.table, s.coded);
   } else {
     // EncodeTaggedSymbols' RAnsSymbolEncoder<5>:
     // ComputeRAnsPrecisionFromUniqueSymbolsBitLength(5).
     constexpr int kTagPrecision = 12;
-    if (!rans_probabilities(tag_histogram, kMaxTag, kTagPrecision, prep, s.table))
+    // Draco's tag coder has kMaxTag symbols (lengths 0…31; no symbol here
+    // is 2^31 or more, so none is left out).
+    while (!tag_present.empty() && tag_present.back() >= kMaxTag) tag_present = tag_present.first(tag_present.size() - 1);
+    if (tag_present.empty() || !rans_probabilities(tag_histogram, tag_present, kTagPrecision, prep, s.table))
       throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
     w.u8(kTagged);
-    write_table(w, prep.probabilities);
+    write_table(w, prep.probabilities, tag_present);
     pending.tagged = true;
     pending.precision_bits = kTagPrecision;
     pending.rans = rans_start(s.bit_lengths.data(), points, kTagPrecision, s.table, s.coded);
