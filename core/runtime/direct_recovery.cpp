@@ -336,17 +336,20 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
   // on each other. Segment phase·partitions + partition is a run of blocks.
   std::vector<NodeId> order;  // nodes in traversal order, kNone for padding lanes
   order.reserve(n_nodes + n_nodes / 4);
-  segment_blocks_.assign(1, 0);
+  segment_blocks_.clear();
   auto segment_of = [&](NodeId k) { return phase[k] * partitions_ + part[k]; };
   for (std::size_t i = 0; i < n_nodes; ++i) {
     const NodeId k = sorted[i];
+    // A segment's first node marks where it starts, and where the empty
+    // segments before it start and end. (Marking where each segment ended
+    // instead gave an empty segment the blocks of the one after it: a node
+    // then ran in the phase before its parent's, on another thread.)
+    while (segment_blocks_.size() <= segment_of(k)) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
     order.push_back(k);
     const bool last = i + 1 == n_nodes;
     const NodeId next = last ? k : sorted[i + 1];
     if (last || segment_of(next) != segment_of(k) || tile[next] != tile[k] || level[next] != level[k])
       while (order.size() % W) order.push_back(kNone);
-    if (last || segment_of(next) != segment_of(k))
-      while (segment_blocks_.size() <= segment_of(k) + 1) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
   }
   while (segment_blocks_.size() < phases * partitions_ + 1) segment_blocks_.push_back(static_cast<std::uint32_t>(order.size() / W));
   phases_ = phases;
@@ -398,6 +401,8 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
     }
     block_ring_.push_back(static_cast<std::uint32_t>(ring_slot_.size() / W));
   }
+
+  check_schedule();
 
   std::vector<Vec3> base_rest(base_count_);
   Vec3 centroid = Vec3::Zero();
@@ -466,6 +471,26 @@ void DirectRecovery::recover(std::span<const Vec3> base, RecoveryWorkspace& ws, 
   std::vector<std::jthread> team;
   for (std::size_t id = 1; id < t; ++id) team.emplace_back(work, id);
   work(0);
+}
+
+void DirectRecovery::check_schedule() const {
+  std::vector<std::uint32_t> segment(blocks());
+  for (std::size_t s = 0; s + 1 < segment_blocks_.size(); ++s)
+    std::fill(segment.begin() + segment_blocks_[s], segment.begin() + segment_blocks_[s + 1], static_cast<std::uint32_t>(s));
+  for (std::size_t b = 0; b < segment.size(); ++b) {
+    for (std::size_t r = std::size_t{block_ring_[b]} * W; r < std::size_t{block_ring_[b + 1]} * W; ++r) {
+      const std::size_t slot = ring_slot_[r] / 4;
+      if (slot < base_count_) continue;
+      const std::size_t writer = (slot - base_count_) / W;
+      const bool earlier_phase = segment[writer] / partitions_ < segment[b] / partitions_;
+      if (!earlier_phase && !(segment[writer] == segment[b] && writer < b))
+        throw std::logic_error("direct recovery layout: block " + std::to_string(b) + " (phase " +
+                               std::to_string(segment[b] / partitions_) + ", partition " + std::to_string(segment[b] % partitions_) +
+                               ") reads a position block " + std::to_string(writer) + " (phase " +
+                               std::to_string(segment[writer] / partitions_) + ", partition " +
+                               std::to_string(segment[writer] % partitions_) + ") has not written yet");
+    }
+  }
 }
 
 std::size_t DirectRecovery::critical_blocks() const {

@@ -105,6 +105,11 @@ class DirectRecovery {
 
  private:
   std::array<double, 3> origin_for(std::span<const Vec3> base) const;
+  // Throws std::logic_error unless every position a block reads is a base
+  // vertex's, or written by a block of an earlier phase or earlier in its
+  // own partition and phase: what threads running partitions side by side
+  // rely on. Checked once, when the layout is built.
+  void check_schedule() const;
 
   std::size_t kernel_ = 0;  // index into kernels()
   std::size_t base_count_ = 0, node_count_ = 0;
