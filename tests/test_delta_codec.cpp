@@ -436,6 +436,37 @@ TEST(DeltaCodec, InterleavedChunksWriteTheSameBytes) {
   EXPECT_GT(raw, 0);
 }
 
+// Every one of the 2^18 symbols an 18-bit chunk can have, in one chunk: the
+// raw scheme Draco's size estimate prefers cannot code 2^18 distinct symbols
+// (its precision would need 19 bits), so Draco's own encoder fails here,
+// while ours falls back to the tagged scheme, which Draco decodes. The
+// values are whole numbers over [0, 2^18 − 1], so 18 bits carry them
+// exactly; x steps through every correction once, y supplies the extremes.
+TEST(DeltaCodec, EveryEighteenBitSymbolFallsBackToTheTaggedScheme) {
+  constexpr std::size_t kSymbolMethodOffset = 26;
+  constexpr std::int64_t kLevels = 1 << 18;
+  std::vector<std::int64_t> corrections(kLevels);
+  std::iota(corrections.begin(), corrections.end(), -kLevels / 2);
+  std::shuffle(corrections.begin(), corrections.end(), std::mt19937(3));
+  std::vector<float> values;
+  std::int64_t x = 0;
+  for (std::size_t p = 0; p <= corrections.size(); ++p) {
+    if (p > 0) x = ((x + corrections[p - 1]) % kLevels + kLevels) % kLevels;
+    const float y = p == 1 ? static_cast<float>(kLevels - 1) : 0.0f;
+    values.insert(values.end(), {static_cast<float>(x), y, 0.0f});
+  }
+  const DeltaQuantization q = quantization_over(values, 18);
+  ASSERT_EQ(q.min, 0.0f);
+  ASSERT_EQ(q.range, static_cast<float>(kLevels - 1));
+  EXPECT_THROW(encode_with_draco_library(values, q, kDefaultEncodingSpeed), DeltaCodecError);
+  const std::string ours = encode_draco(values, q, kDefaultEncodingSpeed);
+  ASSERT_GT(ours.size(), kSymbolMethodOffset);
+  EXPECT_EQ(ours[kSymbolMethodOffset], 0) << "not the tagged scheme";
+  std::vector<float> decoded(values.size());
+  decode_deltas_into(ours, static_cast<std::uint32_t>(values.size() / 3), decoded);
+  EXPECT_EQ(decoded, values);
+}
+
 TEST(DeltaCodec, SameBytesFromConcurrentEncoders) {
   const std::vector<Vec3> d = smooth_field(test::icosphere(4));
   const EncodedDeltas reference = encode_deltas(d, 14);
