@@ -12,6 +12,7 @@
 #include "hierarchy/hierarchy.h"
 #include "mesh/vertex_order.h"
 #include "util/cpu_features.h"
+#include "util/helper_team.h"
 #include "util/spin_barrier.h"
 
 namespace filigree {
@@ -459,18 +460,19 @@ void DirectRecovery::recover(std::span<const Vec3> base, RecoveryWorkspace& ws, 
     run(layout, 0, segment_blocks_.back(), p, o);
     return;
   }
+  // Helpers kept by the process rather than a thread started per frame;
+  // with fewer idle than asked, fewer threads take the partitions.
+  HelperTeam::Crew crew = HelperTeam::shared().reserve(t - 1);
+  const std::size_t n = crew.threads();
   // Thread `id` runs its partitions of every phase; a barrier between phases.
-  SpinBarrier sync(static_cast<std::uint32_t>(t));
-  auto work = [&](std::size_t id) {
-    const std::size_t first = partitions_ * id / t, last = partitions_ * (id + 1) / t;
+  SpinBarrier sync(static_cast<std::uint32_t>(n));
+  crew.run([&](std::size_t id) {
+    const std::size_t first = partitions_ * id / n, last = partitions_ * (id + 1) / n;
     for (std::size_t ph = 0; ph < phases_; ++ph) {
       run(layout, segment_blocks_[ph * partitions_ + first], segment_blocks_[ph * partitions_ + last], p, o);
-      sync.arrive_and_wait();
+      if (n > 1) sync.arrive_and_wait();
     }
-  };
-  std::vector<std::jthread> team;
-  for (std::size_t id = 1; id < t; ++id) team.emplace_back(work, id);
-  work(0);
+  });
 }
 
 void DirectRecovery::check_schedule() const {
