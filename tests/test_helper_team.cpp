@@ -53,6 +53,16 @@ TEST(HelperTeam, ReservedHelpersAreNotSharedUntilTheCrewIsDone) {
   EXPECT_EQ(team.reserve(2).threads(), 3u);  // all back once the crews are gone
 }
 
+TEST(HelperTeam, ACrewHoldsAtMostItsFixedRoom) {
+  HelperTeam team(HelperTeam::kMaxCrew + 2);
+  HelperTeam::Crew crew = team.reserve(100);
+  ASSERT_EQ(crew.threads(), 1 + HelperTeam::kMaxCrew);
+  std::vector<std::atomic<int>> calls(crew.threads());
+  crew.run([&](std::size_t id) { calls[id].fetch_add(1); });
+  for (std::size_t id = 0; id < calls.size(); ++id) EXPECT_EQ(calls[id].load(), 1) << "id " << id;
+  EXPECT_EQ(team.reserve(100).threads(), 3u);  // the two left over
+}
+
 TEST(HelperTeam, ACrewRunsOnce) {
   HelperTeam team(1);
   HelperTeam::Crew crew = team.reserve(1);

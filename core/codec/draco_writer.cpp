@@ -99,14 +99,11 @@ struct PrepareScratch {
   std::vector<std::uint64_t> order;  // (probability, symbol) of the symbols of probability ≥ 2
 };
 
-// The symbols of histogram[0, size) that occur, ascending, into `present`
-// (resized to hold them). The loops after it run over these only: a
-// chunk's few hundred symbols are scattered over thousands of entries, and
-// branching on each entry mispredicted often.
-std::span<const std::uint32_t> occurring_symbols(const std::uint32_t* histogram, std::size_t size,
-                                                 std::vector<std::uint32_t>& present) {
-  if (present.size() < size) present.resize(size);
-  std::uint32_t* out = present.data();
+// The symbols of histogram[0, size) that occur, ascending, written to `out`
+// (room for `size`). The loops after it run over these only: a chunk's few
+// hundred symbols are scattered over thousands of entries, and branching on
+// each entry mispredicted often.
+std::span<const std::uint32_t> occurring_symbols(const std::uint32_t* histogram, std::size_t size, std::uint32_t* out) {
   std::size_t n = 0;
   for (std::size_t i = 0; i < size; ++i) {
     out[n] = static_cast<std::uint32_t>(i);
@@ -507,13 +504,7 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
     total_length += std::uint64_t{tag_histogram[length]} * static_cast<std::uint64_t>(length);
   }
   std::uint32_t tag_present_symbols[kMaxTag + 1];
-  std::span<const std::uint32_t> tag_present;
-  {
-    std::size_t n = 0;
-    for (std::uint32_t length = 0; length <= kMaxTag; ++length)
-      if (tag_histogram[length] != 0) tag_present_symbols[n++] = length;
-    tag_present = std::span<const std::uint32_t>(tag_present_symbols, n);
-  }
+  std::span<const std::uint32_t> tag_present = occurring_symbols(tag_histogram, kMaxTag + 1, tag_present_symbols);
   const auto tag_unique = static_cast<int>(tag_present.size());
   const std::int64_t tagged_bits = entropy_bits(tag_histogram, tag_present, static_cast<int>(points)) +
                                    table_bits(tag_unique, tag_unique) + static_cast<std::int64_t>(total_length * 3);
@@ -542,7 +533,8 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
     for (; k < count; ++k) ++h[sym[k]];
     for (std::size_t l = 1; l < kLanes; ++l)
       for (std::size_t j = 0; j < lane_size; ++j) h[j] += extra[(l - 1) * lane_size + j];
-    present = occurring_symbols(h, size, prep.present);
+    if (prep.present.size() < size) prep.present.resize(size);
+    present = occurring_symbols(h, size, prep.present.data());
     const std::int64_t raw_bits = entropy_bits(h, present, static_cast<int>(count)) +
                                   table_bits(static_cast<std::int32_t>(max_value), static_cast<int>(present.size()));
     raw = !(tagged_bits < raw_bits);

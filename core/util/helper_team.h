@@ -8,9 +8,10 @@
 // depend on how many ran. In a child of fork() (which has none of the
 // parent's threads) every crew is the caller alone.
 
+#include <array>
 #include <cstddef>
-#include <functional>
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 namespace filigree {
@@ -25,7 +26,13 @@ class HelperTeam {
   // A team of its own with `helpers` threads (tests; callers share shared()).
   explicit HelperTeam(std::size_t helpers);
 
-  // Up to `wanted` idle helpers, reserved for one run() of the returned crew.
+  // A crew holds at most this many helpers (direct recovery asks for at
+  // most kMaxPartitions − 1 = 7): fixed room, so a frame's run allocates
+  // nothing.
+  static constexpr std::size_t kMaxCrew = 15;
+
+  // Up to min(wanted, kMaxCrew) idle helpers, reserved for one run() of the
+  // returned crew.
   Crew reserve(std::size_t wanted);
 
   ~HelperTeam();
@@ -42,13 +49,18 @@ class HelperTeam {
 class HelperTeam::Crew {
  public:
   // Threads a run() uses: the caller and the helpers reserved.
-  std::size_t threads() const { return 1 + members_.size(); }
+  std::size_t threads() const { return 1 + size_; }
   // Runs fn(0) on the caller and fn(1) … fn(threads() − 1) on the helpers,
-  // and returns once every call has returned. fn must not throw. Once per crew.
-  void run(const std::function<void(std::size_t)>& fn);
+  // and returns once every call has returned. fn must not throw. Once per
+  // crew. fn is called through a pointer, not copied (no allocation).
+  template <class Fn>
+  void run(Fn&& fn) {
+    using F = std::remove_reference_t<Fn>;
+    run_job(const_cast<void*>(static_cast<const void*>(&fn)), [](void* f, std::size_t id) { (*static_cast<F*>(f))(id); });
+  }
 
   ~Crew();
-  Crew(Crew&&) noexcept = default;
+  Crew(Crew&& other) noexcept;
   Crew(const Crew&) = delete;
   Crew& operator=(const Crew&) = delete;
   Crew& operator=(Crew&&) = delete;
@@ -56,7 +68,9 @@ class HelperTeam::Crew {
  private:
   friend class HelperTeam;
   Crew() = default;
-  std::vector<Helper*> members_;
+  void run_job(void* fn, void (*call)(void*, std::size_t));
+  std::array<Helper*, kMaxCrew> members_{};
+  std::size_t size_ = 0;
   bool ran_ = false;
 };
 
