@@ -478,16 +478,34 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 
 // ------------------------------------------------------------ Drive, Watch
 
+// The streaming methods are raw (their frames go out serialized once, see
+// serialized_frame.h), so their requests are parsed here; a request that is
+// not a valid message is the caller's error.
+template <class Message>
+grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
+  grpc::ByteBuffer copy(bytes);  // Deserialize consumes its buffer (a copy shares the slices)
+  if (grpc::SerializationTraits<Message>::Deserialize(&copy, &out).ok()) return grpc::Status::OK;
+  return {grpc::StatusCode::INVALID_ARGUMENT, "the request is not a valid " + out.GetTypeName() + " message"};
+}
+
 // A stream of frames with a mailbox of one: offer() replaces what is waiting,
 // so a slow client skips frames, and never blocks the session. In the chunked
 // format, a frame whose keyframe this stream has not written goes after it:
 // the keyframe is queued to be sent first (Frame.keyframe_version).
+// A frame as one stream writes it: the frame's shared wire bytes (with the
+// stream's pose id), and the version it has if it is a chunked keyframe.
+struct OutgoingFrame {
+  grpc::ByteBuffer bytes;
+  std::optional<std::uint64_t> keyframe;
+};
+const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
+
 template <class Reactor>
 class FrameStream : public FrameSink {
  public:
   FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
-    writer_.on_start_write([this](const v1::Frame& f) {
-      if (!f.chunks().empty() && f.keyframe_version() == f.version()) written_keyframe_ = f.version();
+    writer_.on_start_write([this](const OutgoingFrame& f) {
+      if (f.keyframe) written_keyframe_ = *f.keyframe;
     });
   }
 
@@ -497,6 +515,7 @@ class FrameStream : public FrameSink {
   // set once, before the stream subscribes. Must not block.
   void on_event(std::function<void(const PublishedFrame*)> observer) { observer_ = std::move(observer); }
   v1::FrameFormat format() const override { return format_; }
+  std::uint64_t driver() const override { return driver_; }
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
     // The session offers from its workers and, once, from subscribe(): one at
@@ -512,37 +531,44 @@ class FrameStream : public FrameSink {
     writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
     if (observer_) observer_(nullptr);
   }
-  StreamWriter<Reactor, v1::Frame>& writer() { return writer_; }
+  StreamWriter<Reactor, OutgoingFrame>& writer() { return writer_; }
 
  private:
   void write(const std::shared_ptr<const PublishedFrame>& frame) {
-    if (format_ == v1::FRAME_FORMAT_SINGLE) {
-      if (frame->single) writer_.send(for_this_stream(frame, frame->single.get()), /*droppable=*/true);
-      return;
-    }
-    const PublishedFrame* key = frame->keyframe.get();
-    if (key != nullptr) {
-      const std::uint64_t version = key->frame.version();
-      if (written_keyframe_ != version && queued_keyframe_ != version) {
-        queued_keyframe_ = version;
-        writer_.send(for_this_stream(frame->keyframe, &key->frame), /*droppable=*/false, /*supersede=*/true);
+    try {
+      if (format_ == v1::FRAME_FORMAT_SINGLE) {
+        if (frame->single) writer_.send(outgoing(*frame, *frame->single, frame->single_bytes()), /*droppable=*/true);
+        return;
       }
+      const PublishedFrame* key = frame->keyframe.get();
+      if (key != nullptr) {
+        const std::uint64_t version = key->frame.version();
+        if (written_keyframe_ != version && queued_keyframe_ != version) {
+          queued_keyframe_ = version;
+          writer_.send(outgoing(*key, key->frame, key->frame_bytes()), /*droppable=*/false, /*supersede=*/true);
+        }
+      }
+      writer_.send(outgoing(*frame, frame->frame, frame->frame_bytes()), /*droppable=*/true);
+    } catch (const std::exception& e) {  // the frame could not be serialized: this stream cannot go on
+      spdlog::error("event=frame_serialization_failed version={} error=\"{}\"", frame->frame.version(), e.what());
+      writer_.finish({grpc::StatusCode::INTERNAL, std::string("a frame could not be serialized: ") + e.what()});
     }
-    writer_.send(for_this_stream(frame, &frame->frame), /*droppable=*/true);
   }
 
-  // Watchers all write the one encoded frame (aliasing its PublishedFrame); a
-  // driver's copy names the newest of its poses in the frame.
-  std::shared_ptr<const v1::Frame> for_this_stream(const std::shared_ptr<const PublishedFrame>& published,
-                                                   const v1::Frame* frame) const {
-    if (!driver_) return std::shared_ptr<const v1::Frame>(published, frame);
-    auto out = std::make_shared<v1::Frame>(*frame);
-    const auto it = published->pose_of_driver.find(driver_);
-    out->set_pose_id(it == published->pose_of_driver.end() ? 0 : it->second);
+  // Every stream writes the frame's one serialized copy; a driver's also
+  // names the newest of its poses the frame includes.
+  std::shared_ptr<const OutgoingFrame> outgoing(const PublishedFrame& published, const v1::Frame& message,
+                                                const SerializedFrame& bytes) const {
+    std::uint64_t pose_id = 0;
+    if (driver_)
+      if (const auto it = published.pose_of_driver.find(driver_); it != published.pose_of_driver.end()) pose_id = it->second;
+    auto out = std::make_shared<OutgoingFrame>();
+    out->bytes = bytes.for_stream(pose_id);
+    if (!message.chunks().empty() && message.keyframe_version() == message.version()) out->keyframe = message.version();
     return out;
   }
 
-  StreamWriter<Reactor, v1::Frame> writer_;
+  StreamWriter<Reactor, OutgoingFrame> writer_;
   std::function<void(const PublishedFrame*)> observer_;
   const std::uint64_t driver_;
   v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
@@ -566,7 +592,7 @@ void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream
   stream.writer().detach();
 }
 
-class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame> {
+class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
       : service_(service), context_(context), driver_(service.next_driver_id()),
@@ -581,7 +607,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
         state->answered = std::max(state->answered, it->second);
       if (state->half_closed && state->answered >= state->submitted) stream->writer().finish(grpc::Status::OK, /*flush=*/true);
     });
-    StartRead(&request_);
+    StartRead(&request_bytes_);
   }
 
   void OnReadDone(bool ok) override {
@@ -592,6 +618,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
       if (!session_ || ending_->answered >= ending_->submitted) stream_->writer().finish(grpc::Status::OK, /*flush=*/true);
       return;
     }
+    if (const grpc::Status parsed = parse_request(request_bytes_, request_); !parsed.ok()) return stream_->writer().finish(parsed);
     if (!session_) {
       grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
       if (status.ok()) status = service_.open_stream(*session_, &stream_slot_);
@@ -612,7 +639,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
     } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
       return stream_->writer().finish({grpc::StatusCode::UNAVAILABLE, e.what()});
     }
-    StartRead(&request_);
+    StartRead(&request_bytes_);
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
@@ -636,14 +663,17 @@ class DriveReactor final : public grpc::ServerBidiReactor<v1::DriveRequest, v1::
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<DriveReactor>> stream_;
   std::shared_ptr<Session> session_;
+  grpc::ByteBuffer request_bytes_;
   v1::DriveRequest request_;
 };
 
-class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
+class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
-  WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const v1::WatchRequest& request)
+  WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
       : stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
-    grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
+    v1::WatchRequest request;
+    grpc::Status status = parse_request(request_bytes, request);
+    if (status.ok()) status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
     if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
     if (!status.ok()) {
       session_.reset();
@@ -673,12 +703,12 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Frame> {
 // clock and submits each sample as a skeletal pose of this stream, waiting
 // for the frame that includes one before sampling the next (so a slow
 // session lowers the sample rate instead of queueing poses).
-class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
+class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
-  PlayClipReactor(FiligreeService& service, grpc::CallbackServerContext* context, const v1::PlayClipRequest& request)
-      : service_(service), request_(request), driver_(service.next_driver_id()),
-        stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
-    grpc::Status status = authorize(service.registry(), *context, request.session_id(), Role::kEditor, &session_);
+  PlayClipReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
+      : service_(service), driver_(service.next_driver_id()), stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
+    grpc::Status status = parse_request(request_bytes, request_);
+    if (status.ok()) status = authorize(service.registry(), *context, request_.session_id(), Role::kEditor, &session_);
     if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
     if (status.ok()) status = check();
     if (!status.ok()) {
@@ -686,7 +716,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
       stream_->writer().finish(status);
       return;
     }
-    stream_->set_format(request.frame_format());
+    stream_->set_format(request_.frame_format());
     // The session may offer after this reactor is gone: the observer owns what it touches.
     stream_->on_event([state = state_, driver = driver_](const PublishedFrame* frame) {
       std::lock_guard lock(state->mutex);
@@ -774,7 +804,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
   }
 
   FiligreeService& service_;
-  const v1::PlayClipRequest request_;
+  v1::PlayClipRequest request_;  // set once, in the constructor
   const std::uint64_t driver_;
   std::shared_ptr<FrameStream<PlayClipReactor>> stream_;
   std::shared_ptr<Session> session_;
@@ -796,8 +826,8 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<v1::Frame> {
 
 }  // namespace
 
-grpc::ServerWriteReactor<v1::Frame>* FiligreeService::PlayClip(grpc::CallbackServerContext* context,
-                                                               const v1::PlayClipRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::PlayClip(grpc::CallbackServerContext* context,
+                                                                      const grpc::ByteBuffer* request) {
   return new PlayClipReactor(*this, context, *request);
 }
 
@@ -806,12 +836,12 @@ grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* Fi
   return new CreateReactor(*this, context);
 }
 
-grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* FiligreeService::Drive(grpc::CallbackServerContext* context) {
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* FiligreeService::Drive(grpc::CallbackServerContext* context) {
   return new DriveReactor(*this, context);
 }
 
-grpc::ServerWriteReactor<v1::Frame>* FiligreeService::Watch(grpc::CallbackServerContext* context,
-                                                            const v1::WatchRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::CallbackServerContext* context,
+                                                                   const grpc::ByteBuffer* request) {
   return new WatchReactor(*this, context, *request);
 }
 

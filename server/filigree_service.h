@@ -34,7 +34,18 @@ struct ServiceLimits {
   double upload_seconds = 300.0;
 };
 
-class FiligreeService final : public v1::Filigree::CallbackService {
+// Every method on the callback API (v1::Filigree::CallbackService, spelled
+// out: a method left out here would be a synchronous one). The frame streams
+// (Drive, Watch, PlayClip) are raw methods: each frame is serialized once
+// and its bytes written by every stream (serialized_frame.h).
+using rpc = v1::Filigree;
+using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithCallbackMethod_JoinSession<
+    rpc::WithRawCallbackMethod_Drive<rpc::WithCallbackMethod_SubmitPose<rpc::WithCallbackMethod_SetHandles<
+        rpc::WithCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithCallbackMethod_GetState<
+            rpc::WithCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
+                rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<rpc::Service>>>>>>>>>>>>>;
+
+class FiligreeService final : public FiligreeServiceBase {
  public:
   FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits);
   ~FiligreeService() override;
@@ -46,17 +57,20 @@ class FiligreeService final : public v1::Filigree::CallbackService {
       grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const v1::JoinSessionRequest* request,
                                         v1::SessionInfo* response) override;
-  grpc::ServerBidiReactor<v1::DriveRequest, v1::Frame>* Drive(grpc::CallbackServerContext* context) override;
-  grpc::ServerWriteReactor<v1::Frame>* PlayClip(grpc::CallbackServerContext* context,
-                                                const v1::PlayClipRequest* request) override;
+  // Requests: a DriveRequest per message; frames out.
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Drive(grpc::CallbackServerContext* context) override;
+  // Request: a PlayClipRequest; frames out.
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* PlayClip(grpc::CallbackServerContext* context,
+                                                       const grpc::ByteBuffer* request) override;
   grpc::ServerUnaryReactor* SubmitPose(grpc::CallbackServerContext* context, const v1::DriveRequest* request,
                                        v1::SubmitPoseResponse* response) override;
   grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,
                                        v1::SetHandlesResponse* response) override;
   grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const v1::GetOverlaysRequest* request,
                                         v1::Overlays* response) override;
-  grpc::ServerWriteReactor<v1::Frame>* Watch(grpc::CallbackServerContext* context,
-                                             const v1::WatchRequest* request) override;
+  // Request: a WatchRequest; frames out.
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
+                                                    const grpc::ByteBuffer* request) override;
   grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,
                                      v1::SessionState* response) override;
   grpc::ServerUnaryReactor* SetOptions(grpc::CallbackServerContext* context, const v1::SetOptionsRequest* request,

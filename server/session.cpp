@@ -881,6 +881,7 @@ void Session::publish(InFlight& f) {
   const double encode_ms = std::chrono::duration<double, std::milli>(Clock::now() - f.encode_start).count();
   auto published = std::make_shared<PublishedFrame>();
   published->pose_of_driver = std::move(f.pose_of_driver);
+  published->wire_pool = assets_->wire;
 
   // What both formats share.
   v1::Frame common;
@@ -957,6 +958,13 @@ void Session::publish(InFlight& f) {
     for (const auto& w : sinks_)
       if (auto s = w.lock()) sinks.push_back(s);
   }
+  // A stream starts its write inside offer(), and at 1.25M vertices that
+  // write (~1 MB into the socket; the first also serializes the frame) takes
+  // milliseconds: the drivers whose poses the frame answers go first, since
+  // they wait for it (closed loop); watchers only follow. (A watcher first
+  // held a driver's frame back by 3.0 ms at the median.)
+  std::stable_partition(sinks.begin(), sinks.end(),
+                        [&](const std::shared_ptr<FrameSink>& s) { return shared->pose_of_driver.contains(s->driver()); });
   for (const auto& s : sinks) s->offer(shared);
 }
 

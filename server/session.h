@@ -31,6 +31,7 @@
 #include "runtime/deformer.h"  // FrameStats
 #include "runtime/pose.h"
 #include "server/frame_scheduler.h"
+#include "server/serialized_frame.h"
 #include "server/session_assets.h"
 #include "server/session_record.h"
 
@@ -54,6 +55,16 @@ struct PublishedFrame {
   // FRAME_FORMAT_SINGLE, encoded only while a subscriber wants it.
   std::shared_ptr<const v1::Frame> single;
   std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+  // Where the wire bytes below are serialized (the mesh's pool).
+  std::shared_ptr<BufferPool<char>> wire_pool;
+
+  // The wire bytes of `frame` and of `single` (which must be set),
+  // serialized by the first stream that writes each, then shared.
+  const SerializedFrame& frame_bytes() const { return frame_wire_.get(frame, wire_pool); }
+  const SerializedFrame& single_bytes() const { return single_wire_.get(*single, wire_pool); }
+
+ private:
+  LazySerializedFrame frame_wire_, single_wire_;
 };
 
 // Where a pose comes from: the driver stream (0: a unary call, no stream to
@@ -75,6 +86,9 @@ class FrameSink {
   virtual void offer(std::shared_ptr<const PublishedFrame> frame) = 0;
   // Which frames this subscriber reads (fixed for its life).
   virtual v1::FrameFormat format() const = 0;
+  // The driver whose poses this stream answers (PublishedFrame::pose_of_driver),
+  // or 0 for a watcher (fixed for its life).
+  virtual std::uint64_t driver() const { return 0; }
   // The session is closing (session_closed) or leaves this process (the
   // server stops, or the session moves to another replica): finish the
   // stream, with `why` as the UNAVAILABLE message in the second case.

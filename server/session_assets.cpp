@@ -45,6 +45,7 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   a->chunk_vertices = chunk_vertices_for(h.vertex_count(), threads);
   const std::size_t chunks = FrameEncoder::chunk_count(h.vertex_count(), a->chunk_vertices);
   a->staging = std::make_shared<BufferPool<float>>(2 * chunks + 2);
+  a->wire = std::make_shared<BufferPool<char>>(2);
   return a;
 }
 
@@ -74,7 +75,7 @@ std::size_t SessionAssetsCache::trim_idle_pools() {
   }
   std::size_t freed = 0;
   for (const auto& a : live)
-    freed += a->frames->trim_if_idle() + a->staging->trim_if_idle() + a->model->recovery_scratch().trim_if_idle();
+    freed += a->frames->trim_if_idle() + a->staging->trim_if_idle() + a->wire->trim_if_idle() + a->model->recovery_scratch().trim_if_idle();
   return freed;
 }
 

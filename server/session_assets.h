@@ -34,6 +34,9 @@ struct SessionAssets {
   // from compute to quantization, chunk deltas from quantization to encoding.
   std::shared_ptr<BufferPool<Vec3>> frames;
   std::shared_ptr<BufferPool<float>> staging;
+  // Frames' wire bytes (SerializedFrame), from publishing until the last
+  // stream has written them.
+  std::shared_ptr<BufferPool<char>> wire;
 
   const Hierarchy& hierarchy() const;
 };

@@ -17,6 +17,13 @@
 
 namespace filigree::server {
 
+// What goes on the wire for a queued message: the message itself, unless an
+// overload for its type (found by argument-dependent lookup) says otherwise.
+template <class Message>
+const Message& wire(const Message& m) {
+  return m;
+}
+
 template <class Reactor, class Message>
 class StreamWriter {
  public:
@@ -86,7 +93,7 @@ class StreamWriter {
       }
       writing_ = true;
       if (observer_) observer_(*out_);
-      reactor_->StartWrite(out_.get());
+      reactor_->StartWrite(&wire(*out_));
     } else if (closing_) {
       finished_ = true;
       reactor_->Finish(*closing_);

@@ -9,6 +9,7 @@
 #include <sstream>
 #include <thread>
 
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
@@ -433,6 +434,67 @@ TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
   do {
     ASSERT_TRUE(drive->Read(&f));
   } while (f.pose_id() != 42);
+  drive->WritesDone();
+  while (drive->Read(&f)) {
+  }
+  EXPECT_TRUE(drive->Finish().ok());
+}
+
+// The frame streams are raw methods (the server parses their requests
+// itself): bytes that are no request message are refused as such, and the
+// session keeps answering good poses.
+TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
+  const Created c = upload(file_bytes(kBunny), "obj");
+  ASSERT_TRUE(c.status.ok());
+  const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
+  // One raw request on a streaming method, then half-close; how the call ended.
+  const auto call_with_bytes = [&](const std::string& method, const std::string& bytes) {
+    grpc::GenericStub generic(channel_);
+    grpc::CompletionQueue cq;
+    auto ctx = context(id, editor);
+    auto call = generic.PrepareCall(ctx.get(), method, &cq);
+    void* tag = nullptr;
+    bool ok = false;
+    call->StartCall(nullptr);
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    const grpc::Slice slice(bytes);
+    call->Write(grpc::ByteBuffer(&slice, 1), nullptr);
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    call->WritesDone(nullptr);
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    for (grpc::ByteBuffer frame; ok;) {  // no frame is expected; read to the end
+      call->Read(&frame, nullptr);
+      EXPECT_TRUE(cq.Next(&tag, &ok));
+    }
+    grpc::Status status;
+    call->Finish(&status, nullptr);
+    EXPECT_TRUE(cq.Next(&tag, &ok));
+    cq.Shutdown();
+    while (cq.Next(&tag, &ok)) {
+    }
+    return status;
+  };
+  const std::string garbage("\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff", 11);  // a tag whose varint never ends
+  for (const auto& [method, type] : {std::pair<std::string, std::string>{"Drive", "filigree.v1.DriveRequest"},
+                                     {"Watch", "filigree.v1.WatchRequest"},
+                                     {"PlayClip", "filigree.v1.PlayClipRequest"}}) {
+    const grpc::Status status = call_with_bytes("/filigree.v1.Filigree/" + method, garbage);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << method << ": " << status.error_message();
+    EXPECT_NE(status.error_message().find("not a valid " + type), std::string::npos) << status.error_message();
+  }
+
+  v1::DriveRequest good;
+  good.set_session_id(id);
+  good.set_pose_id(7);
+  good.add_indices(3);
+  good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
+  auto ctx = context(id, editor);
+  auto drive = stub_->Drive(ctx.get());
+  ASSERT_TRUE(drive->Write(good));
+  v1::Frame f;
+  do {
+    ASSERT_TRUE(drive->Read(&f));
+  } while (f.pose_id() != 7);
   drive->WritesDone();
   while (drive->Read(&f)) {
   }

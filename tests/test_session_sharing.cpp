@@ -1,6 +1,7 @@
 // Sessions of one mesh share its immutable data (DESIGN §3.1, issue 10):
 // one hierarchy object, one deformer model, one copy of the rest mesh; and
-// all of it goes when the last session does.
+// all of it goes when the last session does. And one frame is shared by its
+// subscribers, offered first to the drivers it answers.
 
 #include <algorithm>
 #include <condition_variable>
@@ -198,6 +199,48 @@ TEST_F(SessionSharing, IdleSessionsHoldNoFrameBufferAndShareOneThatGoesRound) {
       s->unsubscribe(sink.get());
       EXPECT_EQ(frames.free_buffers(), 1u) << "round " << round << ": the frame buffer went back";
     }
+}
+
+// Records the order in which sinks are offered frame `version`.
+struct OrderSink : VersionSink {
+  OrderSink(std::uint64_t driver_id, std::vector<std::uint64_t>& log, std::mutex& log_mutex)
+      : id(driver_id), order(log), order_mutex(log_mutex) {}
+  void offer(std::shared_ptr<const PublishedFrame> frame) override {
+    {
+      std::lock_guard lock(order_mutex);
+      if (frame->pose_of_driver.count(7)) order.push_back(id);
+    }
+    VersionSink::offer(frame);
+  }
+  std::uint64_t driver() const override { return id; }
+  const std::uint64_t id;  // 0: a watcher
+  std::vector<std::uint64_t>& order;
+  std::mutex& order_mutex;
+};
+
+TEST_F(SessionSharing, AFrameGoesFirstToTheDriverWhosePoseItAnswers) {
+  // Offering a frame starts the stream's write (the frame into its socket),
+  // so the driver waiting for its pose goes before the watchers, whatever
+  // the order they subscribed in.
+  std::string key;
+  auto h = hierarchy_of(test::icosphere(3), key);
+  auto s = registry_->create(h, key, {}, {});
+  std::vector<std::uint64_t> order;
+  std::mutex order_mutex;
+  auto first_watcher = std::make_shared<OrderSink>(0, order, order_mutex);
+  auto driver = std::make_shared<OrderSink>(7, order, order_mutex);
+  auto last_watcher = std::make_shared<OrderSink>(0, order, order_mutex);
+  for (const auto& sink : {first_watcher, driver, last_watcher}) s->subscribe(sink, s->version());
+  const std::uint64_t before = s->version();
+  const std::vector<std::uint32_t> index{0};
+  const std::vector<float> moved{0.3f, 0.2f, -0.1f};
+  s->submit({7, "editor", 1, false}, index, moved);
+  last_watcher->wait_past(before);
+  std::lock_guard lock(order_mutex);
+  ASSERT_GE(order.size(), 3u);
+  EXPECT_EQ(order[0], 7u) << "the driver's frame went out after a watcher's";
+  EXPECT_EQ(order[1], 0u);
+  EXPECT_EQ(order[2], 0u);
 }
 
 }  // namespace

@@ -1,0 +1,64 @@
+#include "server/serialized_frame.h"
+
+#include <array>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace filigree::server {
+namespace {
+
+// Owns a pooled buffer for as long as gRPC holds the slice over it.
+struct PooledBytes {
+  std::shared_ptr<BufferPool<char>> pool;
+  std::vector<char> bytes;
+};
+
+void give_back(void* user_data) {
+  auto* owned = static_cast<PooledBytes*>(user_data);
+  owned->pool->give(std::move(owned->bytes));
+  delete owned;
+}
+
+// Frame.pose_id (field 2, varint): the wire bytes of that one field.
+constexpr std::uint8_t kPoseIdTag = (2 << 3) | 0;
+
+}  // namespace
+
+SerializedFrame::SerializedFrame(const v1::Frame& frame, std::shared_ptr<BufferPool<char>> pool) {
+  const std::size_t size = frame.ByteSizeLong();
+  if (size > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw std::runtime_error("a frame of " + std::to_string(size) + " bytes is over protobuf's 2 GiB limit");
+  if (size == 0) return;  // an empty message: an empty slice
+  if (!pool) pool = std::make_shared<BufferPool<char>>(0);  // nobody to share with
+  auto owned = std::make_unique<PooledBytes>(PooledBytes{std::move(pool), {}});
+  owned->bytes = owned->pool->take(size);
+  auto* data = reinterpret_cast<std::uint8_t*>(owned->bytes.data());
+  // The size was just computed: the message must not change meanwhile (it
+  // is published, so const).
+  if (static_cast<std::size_t>(frame.SerializeWithCachedSizesToArray(data) - data) != size) {
+    owned->pool->give(std::move(owned->bytes));
+    throw std::logic_error("a frame changed while it was serialized");
+  }
+  body_ = grpc::Slice(data, size, give_back, owned.release());
+}
+
+grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id) const {
+  if (pose_id == 0) return grpc::ByteBuffer(&body_, 1);
+  std::array<std::uint8_t, 11> tail{kPoseIdTag};  // the tag and at most 10 bytes of varint
+  std::size_t n = 1;
+  for (; pose_id >= 0x80; pose_id >>= 7) tail[n++] = static_cast<std::uint8_t>(pose_id | 0x80);
+  tail[n++] = static_cast<std::uint8_t>(pose_id);
+  const std::array<grpc::Slice, 2> slices{body_, grpc::Slice(tail.data(), n)};
+  return grpc::ByteBuffer(slices.data(), slices.size());
+}
+
+const SerializedFrame& LazySerializedFrame::get(const v1::Frame& frame, const std::shared_ptr<BufferPool<char>>& pool) const {
+  std::lock_guard lock(mutex_);
+  if (!value_) value_.emplace(frame, pool);
+  return *value_;
+}
+
+}  // namespace filigree::server
