@@ -125,6 +125,27 @@ class ServiceTest : public ::testing::Test {
     return w;
   }
 
+  // Drives one good pose (base vertex 3 moved) with id `pose_id` and expects
+  // its frame, then a clean end of the stream.
+  void expect_pose_answered(const std::string& id, const std::string& editor, std::uint64_t pose_id) {
+    v1::DriveRequest good;
+    good.set_session_id(id);
+    good.set_pose_id(pose_id);
+    good.add_indices(3);
+    good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
+    auto ctx = context(id, editor);
+    auto drive = stub_->Drive(ctx.get());
+    ASSERT_TRUE(drive->Write(good));
+    v1::Frame f;
+    do {
+      ASSERT_TRUE(drive->Read(&f)) << "the stream ended before the frame of pose " << pose_id;
+    } while (f.pose_id() != pose_id);
+    drive->WritesDone();
+    while (drive->Read(&f)) {
+    }
+    EXPECT_TRUE(drive->Finish().ok());
+  }
+
   // Submits a pose that moves base vertex 2 to (x, 0.5, 0.5) and returns the
   // first frame a watcher sees after it (a step that fails is a test failure).
   v1::Frame frame_after_pose(const std::string& id, const std::string& editor, float x) {
@@ -421,23 +442,7 @@ TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
   EXPECT_EQ(nan_status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(nan_status.error_message().find("not finite"), std::string::npos);
 
-  // A good pose still gets its frame.
-  v1::DriveRequest good;
-  good.set_session_id(id);
-  good.set_pose_id(42);
-  good.add_indices(3);
-  good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
-  auto ctx = context(id, editor);
-  auto drive = stub_->Drive(ctx.get());
-  ASSERT_TRUE(drive->Write(good));
-  v1::Frame f;
-  do {
-    ASSERT_TRUE(drive->Read(&f));
-  } while (f.pose_id() != 42);
-  drive->WritesDone();
-  while (drive->Read(&f)) {
-  }
-  EXPECT_TRUE(drive->Finish().ok());
+  expect_pose_answered(id, editor, 42);  // a good pose still gets its frame
 }
 
 // The frame streams are raw methods (the server parses their requests
@@ -483,22 +488,7 @@ TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
     EXPECT_NE(status.error_message().find("not a valid " + type), std::string::npos) << status.error_message();
   }
 
-  v1::DriveRequest good;
-  good.set_session_id(id);
-  good.set_pose_id(7);
-  good.add_indices(3);
-  good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
-  auto ctx = context(id, editor);
-  auto drive = stub_->Drive(ctx.get());
-  ASSERT_TRUE(drive->Write(good));
-  v1::Frame f;
-  do {
-    ASSERT_TRUE(drive->Read(&f));
-  } while (f.pose_id() != 7);
-  drive->WritesDone();
-  while (drive->Read(&f)) {
-  }
-  EXPECT_TRUE(drive->Finish().ok());
+  expect_pose_answered(id, editor, 7);
 }
 
 TEST_F(ServiceTest, UnknownSessionIsNotFound) {
