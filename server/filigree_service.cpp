@@ -488,10 +488,6 @@ grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   return {grpc::StatusCode::INVALID_ARGUMENT, "the request is not a valid " + out.GetTypeName() + " message"};
 }
 
-// A stream of frames with a mailbox of one: offer() replaces what is waiting,
-// so a slow client skips frames, and never blocks the session. In the chunked
-// format, a frame whose keyframe this stream has not written goes after it:
-// the keyframe is queued to be sent first (Frame.keyframe_version).
 // A frame as one stream writes it: the frame's shared wire bytes (with the
 // stream's pose id), and the version it has if it is a chunked keyframe.
 struct OutgoingFrame {
@@ -500,6 +496,10 @@ struct OutgoingFrame {
 };
 const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
 
+// A stream of frames with a mailbox of one: offer() replaces what is waiting,
+// so a slow client skips frames, and never blocks the session. In the chunked
+// format, a frame whose keyframe this stream has not written goes after it:
+// the keyframe is queued to be sent first (Frame.keyframe_version).
 template <class Reactor>
 class FrameStream : public FrameSink {
  public:
