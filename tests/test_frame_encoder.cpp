@@ -296,6 +296,36 @@ TEST(FrameEncoder, AStaleKeyframeIsRenewedWhenItCostsMoreThanAFrame) {
   EXPECT_EQ(std::count(keyframe.begin(), keyframe.end(), true), 1) << "one renewal is enough";
 }
 
+TEST(FrameEncoder, AChunkLeftOutShowsTheKeyframeToTheNextFrame) {
+  // Clients keep the keyframe's deltas where a frame leaves a chunk out; the
+  // encoder does too (without copying them), so the next frame counts what
+  // moved since the last one against the keyframe there, not against an
+  // older frame's deltas.
+  const std::vector<Vec3> rest = test::icosphere(4).positions;
+  const double diag = bounding_box_diagonal(rest);
+  FrameEncoder encoder(rest, {.chunk_vertices = 256, .bits = 0, .max_error = 5e-5 * diag});
+  ASSERT_GE(encoder.chunk_count(), 3u);
+  const std::vector<Vec3> keyed = body_motion(rest, 0.02, 0.3);  // every delta non-zero
+  ASSERT_TRUE(encoder.encode(keyed, true).keyframe);
+  const auto moved_chunk = [&](const std::vector<Vec3>& from, std::size_t c) {
+    std::vector<Vec3> p = from;
+    for (std::size_t i = encoder.chunk(c).first; i < encoder.chunk(c).first + encoder.chunk(c).count; ++i)
+      p[i] += Vec3(0.01 * diag, 0.0, 0.0);
+    return p;
+  };
+  const std::vector<Vec3> first_moved = moved_chunk(keyed, 0);
+  encoder.encode(first_moved, false);
+  ASSERT_NE(encoder.chunk(0).kind, EncodedChunk::Kind::kAbsent);
+  ASSERT_EQ(encoder.chunk(1).kind, EncodedChunk::Kind::kAbsent);
+  encoder.encode(first_moved, false);  // nothing moved since
+  for (std::size_t c = 0; c < encoder.chunk_count(); ++c)
+    EXPECT_EQ(encoder.chunk(c).moved_since_last, 0u) << "chunk " << c;
+  encoder.encode(moved_chunk(first_moved, 1), false);  // now chunk 1 moves, and only it
+  EXPECT_EQ(encoder.chunk(0).moved_since_last, 0u);
+  EXPECT_EQ(encoder.chunk(1).moved_since_last, encoder.chunk(1).count);
+  EXPECT_EQ(encoder.chunk(2).moved_since_last, 0u);
+}
+
 TEST(FrameEncoder, StagingFromASharedPoolGivesTheSameFramesAndHoldsNothingBetween) {
   // Two sessions' encoders sharing one pool, against one with buffers of its
   // own: the same bytes frame after frame (dense, sparse, absent chunks), and

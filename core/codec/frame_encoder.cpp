@@ -81,7 +81,9 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   const Vec3* rest = rest_.data() + a;
   const bool compare = !force_;
   const float* key = compare ? keyframe_.data() + 3 * a : nullptr;
-  const float* last = compare ? (previous_is_keyframe_ ? keyframe_ : decoded_).data() + 3 * a : nullptr;
+  // What clients showed after the previous frame: the keyframe's deltas
+  // where that frame was the keyframe or left this chunk out.
+  const float* last = compare ? (previous_is_keyframe_ || slot.shows_keyframe ? keyframe_ : decoded_).data() + 3 * a : nullptr;
   const StagingSummary st = stage_vertices(pos->data(), rest->data(), key, last, tolerance, count, slot.values.data(), slot.moved.data());
   if (!st.plausible) throw_bad_delta(pos, rest, a, count);
   const std::size_t changed = st.moved;
@@ -113,12 +115,13 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   if (out.present) q = quantization_over_range(lo, hi, q.bits);
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
   // Pass 2, over the staged floats only: what clients will decode, straight
-  // into decoded_ (absent vertices keep the keyframe's, a sparse chunk is
-  // decoded run by run), and the stated error. An absent vertex's error is
-  // exact (from the pass above); a present one's is |decoded − s| + |s − d|
-  // at most, both measured (d the delta in double, s its float): an upper
-  // bound above the exact error by at most twice the staging's rounding
-  // (2^-24 of the largest delta).
+  // into decoded_ (a sparse chunk's absent vertices keep the keyframe's, its
+  // present ones decoded run by run; an absent chunk writes nothing), and
+  // the stated error. An absent vertex's error is exact (from the pass
+  // above); a present one's is |decoded − s| + |s − d| at most, both
+  // measured (d the delta in double, s its float): an upper bound above the
+  // exact error by at most twice the staging's rounding (2^-24 of the
+  // largest delta).
   float* dec = decoded_.data() + 3 * a;
   const auto present_error = [&](double decode_error) { return (decode_error + st.rounding) * (1.0 + 0x1p-50); };
   while (true) {
@@ -129,7 +132,7 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
       } else {
         decode_error = q.decode_measured(slot.values, std::span<float>(dec, 3 * count));
       }
-    } else {
+    } else if (out.kind == EncodedChunk::Kind::kSparse) {
       std::copy_n(keyframe_.data() + 3 * a, 3 * count, dec);
       for (std::size_t r = 0, i = 0, j = 0; r < out.runs.size(); r += 2) {
         i += out.runs[r];
@@ -150,6 +153,10 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   }
   out.quantization = all_zero ? DeltaQuantization{q.bits, 0.0f, 0.0f} : q;
   if (all_zero) slot.values.clear();  // nothing for Draco: an empty buffer means zeros
+  // A chunk left out leaves decoded_ unwritten: clients show the keyframe's
+  // deltas there, and the next frame reads those (a local motion leaves most
+  // chunks out: no copy of the keyframe per frame, no second stream to read).
+  slot.shows_keyframe = out.kind == EncodedChunk::Kind::kAbsent;
 }
 
 void FrameEncoder::encode_chunks(std::size_t first, std::size_t count) {
