@@ -963,8 +963,9 @@ void Session::publish(InFlight& f) {
   // milliseconds: the drivers whose poses the frame answers go first, since
   // they wait for it (closed loop); watchers only follow. (A watcher first
   // held a driver's frame back by 3.0 ms at the median.)
-  std::stable_partition(sinks.begin(), sinks.end(),
-                        [&](const std::shared_ptr<FrameSink>& s) { return shared->pose_of_driver.contains(s->driver()); });
+  // (std::partition: stable_partition may allocate a buffer every frame.)
+  std::partition(sinks.begin(), sinks.end(),
+                 [&](const std::shared_ptr<FrameSink>& s) { return shared->pose_of_driver.contains(s->driver()); });
   for (const auto& s : sinks) s->offer(shared);
 }
 

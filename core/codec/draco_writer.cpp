@@ -572,7 +572,7 @@ bool prepare_chunk(std::span<const float> values, const DeltaQuantization& q, in
     constexpr int kTagPrecision = 12;
     // Draco's tag coder has kMaxTag symbols (lengths 0…31; no symbol here
     // is 2^31 or more, so none is left out).
-    while (!tag_present.empty() && tag_present.back() >= kMaxTag) tag_present = tag_present.first(tag_present.size() - 1);
+    if (!tag_present.empty() && tag_present.back() == kMaxTag) tag_present = tag_present.first(tag_present.size() - 1);
     if (tag_present.empty() || !rans_probabilities(tag_histogram, tag_present, kTagPrecision, prep, s.table))
       throw DeltaCodecError("Draco's tag coder cannot encode these deltas");
     w.u8(kTagged);

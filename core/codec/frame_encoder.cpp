@@ -82,8 +82,10 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   const bool compare = !force_;
   const float* key = compare ? keyframe_.data() + 3 * a : nullptr;
   // What clients showed after the previous frame: the keyframe's deltas
-  // where that frame was the keyframe or left this chunk out.
-  const float* last = compare ? (previous_is_keyframe_ || slot.shows_keyframe ? keyframe_ : decoded_).data() + 3 * a : nullptr;
+  // where that frame was the keyframe or left this chunk out (out.kind is
+  // still the previous frame's here; a left-out chunk writes no decoded_).
+  const bool showed_keyframe = previous_is_keyframe_ || out.kind == EncodedChunk::Kind::kAbsent;
+  const float* last = compare ? (showed_keyframe ? keyframe_ : decoded_).data() + 3 * a : nullptr;
   const StagingSummary st = stage_vertices(pos->data(), rest->data(), key, last, tolerance, count, slot.values.data(), slot.moved.data());
   if (!st.plausible) throw_bad_delta(pos, rest, a, count);
   const std::size_t changed = st.moved;
@@ -116,7 +118,9 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   if (options_.bits == 0) q.bits = bits_for_error(q.range, options_.max_error);
   // Pass 2, over the staged floats only: what clients will decode, straight
   // into decoded_ (a sparse chunk's absent vertices keep the keyframe's, its
-  // present ones decoded run by run; an absent chunk writes nothing), and
+  // present ones decoded run by run; an absent chunk writes nothing: clients
+  // show the keyframe's deltas there, and so a local motion, which leaves
+  // most chunks out, neither copies the keyframe nor reads a copy back), and
   // the stated error. An absent vertex's error is exact (from the pass
   // above); a present one's is |decoded − s| + |s − d| at most, both
   // measured (d the delta in double, s its float): an upper bound above the
@@ -153,10 +157,6 @@ void FrameEncoder::quantize_chunk(std::size_t c, std::span<const Vec3> positions
   }
   out.quantization = all_zero ? DeltaQuantization{q.bits, 0.0f, 0.0f} : q;
   if (all_zero) slot.values.clear();  // nothing for Draco: an empty buffer means zeros
-  // A chunk left out leaves decoded_ unwritten: clients show the keyframe's
-  // deltas there, and the next frame reads those (a local motion leaves most
-  // chunks out: no copy of the keyframe per frame, no second stream to read).
-  slot.shows_keyframe = out.kind == EncodedChunk::Kind::kAbsent;
 }
 
 void FrameEncoder::encode_chunks(std::size_t first, std::size_t count) {

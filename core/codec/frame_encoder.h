@@ -108,13 +108,12 @@ class FrameEncoder {
     EncodedChunk out;
     std::vector<float> values;       // present deltas, x y z
     std::vector<std::uint64_t> moved;  // bit i: vertex first + i moved from the keyframe
-    bool shows_keyframe = false;       // the last frame left this chunk out: decoded_ not written
   };
   std::span<const Vec3> rest_;
   FrameEncoderOptions options_;
   std::vector<Slot> chunks_;
   std::vector<float> keyframe_;  // decoded deltas clients hold, 3·n
-  std::vector<float> decoded_;   // this frame's decoded deltas, but for chunks it leaves out (Slot::shows_keyframe)
+  std::vector<float> decoded_;   // this frame's decoded deltas, but for the chunks it leaves out
   bool have_keyframe_ = false;
   bool force_ = false;
   bool previous_is_keyframe_ = true;
