@@ -16,10 +16,12 @@
 // divides the medians of those pairs.
 // Quality is measured on the last timed frame, at phase 1.
 //
-// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--bound N] [--threads N]
+// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--bound N] [--kernels N] [--threads N]
 //   --quick: only the shipped Armadillo (for a fast look).
 //   --bound N: only the streaming-bound table, N times over (its spread on
 //   a shared machine).
+//   --kernels N: only the kernel's compiled copies against each other, N
+//   frames each.
 
 #include <algorithm>
 #include <chrono>
@@ -28,6 +30,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -140,6 +143,37 @@ void recovery_bound(const Hierarchy& h, int threads) {
               static_cast<double>(d.model().memory_bytes()) / n, static_cast<double>(d.memory_bytes()) / n);
 }
 
+// The kernel's compiled copies against each other (issue 10 item 1):
+// one layout per copy, frames interleaved copy by copy, so that every copy
+// sees the same minutes of a machine whose speed drifts.
+void compare_kernels(const Hierarchy& h, int threads, int rounds) {
+  const std::vector<std::string_view> names = DirectRecovery::kernels();
+  std::vector<std::unique_ptr<DirectRecovery>> copies;
+  for (std::string_view name : names) copies.push_back(std::make_unique<DirectRecovery>(h, 0, name));
+  const MotionField field(h.rest_positions, Motion::kBend, 1.0);
+  std::vector<std::vector<Vec3>> bases;
+  for (int f = 0; f < 5; ++f) bases.push_back(base_pose(h, field.with_phase(0.6 + 0.1 * f)).positions);
+  RecoveryWorkspace ws;
+  std::vector<Vec3> out(h.vertex_count());
+  std::vector<std::vector<double>> ms(copies.size());
+  // Each round starts one copy later: a frame runs in the caches the one
+  // before it left, and every copy follows every other equally often.
+  for (int round = 0; round < rounds; ++round)
+    for (std::size_t j = 0; j < copies.size(); ++j) {
+      const std::size_t k = (j + static_cast<std::size_t>(round)) % copies.size();
+      const auto start = Clock::now();
+      copies[k]->recover(bases[round % bases.size()], ws, out, threads);
+      ms[k].push_back(ms_since(start));
+    }
+  std::printf("\n### the kernel's compiled copies, %d frames each, interleaved\n\n| kernel | recover ms (median) | ns/vertex | against %s |\n"
+              "|---|---:|---:|---:|\n",
+              rounds, std::string(names.back()).c_str());
+  const double last = median(ms.back());
+  for (std::size_t k = 0; k < copies.size(); ++k)
+    std::printf("| %s | %.2f | %.1f | %.2f |\n", std::string(names[k]).c_str(), median(ms[k]),
+                1e6 * median(ms[k]) / static_cast<double>(h.vertex_count()), median(ms[k]) / last);
+}
+
 // Mean relative change of edge lengths: how much of the rest shape's local
 // detail a result keeps (0 for a rigid motion of the rest mesh).
 double edge_distortion(const TriMesh& mesh, const std::vector<Vec3>& x) {
@@ -192,7 +226,7 @@ std::string quality(const MeshComparison& q) {
   return out;
 }
 
-void run_mesh(const std::string& name, const TriMesh& mesh, int threads, int bound_only) {
+void run_mesh(const std::string& name, const TriMesh& mesh, int threads, int bound_only, int kernel_rounds) {
   PreprocessOptions pre;
   pre.threads = threads;
   const auto t0 = Clock::now();
@@ -201,6 +235,10 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads, int bou
               h.base_vertices.size(), ms_since(t0) / 1000.0);
   if (h.rest_positions.size() != mesh.positions.size()) throw std::logic_error("the hierarchy is not of this mesh");
 
+  if (kernel_rounds > 0) {
+    compare_kernels(h, threads, kernel_rounds);
+    return;
+  }
   if (bound_only > 0) {
     for (int i = 0; i < bound_only; ++i) recovery_bound(h, threads);
     return;
@@ -297,12 +335,13 @@ int main(int argc, char** argv) {
   using namespace filigree;
   std::string only;  // camel, armadillo, dragon or large; empty: all
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  int bound_only = 0;
+  int bound_only = 0, kernel_rounds = 0;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) only = "armadillo";
     if (!std::strcmp(argv[i], "--mesh") && i + 1 < argc) only = argv[++i];
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (!std::strcmp(argv[i], "--bound") && i + 1 < argc) bound_only = std::max(1, std::atoi(argv[++i]));
+    if (!std::strcmp(argv[i], "--kernels") && i + 1 < argc) kernel_rounds = std::max(1, std::atoi(argv[++i]));
   }
   const std::string shared = FILIGREE_SHARED_DATA_DIR, repo = FILIGREE_REPO_DATA_DIR;
   auto wanted = [&](const char* name) { return only.empty() || only == name; };
@@ -312,12 +351,12 @@ int main(int argc, char** argv) {
               "posed by the same map) and *to ∞* (the whole-mesh optimisation result of the same pose).\n",
               threads);
   if (wanted("camel") && std::filesystem::exists(shared + "/camel.off"))
-    bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads, bound_only);
-  if (wanted("armadillo")) bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads, bound_only);
+    bench::run_mesh("camel (real)", bench::load_clean(shared + "/camel.off"), threads, bound_only, kernel_rounds);
+  if (wanted("armadillo")) bench::run_mesh("armadillo (real)", bench::load_clean(repo + "/armadillo.off"), threads, bound_only, kernel_rounds);
   if (wanted("dragon") && std::filesystem::exists(shared + "/dragon.ply"))
-    bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads, bound_only);
+    bench::run_mesh("dragon (real)", bench::load_clean(shared + "/dragon.ply"), threads, bound_only, kernel_rounds);
   if (wanted("large"))
     bench::run_mesh("armadillo Loop x2 + sqrt3",
-                    bench::in_session_order(bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1)), threads, bound_only);
+                    bench::in_session_order(bench::subdivide(bench::load_clean(repo + "/armadillo.off"), 2, 1)), threads, bound_only, kernel_rounds);
   return 0;
 }

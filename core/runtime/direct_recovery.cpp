@@ -232,6 +232,8 @@ struct Layout {
 // of the same 8-lane vectors, mask registers for the selects, 8 doubles in
 // one register for the output, FMA contracted) is ~10% faster than AVX2 on
 // the 1.25M mesh (Zen 4, 1 and 2 threads); AVX2 with FMA alone was not.
+// On Zen 5 the AVX2 copy runs at 0.94–0.95 of the AVX-512 one
+// (`filigree_bench_runtime --kernels`, 2026-11-26): the order is Zen 4's.
 // Copies differ in float rounding (FMA), each within the header's bound.
 using BlocksFn = void (*)(const Layout&, std::size_t, std::size_t, float*, const Output&);
 struct KernelCopy {

@@ -60,8 +60,9 @@ class DirectRecovery {
   explicit DirectRecovery(const Hierarchy& h, std::size_t partitions = 0, std::string_view kernel = {});
 
   // The compiled copies of the kernel this processor runs ("baseline",
-  // "avx2", "avx512"), fastest last. Their results differ only in float
-  // rounding, each within the precision promised above.
+  // "avx2", "avx512"), the newest instruction set last (the default).
+  // Their results differ only in float rounding, each within the precision
+  // promised above.
   static std::vector<std::string_view> kernels();
   std::string_view kernel() const;
 
