@@ -88,6 +88,53 @@ grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& c
   return grpc::Status::OK;
 }
 
+void FiligreeService::with_session(grpc::CallbackServerContext& context, const std::string& id, Role needed,
+                                   SessionContinuation then) {
+  const std::string session_id = id.empty() ? metadata(context, "x-session-id") : id;
+  if (session_id.empty() || registry_.in_memory(session_id)) {
+    std::shared_ptr<Session> s;
+    const grpc::Status status = authorize(registry_, context, id, needed, &s);
+    return then(status, std::move(s));
+  }
+  if (!begin_job()) return then({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"}, nullptr);
+  // Shared: if the thread cannot start, `then` still answers the call.
+  auto next = std::make_shared<SessionContinuation>(std::move(then));
+  try {
+    std::thread([this, &context, id, needed, next]() mutable {
+      std::shared_ptr<Session> s;
+      grpc::Status status;
+      try {
+        status = authorize(registry_, context, id, needed, &s);
+      } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
+        status = {grpc::StatusCode::INTERNAL, std::string("loading the session failed: ") + e.what()};
+      }
+      (*next)(status, std::move(s));
+      next.reset();  // what it holds may need the service: release it while the service surely exists
+      end_job();     // the last touch of the service: drain() waits for it
+    }).detach();
+  } catch (const std::system_error& e) {
+    end_job();
+    (*next)({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()}, nullptr);
+  }
+}
+
+grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServerContext* context, const std::string& id,
+                                                            Role needed, std::function<grpc::Status(Session&)> body) {
+  auto* reactor = context->DefaultReactor();
+  with_session(*context, id, needed, [reactor, body = std::move(body)](grpc::Status status, std::shared_ptr<Session> s) {
+    if (status.ok()) {
+      try {
+        status = body(*s);
+      } catch (const std::exception& e) {
+        status = {grpc::StatusCode::INTERNAL, e.what()};
+      }
+    }
+    s.reset();  // before the call ends, so that a session closed meanwhile ends here
+    reactor->Finish(status);
+  });
+  return reactor;
+}
+
 FiligreeService::FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits)
     : registry_(registry), cache_(cache), limits_(limits) {}
 
@@ -592,6 +639,34 @@ void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream
   stream.writer().detach();
 }
 
+// A stream's start while its session loads (FiligreeService::with_session,
+// maybe on a job thread): a cancel that arrives meanwhile must not end the
+// call, since the reactor is deleted once it ends and the load's
+// continuation still runs on it; the continuation ends it instead.
+class StreamStart {
+ public:
+  void begin() {
+    std::lock_guard lock(mutex_);
+    starting_ = true;
+  }
+  // The session is there (or not): whether the stream was cancelled meanwhile.
+  bool end() {
+    std::lock_guard lock(mutex_);
+    starting_ = false;
+    return cancelled_;
+  }
+  // OnCancel: whether the caller may end the stream now (false while it starts).
+  bool cancel() {
+    std::lock_guard lock(mutex_);
+    cancelled_ = true;
+    return !starting_;
+  }
+
+ private:
+  std::mutex mutex_;
+  bool starting_ = false, cancelled_ = false;
+};
+
 class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
@@ -620,15 +695,35 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
     }
     if (const grpc::Status parsed = parse_request(request_bytes_, request_); !parsed.ok()) return stream_->writer().finish(parsed);
     if (!session_) {
-      grpc::Status status = authorize(service_.registry(), *context_, request_.session_id(), Role::kEditor, &session_);
-      if (status.ok()) status = service_.open_stream(*session_, &stream_slot_);
-      if (!status.ok()) {
-        session_.reset();
-        return stream_->writer().finish(status);
-      }
-      stream_->set_format(request_.frame_format());
-      session_->subscribe(stream_, session_->version());
+      // The first request names the session: no read until it is there.
+      start_.begin();
+      return service_.with_session(*context_, request_.session_id(), Role::kEditor,
+                                   [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
     }
+    take_request();
+  }
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override {
+    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+  }
+  void OnDone() override {
+    leave(session_, *stream_, driver_);
+    delete this;
+  }
+
+ private:
+  void start(grpc::Status status, std::shared_ptr<Session> s) {
+    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
+    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    if (!status.ok()) return stream_->writer().finish(status);
+    session_ = std::move(s);
+    stream_->set_format(request_.frame_format());
+    session_->subscribe(stream_, session_->version());
+    take_request();
+  }
+
+  // Submits the request just read and reads the next.
+  void take_request() {
     try {
       submit_pose(*session_, driver_, request_);
       const bool pose = !request_.positions().empty() || request_.has_joints();  // not a keyframe request alone
@@ -641,14 +736,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
     }
     StartRead(&request_bytes_);
   }
-  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
-  void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
-  void OnDone() override {
-    leave(session_, *stream_, driver_);
-    delete this;
-  }
 
- private:
   // The newest pose id submitted and the newest a frame has answered.
   struct Ending {
     std::mutex mutex;
@@ -660,6 +748,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
   grpc::CallbackServerContext* context_;
   const std::uint64_t driver_;
   std::shared_ptr<Ending> ending_ = std::make_shared<Ending>();
+  StreamStart start_;
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<DriveReactor>> stream_;
   std::shared_ptr<Session> session_;
@@ -670,23 +759,20 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
 class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
   WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
-      : stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
-    v1::WatchRequest request;
-    grpc::Status status = parse_request(request_bytes, request);
-    if (status.ok()) status = authorize(service.registry(), *context, request.session_id(), Role::kViewer, &session_);
-    if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
+      : service_(service), stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
+    grpc::Status status = parse_request(request_bytes, request_);
     if (!status.ok()) {
-      session_.reset();
       stream_->writer().finish(status);
       return;
     }
-    stream_->set_format(request.frame_format());
-    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
-    session_->subscribe(stream_, request.after_version() == 0 ? std::nullopt
-                                                              : std::optional<std::uint64_t>(request.after_version()));
+    start_.begin();
+    service.with_session(*context, request_.session_id(), Role::kViewer,
+                         [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
-  void OnCancel() override { stream_->writer().finish(grpc::Status::CANCELLED); }
+  void OnCancel() override {
+    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+  }
   void OnDone() override {
     if (session_) session_->unsubscribe(stream_.get());
     stream_->writer().detach();
@@ -694,6 +780,20 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
  private:
+  void start(grpc::Status status, std::shared_ptr<Session> s) {
+    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
+    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    if (!status.ok()) return stream_->writer().finish(status);
+    session_ = std::move(s);
+    stream_->set_format(request_.frame_format());
+    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
+    session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
+                                                               : std::optional<std::uint64_t>(request_.after_version()));
+  }
+
+  FiligreeService& service_;
+  v1::WatchRequest request_;
+  StreamStart start_;
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<WatchReactor>> stream_;
   std::shared_ptr<Session> session_;
@@ -708,8 +808,31 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
   PlayClipReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
       : service_(service), driver_(service.next_driver_id()), stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
     grpc::Status status = parse_request(request_bytes, request_);
-    if (status.ok()) status = authorize(service.registry(), *context, request_.session_id(), Role::kEditor, &session_);
-    if (status.ok()) status = service.open_stream(*session_, &stream_slot_);
+    if (!status.ok()) {
+      stream_->writer().finish(status);
+      return;
+    }
+    start_.begin();
+    service.with_session(*context, request_.session_id(), Role::kEditor,
+                         [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
+  }
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override {
+    state_->end();
+    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+  }
+  void OnDone() override {
+    state_->end();
+    if (player_.joinable()) player_.get_id() == std::this_thread::get_id() ? player_.detach() : player_.join();
+    leave(session_, *stream_, driver_);
+    delete this;
+  }
+
+ private:
+  void start(grpc::Status status, std::shared_ptr<Session> s) {
+    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
+    session_ = std::move(s);
+    if (status.ok()) status = service_.open_stream(*session_, &stream_slot_);
     if (status.ok()) status = check();
     if (!status.ok()) {
       session_.reset();
@@ -744,19 +867,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
       stream_->writer().finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
     }
   }
-  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
-  void OnCancel() override {
-    state_->end();
-    stream_->writer().finish(grpc::Status::CANCELLED);
-  }
-  void OnDone() override {
-    state_->end();
-    if (player_.joinable()) player_.get_id() == std::this_thread::get_id() ? player_.detach() : player_.join();
-    leave(session_, *stream_, driver_);
-    delete this;
-  }
 
- private:
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   static constexpr double kMostSamplesPerSecond = 60.0;
 
@@ -806,6 +917,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
   FiligreeService& service_;
   v1::PlayClipRequest request_;  // set once, in the constructor
   const std::uint64_t driver_;
+  StreamStart start_;
   std::shared_ptr<FrameStream<PlayClipReactor>> stream_;
   std::shared_ptr<Session> session_;
   const AnimationClip* clip_ = nullptr;  // owned by the session's rig
@@ -849,68 +961,62 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::Callbac
 
 grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context,
                                                        const v1::JoinSessionRequest* request, v1::SessionInfo* response) {
-  std::shared_ptr<Session> s;
-  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
-  if (status.ok()) *response = s->info();
-  return finish_unary(context, status);
+  return unary_on_session(context, request->session_id(), Role::kViewer, [response](Session& s) {
+    *response = s.info();
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::SubmitPose(grpc::CallbackServerContext* context,
                                                       const v1::DriveRequest* request, v1::SubmitPoseResponse* response) {
-  std::shared_ptr<Session> s;
-  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
-  if (status.ok()) {
+  return unary_on_session(context, request->session_id(), Role::kEditor, [request, response](Session& s) -> grpc::Status {
     try {
-      response->set_accepted_at_version(s->accepted_version());
-      submit_pose(*s, /*driver=*/0, *request);
+      response->set_accepted_at_version(s.accepted_version());
+      submit_pose(s, /*driver=*/0, *request);
     } catch (const PoseError& e) {
-      status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+      return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const StoreUnavailable& e) {
-      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
-  }
-  return finish_unary(context, status);
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContext* context,
                                                       const v1::SetHandlesRequest* request, v1::SetHandlesResponse* response) {
-  std::shared_ptr<Session> s;
-  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
-  if (status.ok()) {
+  return unary_on_session(context, request->session_id(), Role::kEditor, [request, response](Session& s) -> grpc::Status {
     std::vector<std::pair<Index, Vec3>> handles;
     for (const v1::Handle& h : request->handles()) handles.emplace_back(h.vertex(), Vec3(h.x(), h.y(), h.z()));
     try {
-      response->set_accepted_at_version(s->accepted_version());
-      response->set_handles_in_session(static_cast<std::uint32_t>(s->set_handles(request->client_name(), handles)));
+      response->set_accepted_at_version(s.accepted_version());
+      response->set_handles_in_session(static_cast<std::uint32_t>(s.set_handles(request->client_name(), handles)));
     } catch (const PoseError& e) {
-      status = {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
+      return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const StoreUnavailable& e) {  // handles are journaled now
-      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
-  }
-  return finish_unary(context, status);
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context,
                                                        const v1::GetOverlaysRequest* request, v1::Overlays* response) {
-  std::shared_ptr<Session> s;
-  const grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
-  if (status.ok()) *response = s->overlays();
-  return finish_unary(context, status);
+  return unary_on_session(context, request->session_id(), Role::kViewer, [response](Session& s) {
+    *response = s.overlays();
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context,
                                                     const v1::GetStateRequest* request, v1::SessionState* response) {
-  std::shared_ptr<Session> s;
-  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kViewer, &s);
-  if (status.ok()) {
+  return unary_on_session(context, request->session_id(), Role::kViewer, [request, response](Session& s) -> grpc::Status {
     try {
-      *response = s->state(request->frame_format());
+      *response = s.state(request->frame_format());
     } catch (const std::exception& e) {
-      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
-  }
-  return finish_unary(context, status);
+    return grpc::Status::OK;
+  });
 }
 
 namespace {
@@ -939,47 +1045,46 @@ grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, v1::Se
 
 grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context,
                                                       const v1::SetOptionsRequest* request, v1::SessionInfo* response) {
-  std::shared_ptr<Session> s;
-  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
-  if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
-    status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-  if (!status.ok()) return finish_unary(context, status);
-  const double threshold = request->threshold();
-  const bool whole_mesh = request->whole_mesh();
-  if (!s->threshold_needs_preparation(threshold, whole_mesh)) return finish_unary(context, apply_options(*s, threshold, whole_mesh, response));
-  // The first finite T of a mesh derives its node graph and region
-  // optimisation's data (~1 s at 1.25M vertices), and whole-mesh
-  // optimisation factorises the mesh (seconds): on a thread of its own, not
-  // one of gRPC's callback threads, which every other call of this server
-  // shares. A job, so that drain() (and so the service's end) waits for it.
-  if (!begin_job()) return finish_unary(context, {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
   auto* reactor = context->DefaultReactor();
-  try {
-    std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
-      const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
-      s.reset();  // the session may end with its last holder: while the service surely exists
-      reactor->Finish(result);
-      end_job();  // the last touch of the service: drain() waits for it
-    }).detach();
-  } catch (const std::system_error& e) {
-    end_job();
-    reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
-  }
+  with_session(*context, request->session_id(), Role::kEditor,
+               [this, reactor, request, response](grpc::Status status, std::shared_ptr<Session> s) {
+    if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
+      status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+    if (!status.ok()) return reactor->Finish(status);
+    const double threshold = request->threshold();
+    const bool whole_mesh = request->whole_mesh();
+    if (!s->threshold_needs_preparation(threshold, whole_mesh)) return reactor->Finish(apply_options(*s, threshold, whole_mesh, response));
+    // The first finite T of a mesh derives its node graph and region
+    // optimisation's data (~1 s at 1.25M vertices), and whole-mesh
+    // optimisation factorises the mesh (seconds): on a thread of its own, not
+    // one of gRPC's callback threads, which every other call of this server
+    // shares. A job, so that drain() (and so the service's end) waits for it.
+    if (!begin_job()) return reactor->Finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+    try {
+      std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
+        const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
+        s.reset();  // the session may end with its last holder: while the service surely exists
+        reactor->Finish(result);
+        end_job();  // the last touch of the service: drain() waits for it
+      }).detach();
+    } catch (const std::system_error& e) {
+      end_job();
+      reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+    }
+  });
   return reactor;
 }
 
 grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerContext* context,
                                                         const v1::CloseSessionRequest* request, v1::CloseSessionResponse*) {
-  std::shared_ptr<Session> s;
-  grpc::Status status = authorize(registry_, *context, request->session_id(), Role::kEditor, &s);
-  if (status.ok()) {
+  return unary_on_session(context, request->session_id(), Role::kEditor, [this](Session& s) -> grpc::Status {
     try {
-      registry_.close(s->id());
+      registry_.close(s.id());
     } catch (const StoreUnavailable& e) {
-      status = {grpc::StatusCode::UNAVAILABLE, e.what()};
+      return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
-  }
-  return finish_unary(context, status);
+    return grpc::Status::OK;
+  });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::LocateSession(grpc::CallbackServerContext* context,

@@ -92,6 +92,12 @@ std::shared_ptr<Session> SessionRegistry::find(const std::string& id, bool take_
   return load(id, take_over);
 }
 
+bool SessionRegistry::in_memory(const std::string& id) const {
+  std::lock_guard lock(mutex_);
+  const auto it = sessions_.find(id);
+  return it != sessions_.end() && it->second.session->failure().empty();
+}
+
 std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_over) {
   // One load per session at a time: concurrent calls for it wait and share it.
   std::shared_ptr<std::mutex> loading;

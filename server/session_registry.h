@@ -70,6 +70,9 @@ class SessionRegistry {
   // to hand the session over if `take_over`), StoreUnavailable if the shared
   // store cannot be reached.
   std::shared_ptr<Session> find(const std::string& id, bool take_over = true);
+  // Whether find(id) would answer from memory, without loading: the
+  // session is loaded here and computing. (It may be evicted right after.)
+  bool in_memory(const std::string& id) const;
   // Which replica serves the session, without loading it.
   SessionLocation locate(const std::string& id);
   // Closes the session's streams and deletes its record; false if unknown.
