@@ -101,12 +101,27 @@ void FiligreeService::with_session(grpc::CallbackServerContext& context, const s
   auto next = std::make_shared<SessionContinuation>(std::move(then));
   try {
     std::thread([this, &context, id, needed, next]() mutable {
+      // A turn: a failover or a restart's first requests must not load every
+      // session at once (each load's memory, all of them slowed alike).
+      const unsigned turns = limits_.session_loads ? limits_.session_loads : std::max(1u, std::thread::hardware_concurrency());
+      {
+        std::unique_lock lock(jobs_mutex_);
+        ++loads_waiting_;
+        load_free_.wait(lock, [&] { return loads_ < turns; });
+        --loads_waiting_;
+        ++loads_;
+      }
       std::shared_ptr<Session> s;
       grpc::Status status;
       try {
         status = authorize(registry_, context, id, needed, &s);
       } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
         status = {grpc::StatusCode::INTERNAL, std::string("loading the session failed: ") + e.what()};
+      }
+      {
+        std::lock_guard lock(jobs_mutex_);
+        --loads_;
+        load_free_.notify_one();
       }
       (*next)(status, std::move(s));
       next.reset();  // what it holds may need the service: release it while the service surely exists
@@ -240,6 +255,11 @@ void FiligreeService::acquire_preprocessing() {
   std::unique_lock lock(jobs_mutex_);
   preprocessing_free_.wait(lock, [&] { return preprocessing_ < std::max(1u, limits_.preprocessing_slots); });
   ++preprocessing_;
+}
+
+std::size_t FiligreeService::loads_waiting() const {
+  std::lock_guard lock(jobs_mutex_);
+  return loads_waiting_;
 }
 
 void FiligreeService::release_preprocessing() {

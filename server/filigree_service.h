@@ -29,6 +29,9 @@ struct ServiceLimits {
   // Uploads preprocessed at once (more wait their turn), at a lower CPU
   // priority than the sessions' frames.
   unsigned preprocessing_slots = 1;
+  // Sessions loaded from the store at once (their records, hierarchies and
+  // models; 0: one per core); more wait their turn on their own threads.
+  unsigned session_loads = 0;
   // Longest an upload may take to send its bytes (slow or stalled clients
   // hold memory and a stream); 0: no limit.
   double upload_seconds = 300.0;
@@ -92,6 +95,8 @@ class FiligreeService final : public FiligreeServiceBase {
   // an upload is parsed and preprocessed.
   void acquire_preprocessing();
   void release_preprocessing();
+  // Calls waiting for a turn to load their session (limits().session_loads).
+  std::size_t loads_waiting() const;
   // Whether a new upload fits under limits().max_memory_bytes: if the
   // server's resident memory is over it, idle sessions are evicted first;
   // RESOURCE_EXHAUSTED saying the figures if that is not enough.
@@ -148,10 +153,13 @@ class FiligreeService final : public FiligreeServiceBase {
   mutable std::mutex keys_mutex_;
   std::shared_ptr<const ApiKeys> keys_;
   ApiKeyLedger ledger_;
-  std::mutex jobs_mutex_;
+  mutable std::mutex jobs_mutex_;
   std::condition_variable jobs_done_, preprocessing_free_;
   int jobs_ = 0;
   unsigned preprocessing_ = 0;  // uploads preprocessing now
+  std::condition_variable load_free_;
+  unsigned loads_ = 0;              // sessions loading now
+  std::size_t loads_waiting_ = 0;   // calls waiting for a turn
   bool draining_ = false;
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key

@@ -101,6 +101,10 @@ int main(int argc, char** argv) {
   app.add_option("--preprocessing-slots", service_limits.preprocessing_slots,
                  "Uploads preprocessed at once, at a lower CPU priority than live sessions; more wait their turn")
       ->check(CLI::Range(1u, 64u));
+  app.add_option("--session-loads", service_limits.session_loads,
+                 "Sessions loaded from --data-dir or the shared store at once (evicted, or another replica's); "
+                 "more wait their turn off gRPC's threads; 0: one per core")
+      ->check(CLI::Range(0u, 64u));
   app.add_option("--upload-timeout", service_limits.upload_seconds,
                  "Seconds an upload may take to send its bytes (DEADLINE_EXCEEDED after); 0: no limit")
       ->check(CLI::NonNegativeNumber);

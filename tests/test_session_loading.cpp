@@ -108,7 +108,9 @@ class SessionLoading : public ::testing::Test {
     gated_ = std::make_unique<GatedStore>(*files_);
     cache_ = std::make_unique<HierarchyCache>(dir_ / "hierarchies");
     registry_ = std::make_unique<SessionRegistry>(*cache_, *gated_, RegistryLimits{});
-    service_ = std::make_unique<FiligreeService>(*registry_, *cache_, ServiceLimits{});
+    ServiceLimits limits;
+    limits.session_loads = session_loads();
+    service_ = std::make_unique<FiligreeService>(*registry_, *cache_, limits);
     grpc::ServerBuilder builder;
     int port = 0;
     builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
@@ -134,6 +136,8 @@ class SessionLoading : public ::testing::Test {
     auto h = cache_->get_or_build(test::icosphere(3), o, &key, nullptr);
     return registry_->create(h, key, {}, {})->id();
   }
+  // Loads at once: as many as the test holds up, unless a test is about the bound.
+  virtual unsigned session_loads() const { return 64; }
   std::string editor_token(const std::string& id) { return files_->load(id)->editor_token; }
 
   void start_join(PendingJoin& call, const std::string& id) {
@@ -255,6 +259,41 @@ TEST_F(SessionLoading, AWatcherCancelledWhileItsSessionLoadsNeverSubscribes) {
   const auto session = registry_->find(id);
   ASSERT_TRUE(session);
   EXPECT_EQ(session->subscriber_count(), 0u);
+}
+
+class OneLoadAtATime : public SessionLoading {
+ protected:
+  unsigned session_loads() const override { return 1; }
+};
+
+TEST_F(OneLoadAtATime, MoreLoadsWaitTheirTurnOffTheCallThreads) {
+  std::vector<std::string> evicted;
+  for (int i = 0; i < 3; ++i) evicted.push_back(create_session());
+  registry_->evict_idle_until([] { return false; });
+  gated_->close_gate();
+  std::vector<std::unique_ptr<PendingJoin>> calls;
+  for (const std::string& id : evicted) {
+    calls.push_back(std::make_unique<PendingJoin>());
+    start_join(*calls.back(), id);
+  }
+  ASSERT_TRUE(gated_->wait_for_waiting(1));
+  // The other two wait for a turn (a spin on what the service counts, under a deadline: nothing here sleeps).
+  const auto deadline = std::chrono::steady_clock::now() + kPatience;
+  while (service_->loads_waiting() < 2 && std::chrono::steady_clock::now() < deadline) std::this_thread::yield();
+  ASSERT_EQ(service_->loads_waiting(), 2u);
+  EXPECT_EQ(gated_->waiting(), 1u);  // the turn holder is the only load at the store
+
+  gated_->open_gate();
+  std::unique_lock lock(calls_mutex_);
+  ASSERT_TRUE(calls_done_.wait_for(lock, kPatience, [&] {
+    for (const auto& call : calls)
+      if (!call->done) return false;
+    return true;
+  }));
+  for (std::size_t i = 0; i < calls.size(); ++i) {
+    EXPECT_TRUE(calls[i]->status.ok()) << calls[i]->status.error_message();
+    EXPECT_EQ(calls[i]->response.session_id(), evicted[i]);
+  }
 }
 
 }  // namespace
