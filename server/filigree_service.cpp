@@ -687,6 +687,21 @@ class StreamStart {
   bool starting_ = false, cancelled_ = false;
 };
 
+// A stream's start once authorize() has answered (`status`, the session
+// `s`): true, or the stream is ended: cancelled meanwhile, refused, or over
+// the session's stream limits (*slot then holds the stream's place).
+template <class Reactor>
+bool open_started_stream(StreamStart& start, FiligreeService& service, FrameStream<Reactor>& stream, grpc::Status status,
+                         const std::shared_ptr<Session>& s, std::shared_ptr<void>* slot) {
+  if (start.end()) {
+    stream.writer().finish(grpc::Status::CANCELLED);
+    return false;
+  }
+  if (status.ok()) status = service.open_stream(*s, slot);
+  if (!status.ok()) stream.writer().finish(status);
+  return status.ok();
+}
+
 class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
@@ -733,9 +748,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
-    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
-    if (!status.ok()) return stream_->writer().finish(status);
+    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
     session_ = std::move(s);
     stream_->set_format(request_.frame_format());
     session_->subscribe(stream_, session_->version());
@@ -801,9 +814,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
-    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
-    if (!status.ok()) return stream_->writer().finish(status);
+    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
     session_ = std::move(s);
     stream_->set_format(request_.frame_format());
     // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
@@ -850,13 +861,11 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (start_.end()) return stream_->writer().finish(grpc::Status::CANCELLED);
+    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
     session_ = std::move(s);
-    if (status.ok()) status = service_.open_stream(*session_, &stream_slot_);
-    if (status.ok()) status = check();
-    if (!status.ok()) {
+    if (const grpc::Status checked = check(); !checked.ok()) {
       session_.reset();
-      stream_->writer().finish(status);
+      stream_->writer().finish(checked);
       return;
     }
     stream_->set_format(request_.frame_format());

@@ -9,6 +9,7 @@
 // the test opens. Nothing waits on time: the test waits for the loads to
 // reach the gate, under a generous deadline that only bounds a failure.
 
+#include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <filesystem>
@@ -151,6 +152,18 @@ class SessionLoading : public ::testing::Test {
     });
   }
 
+  // Waits for every call and checks each joined its session.
+  void expect_joined(const std::vector<std::unique_ptr<PendingJoin>>& calls, const std::vector<std::string>& ids) {
+    std::unique_lock lock(calls_mutex_);
+    ASSERT_TRUE(calls_done_.wait_for(lock, kPatience, [&] {
+      return std::all_of(calls.begin(), calls.end(), [](const auto& call) { return call->done; });
+    })) << "a call was not answered";
+    for (std::size_t i = 0; i < calls.size(); ++i) {
+      EXPECT_TRUE(calls[i]->status.ok()) << calls[i]->status.error_message();
+      EXPECT_EQ(calls[i]->response.session_id(), ids[i]);
+    }
+  }
+
   std::filesystem::path dir_;
   std::unique_ptr<FileSessionStore> files_;
   std::unique_ptr<GatedStore> gated_;
@@ -200,16 +213,7 @@ TEST_F(SessionLoading, LoadsHeldUpDoNotStopCallsOnSessionsInMemory) {
 
   // The held-up loads finish once the store answers, each with its session.
   gated_->open_gate();
-  std::unique_lock lock(calls_mutex_);
-  ASSERT_TRUE(calls_done_.wait_for(lock, kPatience, [&] {
-    for (const auto& call : calls)
-      if (!call->done) return false;
-    return true;
-  }));
-  for (std::size_t i = 0; i < calls.size(); ++i) {
-    EXPECT_TRUE(calls[i]->status.ok()) << calls[i]->status.error_message();
-    EXPECT_EQ(calls[i]->response.session_id(), evicted[i]);
-  }
+  expect_joined(calls, evicted);
   EXPECT_EQ(registry_->loaded().size(), held + 1);
 }
 
@@ -284,16 +288,7 @@ TEST_F(OneLoadAtATime, MoreLoadsWaitTheirTurnOffTheCallThreads) {
   EXPECT_EQ(gated_->waiting(), 1u);  // the turn holder is the only load at the store
 
   gated_->open_gate();
-  std::unique_lock lock(calls_mutex_);
-  ASSERT_TRUE(calls_done_.wait_for(lock, kPatience, [&] {
-    for (const auto& call : calls)
-      if (!call->done) return false;
-    return true;
-  }));
-  for (std::size_t i = 0; i < calls.size(); ++i) {
-    EXPECT_TRUE(calls[i]->status.ok()) << calls[i]->status.error_message();
-    EXPECT_EQ(calls[i]->response.session_id(), evicted[i]);
-  }
+  expect_joined(calls, evicted);
 }
 
 }  // namespace
