@@ -660,16 +660,22 @@ void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream
 }
 
 // A stream's start while its session loads (FiligreeService::with_session,
-// maybe on a job thread): a cancel that arrives meanwhile must not end the
-// call, since the reactor is deleted once it ends and the load's
-// continuation still runs on it; the continuation ends it instead.
+// maybe on a job thread, which gRPC does not know of): until the start
+// ends, nothing but the start may end the stream, since the reactor is
+// deleted once it ends and the start still runs on it. A cancel that
+// arrives meanwhile is held, and end_start() answers it. Shared, so that
+// the start can end it after the reactor may be gone.
 class StreamStart {
  public:
   void begin() {
     std::lock_guard lock(mutex_);
     starting_ = true;
   }
-  // The session is there (or not): whether the stream was cancelled meanwhile.
+  bool cancelled() {
+    std::lock_guard lock(mutex_);
+    return cancelled_;
+  }
+  // The start is over: whether a cancel came while it ran.
   bool end() {
     std::lock_guard lock(mutex_);
     starting_ = false;
@@ -687,19 +693,18 @@ class StreamStart {
   bool starting_ = false, cancelled_ = false;
 };
 
-// A stream's start once authorize() has answered (`status`, the session
-// `s`): true, or the stream is ended: cancelled meanwhile, refused, or over
-// the session's stream limits (*slot then holds the stream's place).
-template <class Reactor>
-bool open_started_stream(StreamStart& start, FiligreeService& service, FrameStream<Reactor>& stream, grpc::Status status,
-                         const std::shared_ptr<Session>& s, std::shared_ptr<void>* slot) {
-  if (start.end()) {
-    stream.writer().finish(grpc::Status::CANCELLED);
-    return false;
+// A stream's start's last step: the stream ends with `status` if it is not
+// OK, or as cancelled if a cancel came while it started. Touches only what it
+// is given (the reactor may be gone once `start` ends; a finished writer
+// ignores a second finish).
+template <class Stream>
+void end_start(const std::shared_ptr<StreamStart>& start, const std::shared_ptr<Stream>& stream, const grpc::Status& status) {
+  const bool cancelled = start->end();
+  if (!status.ok()) {
+    stream->writer().finish(status);
+  } else if (cancelled) {
+    stream->writer().finish(grpc::Status::CANCELLED);
   }
-  if (status.ok()) status = service.open_stream(*s, slot);
-  if (!status.ok()) stream.writer().finish(status);
-  return status.ok();
 }
 
 class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
@@ -731,7 +736,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
     if (const grpc::Status parsed = parse_request(request_bytes_, request_); !parsed.ok()) return stream_->writer().finish(parsed);
     if (!session_) {
       // The first request names the session: no read until it is there.
-      start_.begin();
+      start_->begin();
       return service_.with_session(*context_, request_.session_id(), Role::kEditor,
                                    [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
     }
@@ -739,7 +744,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override {
-    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
     leave(session_, *stream_, driver_);
@@ -748,11 +753,17 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
-    session_ = std::move(s);
-    stream_->set_format(request_.frame_format());
-    session_->subscribe(stream_, session_->version());
-    take_request();
+    const auto started = start_;
+    const auto stream = stream_;  // this reactor may end once the start does
+    if (started->cancelled()) status = grpc::Status::CANCELLED;
+    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    if (status.ok()) {
+      session_ = std::move(s);
+      stream_->set_format(request_.frame_format());
+      session_->subscribe(stream_, session_->version());
+      take_request();  // may end the stream: `this` is not touched after it
+    }
+    end_start(started, stream, status);
   }
 
   // Submits the request just read and reads the next.
@@ -781,7 +792,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
   grpc::CallbackServerContext* context_;
   const std::uint64_t driver_;
   std::shared_ptr<Ending> ending_ = std::make_shared<Ending>();
-  StreamStart start_;
+  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<DriveReactor>> stream_;
   std::shared_ptr<Session> session_;
@@ -798,13 +809,13 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       stream_->writer().finish(status);
       return;
     }
-    start_.begin();
+    start_->begin();
     service.with_session(*context, request_.session_id(), Role::kViewer,
                          [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override {
-    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
     if (session_) session_->unsubscribe(stream_.get());
@@ -814,17 +825,23 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
-    session_ = std::move(s);
-    stream_->set_format(request_.frame_format());
-    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
-    session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
-                                                               : std::optional<std::uint64_t>(request_.after_version()));
+    const auto started = start_;
+    const auto stream = stream_;  // this reactor may end once the start does
+    if (started->cancelled()) status = grpc::Status::CANCELLED;
+    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    if (status.ok()) {
+      session_ = std::move(s);
+      stream_->set_format(request_.frame_format());
+      // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
+      session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
+                                                                 : std::optional<std::uint64_t>(request_.after_version()));
+    }
+    end_start(started, stream, status);
   }
 
   FiligreeService& service_;
   v1::WatchRequest request_;
-  StreamStart start_;
+  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   std::shared_ptr<FrameStream<WatchReactor>> stream_;
   std::shared_ptr<Session> session_;
@@ -843,14 +860,14 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
       stream_->writer().finish(status);
       return;
     }
-    start_.begin();
+    start_->begin();
     service.with_session(*context, request_.session_id(), Role::kEditor,
                          [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
   }
   void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override {
     state_->end();
-    if (start_.cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
     state_->end();
@@ -861,12 +878,18 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
 
  private:
   void start(grpc::Status status, std::shared_ptr<Session> s) {
-    if (!open_started_stream(start_, service_, *stream_, status, s, &stream_slot_)) return;
-    session_ = std::move(s);
-    if (const grpc::Status checked = check(); !checked.ok()) {
+    const auto started = start_;
+    const auto stream = stream_;  // this reactor may end once the start does
+    if (started->cancelled()) status = grpc::Status::CANCELLED;
+    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    if (status.ok()) {
+      session_ = std::move(s);
+      status = check();
+    }
+    if (status.ok() && !service_.begin_job()) status = {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
+    if (!status.ok()) {
       session_.reset();
-      stream_->writer().finish(checked);
-      return;
+      return end_start(started, stream, status);
     }
     stream_->set_format(request_.frame_format());
     // The session may offer after this reactor is gone: the observer owns what it touches.
@@ -879,22 +902,25 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
       }
       state->changed.notify_all();
     });
-    if (!service_.begin_job()) {
-      session_.reset();
-      stream_->writer().finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
-      return;
-    }
     session_->subscribe(stream_, session_->version());
     try {
       player_ = std::thread([this] {
+        {  // not before player_ is set: the stream may end with it, and OnDone joins player_
+          std::unique_lock lock(state_->mutex);
+          state_->changed.wait(lock, [&] { return state_->playing; });
+        }
         const grpc::Status status = play();
         service_.end_job();
         stream_->writer().finish(status, /*flush=*/true);
       });
+      std::lock_guard lock(state_->mutex);
+      state_->playing = true;
+      state_->changed.notify_all();
     } catch (const std::system_error& e) {
       service_.end_job();
-      stream_->writer().finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+      status = {grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()};
     }
+    end_start(started, stream, status);
   }
 
   std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
@@ -946,7 +972,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
   FiligreeService& service_;
   v1::PlayClipRequest request_;  // set once, in the constructor
   const std::uint64_t driver_;
-  StreamStart start_;
+  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
   std::shared_ptr<FrameStream<PlayClipReactor>> stream_;
   std::shared_ptr<Session> session_;
   const AnimationClip* clip_ = nullptr;  // owned by the session's rig
@@ -954,6 +980,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
     std::mutex mutex;
     std::condition_variable changed;
     bool ended = false;       // cancelled, done, or the session's streams closed
+    bool playing = false;     // player_ is set
     std::uint64_t shown = 0;  // the newest sample a frame includes
     void end() {
       std::lock_guard lock(mutex);
