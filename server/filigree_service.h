@@ -53,7 +53,7 @@ class FiligreeService final : public FiligreeServiceBase {
   FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits);
   ~FiligreeService() override;
 
-  // Refuses new uploads and waits for running ones to finish.
+  // Refuses new background work (uploads, session loads) and waits for what runs to finish.
   void drain();
 
   grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* CreateSession(
@@ -88,7 +88,8 @@ class FiligreeService final : public FiligreeServiceBase {
   SessionRegistry& registry() { return registry_; }
   HierarchyCache& cache() { return cache_; }
   const ServiceLimits& limits() const { return limits_; }
-  // Background uploads: counted so drain() can wait for them.
+  // Work off gRPC's threads (uploads, session loads, a first finite T,
+  // clips): counted so drain() can wait for it.
   bool begin_job();
   void end_job();
   // Preprocessing turns (limits().preprocessing_slots at once): held while
@@ -158,8 +159,8 @@ class FiligreeService final : public FiligreeServiceBase {
   int jobs_ = 0;
   unsigned preprocessing_ = 0;  // uploads preprocessing now
   std::condition_variable load_free_;
-  unsigned loads_ = 0;              // sessions loading now
-  std::size_t loads_waiting_ = 0;   // calls waiting for a turn
+  unsigned loads_ = 0;             // sessions loading now
+  std::size_t loads_waiting_ = 0;  // calls waiting for a turn
   bool draining_ = false;
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key
