@@ -123,6 +123,7 @@ class SessionLoading : public ::testing::Test {
   void TearDown() override {
     gated_->open_gate();  // a failed test must not leave a load waiting
     if (server_) server_->Shutdown();
+    EXPECT_TRUE(wait_for_calls()) << "a call outlived the server";
     server_.reset();
     service_.reset();
     registry_.reset();
@@ -141,7 +142,11 @@ class SessionLoading : public ::testing::Test {
   virtual unsigned session_loads() const { return 64; }
   std::string editor_token(const std::string& id) { return files_->load(id)->editor_token; }
 
-  void start_join(PendingJoin& call, const std::string& id) {
+  // Starts a JoinSession of session `id`; the fixture keeps the call until
+  // it is answered, even past a failed test's end.
+  void start_join(const std::string& id) {
+    calls_.push_back(std::make_unique<PendingJoin>());
+    PendingJoin& call = *calls_.back();
     call.request.set_session_id(id);
     call.context.AddMetadata("x-filigree-token", editor_token(id));
     stub_->async()->JoinSession(&call.context, &call.request, &call.response, [this, &call](grpc::Status status) {
@@ -152,15 +157,21 @@ class SessionLoading : public ::testing::Test {
     });
   }
 
-  // Waits for every call and checks each joined its session.
-  void expect_joined(const std::vector<std::unique_ptr<PendingJoin>>& calls, const std::vector<std::string>& ids) {
+  // Whether every call started is answered within kPatience.
+  bool wait_for_calls() {
     std::unique_lock lock(calls_mutex_);
-    ASSERT_TRUE(calls_done_.wait_for(lock, kPatience, [&] {
-      return std::all_of(calls.begin(), calls.end(), [](const auto& call) { return call->done; });
-    })) << "a call was not answered";
-    for (std::size_t i = 0; i < calls.size(); ++i) {
-      EXPECT_TRUE(calls[i]->status.ok()) << calls[i]->status.error_message();
-      EXPECT_EQ(calls[i]->response.session_id(), ids[i]);
+    return calls_done_.wait_for(lock, kPatience, [&] {
+      return std::all_of(calls_.begin(), calls_.end(), [](const auto& call) { return call->done; });
+    });
+  }
+  // Waits for every call and checks call i joined session ids[i].
+  void expect_joined(const std::vector<std::string>& ids) {
+    ASSERT_TRUE(wait_for_calls()) << "a call was not answered";
+    std::lock_guard lock(calls_mutex_);
+    ASSERT_EQ(calls_.size(), ids.size());
+    for (std::size_t i = 0; i < calls_.size(); ++i) {
+      EXPECT_TRUE(calls_[i]->status.ok()) << calls_[i]->status.error_message();
+      EXPECT_EQ(calls_[i]->response.session_id(), ids[i]);
     }
   }
 
@@ -174,6 +185,7 @@ class SessionLoading : public ::testing::Test {
   std::unique_ptr<v1::Filigree::Stub> stub_;
   std::mutex calls_mutex_;
   std::condition_variable calls_done_;
+  std::vector<std::unique_ptr<PendingJoin>> calls_;  // calls_mutex_ guards their results
 };
 
 TEST_F(SessionLoading, LoadsHeldUpDoNotStopCallsOnSessionsInMemory) {
@@ -188,11 +200,7 @@ TEST_F(SessionLoading, LoadsHeldUpDoNotStopCallsOnSessionsInMemory) {
   ASSERT_TRUE(registry_->find(in_memory));  // loaded again while the gate is open
 
   gated_->close_gate();
-  std::vector<std::unique_ptr<PendingJoin>> calls;
-  for (const std::string& id : evicted) {
-    calls.push_back(std::make_unique<PendingJoin>());
-    start_join(*calls.back(), id);
-  }
+  for (const std::string& id : evicted) start_join(id);
   ASSERT_TRUE(gated_->wait_for_waiting(held)) << "only " << gated_->waiting() << " of " << held
                                               << " loads reached the store: loads hold the server's call threads";
 
@@ -208,12 +216,12 @@ TEST_F(SessionLoading, LoadsHeldUpDoNotStopCallsOnSessionsInMemory) {
   EXPECT_EQ(info.session_id(), in_memory);
   {
     std::lock_guard lock(calls_mutex_);
-    for (const auto& call : calls) EXPECT_FALSE(call->done) << "a load finished through a closed gate";
+    for (const auto& call : calls_) EXPECT_FALSE(call->done) << "a load finished through a closed gate";
   }
 
   // The held-up loads finish once the store answers, each with its session.
   gated_->open_gate();
-  expect_joined(calls, evicted);
+  expect_joined(evicted);
   EXPECT_EQ(registry_->loaded().size(), held + 1);
 }
 
@@ -278,11 +286,7 @@ TEST_F(OneLoadAtATime, MoreLoadsWaitTheirTurnOffTheCallThreads) {
   for (int i = 0; i < 3; ++i) evicted.push_back(create_session());
   registry_->evict_idle_until([] { return false; });
   gated_->close_gate();
-  std::vector<std::unique_ptr<PendingJoin>> calls;
-  for (const std::string& id : evicted) {
-    calls.push_back(std::make_unique<PendingJoin>());
-    start_join(*calls.back(), id);
-  }
+  for (const std::string& id : evicted) start_join(id);
   ASSERT_TRUE(gated_->wait_for_waiting(1));
   // The other two wait for a turn (a spin on what the service counts, under a deadline: nothing here sleeps).
   const auto deadline = std::chrono::steady_clock::now() + kPatience;
@@ -291,7 +295,7 @@ TEST_F(OneLoadAtATime, MoreLoadsWaitTheirTurnOffTheCallThreads) {
   EXPECT_EQ(gated_->waiting(), 1u);  // the turn holder is the only load at the store
 
   gated_->open_gate();
-  expect_joined(calls, evicted);
+  expect_joined(evicted);
 }
 
 }  // namespace
