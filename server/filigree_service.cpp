@@ -103,14 +103,7 @@ void FiligreeService::with_session(grpc::CallbackServerContext& context, const s
     std::thread([this, &context, id, needed, next]() mutable {
       // A turn: a failover or a restart's first requests must not load every
       // session at once (each load's memory, all of them slowed alike).
-      const unsigned turns = limits_.session_loads ? limits_.session_loads : std::max(1u, std::thread::hardware_concurrency());
-      {
-        std::unique_lock lock(jobs_mutex_);
-        ++loads_waiting_;
-        load_free_.wait(lock, [&] { return loads_ < turns; });
-        --loads_waiting_;
-        ++loads_;
-      }
+      loads_.acquire();
       std::shared_ptr<Session> s;
       grpc::Status status;
       try {
@@ -118,11 +111,7 @@ void FiligreeService::with_session(grpc::CallbackServerContext& context, const s
       } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
         status = {grpc::StatusCode::INTERNAL, std::string("loading the session failed: ") + e.what()};
       }
-      {
-        std::lock_guard lock(jobs_mutex_);
-        --loads_;
-        load_free_.notify_one();
-      }
+      loads_.release();
       (*next)(status, std::move(s));
       next.reset();  // what it holds may need the service: release it while the service surely exists
       end_job();     // the last touch of the service: drain() waits for it
@@ -151,7 +140,8 @@ grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServer
 }
 
 FiligreeService::FiligreeService(SessionRegistry& registry, HierarchyCache& cache, ServiceLimits limits)
-    : registry_(registry), cache_(cache), limits_(limits) {}
+    : registry_(registry), cache_(cache), limits_(limits), preprocessing_(limits.preprocessing_slots),
+      loads_(limits.session_loads ? limits.session_loads : std::thread::hardware_concurrency()) {}
 
 FiligreeService::~FiligreeService() { drain(); }
 
@@ -251,22 +241,11 @@ void FiligreeService::end_job() {
   if (--jobs_ == 0) jobs_done_.notify_all();
 }
 
-void FiligreeService::acquire_preprocessing() {
-  std::unique_lock lock(jobs_mutex_);
-  preprocessing_free_.wait(lock, [&] { return preprocessing_ < std::max(1u, limits_.preprocessing_slots); });
-  ++preprocessing_;
-}
+void FiligreeService::acquire_preprocessing() { preprocessing_.acquire(); }
 
-std::size_t FiligreeService::loads_waiting() const {
-  std::lock_guard lock(jobs_mutex_);
-  return loads_waiting_;
-}
+void FiligreeService::release_preprocessing() { preprocessing_.release(); }
 
-void FiligreeService::release_preprocessing() {
-  std::lock_guard lock(jobs_mutex_);
-  --preprocessing_;
-  preprocessing_free_.notify_one();
-}
+std::size_t FiligreeService::loads_waiting() const { return loads_.waiting(); }
 
 grpc::Status FiligreeService::admit_memory() {
   if (limits_.max_memory_bytes == 0) return grpc::Status::OK;
@@ -693,6 +672,16 @@ class StreamStart {
   bool starting_ = false, cancelled_ = false;
 };
 
+// A stream's status once its session is there: CANCELLED if a cancel came
+// meanwhile, else authorize()'s answer, else the session's stream limits
+// (open_stream; *slot then holds the stream's place).
+grpc::Status admit_stream(StreamStart& start, FiligreeService& service, const grpc::Status& authorized,
+                          const std::shared_ptr<Session>& s, std::shared_ptr<void>* slot) {
+  if (start.cancelled()) return grpc::Status::CANCELLED;
+  if (!authorized.ok()) return authorized;
+  return service.open_stream(*s, slot);
+}
+
 // A stream's start's last step: the stream ends with `status` if it is not
 // OK, or as cancelled if a cancel came while it started. Touches only what it
 // is given (the reactor may be gone once `start` ends; a finished writer
@@ -755,8 +744,7 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
   void start(grpc::Status status, std::shared_ptr<Session> s) {
     const auto started = start_;
     const auto stream = stream_;  // this reactor may end once the start does
-    if (started->cancelled()) status = grpc::Status::CANCELLED;
-    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    status = admit_stream(*started, service_, status, s, &stream_slot_);
     if (status.ok()) {
       session_ = std::move(s);
       stream_->set_format(request_.frame_format());
@@ -827,8 +815,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   void start(grpc::Status status, std::shared_ptr<Session> s) {
     const auto started = start_;
     const auto stream = stream_;  // this reactor may end once the start does
-    if (started->cancelled()) status = grpc::Status::CANCELLED;
-    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    status = admit_stream(*started, service_, status, s, &stream_slot_);
     if (status.ok()) {
       session_ = std::move(s);
       stream_->set_format(request_.frame_format());
@@ -880,8 +867,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
   void start(grpc::Status status, std::shared_ptr<Session> s) {
     const auto started = start_;
     const auto stream = stream_;  // this reactor may end once the start does
-    if (started->cancelled()) status = grpc::Status::CANCELLED;
-    if (status.ok()) status = service_.open_stream(*s, &stream_slot_);
+    status = admit_stream(*started, service_, status, s, &stream_slot_);
     if (status.ok()) {
       session_ = std::move(s);
       status = check();

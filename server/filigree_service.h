@@ -17,6 +17,7 @@
 #include "server/hierarchy_cache.h"
 #include "server/session_registry.h"
 #include "server/slot_counter.h"
+#include "server/turns.h"
 
 namespace filigree::server {
 
@@ -154,13 +155,11 @@ class FiligreeService final : public FiligreeServiceBase {
   mutable std::mutex keys_mutex_;
   std::shared_ptr<const ApiKeys> keys_;
   ApiKeyLedger ledger_;
-  mutable std::mutex jobs_mutex_;
-  std::condition_variable jobs_done_, preprocessing_free_;
+  std::mutex jobs_mutex_;
+  std::condition_variable jobs_done_;
   int jobs_ = 0;
-  unsigned preprocessing_ = 0;  // uploads preprocessing now
-  std::condition_variable load_free_;
-  unsigned loads_ = 0;             // sessions loading now
-  std::size_t loads_waiting_ = 0;  // calls waiting for a turn
+  Turns preprocessing_;  // limits_.preprocessing_slots
+  Turns loads_;          // limits_.session_loads, or one per core
   bool draining_ = false;
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key

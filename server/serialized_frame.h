@@ -26,10 +26,10 @@ namespace filigree::server {
 class SerializedFrame {
  public:
   // Serializes `frame` into a buffer taken from `pool` (null: a pool of its
-  // own). The buffer goes back
-  // to the pool once this object and every ByteBuffer made from it are gone
-  // (gRPC may hold one after a stream has ended). Throws std::runtime_error
-  // if the frame cannot be serialized (over 2 GiB).
+  // own). The buffer goes back to the pool once this object and every
+  // ByteBuffer made from it are gone (gRPC may hold one after a stream has
+  // ended). Throws std::runtime_error if the frame cannot be serialized
+  // (over 2 GiB).
   SerializedFrame(const v1::Frame& frame, std::shared_ptr<BufferPool<char>> pool);
 
   // What one stream writes: the frame itself (pose_id 0), or the frame with

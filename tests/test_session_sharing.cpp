@@ -235,6 +235,9 @@ TEST_F(SessionSharing, AFrameGoesFirstToTheDriverWhosePoseItAnswers) {
   const std::vector<std::uint32_t> index{0};
   const std::vector<float> moved{0.3f, 0.2f, -0.1f};
   s->submit({7, "editor", 1, false}, index, moved);
+  // Both watchers offered: every offer is in the log (the driver's, if it
+  // came last, may not be, and the check below then fails).
+  first_watcher->wait_past(before);
   last_watcher->wait_past(before);
   std::lock_guard lock(order_mutex);
   ASSERT_GE(order.size(), 3u);
