@@ -22,8 +22,13 @@
 // Usage: filigree_bench_service [server-binary] [--format single|chunked]
 //        [--quick] (the quick run skips the ≥ 1M mesh and the 16 sessions)
 //        [--large] (only the ≥ 1M mesh's single-watcher drives: for profiling)
+//        [--against OTHER-SERVER [--rounds N] [--mesh small|medium|large]]
+//        (before/after: both servers, one mesh, the single-watcher whole-body
+//        drive alternating between them N times, so that a drift of the
+//        machine's speed falls on both; prints each round and the medians)
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -284,12 +289,89 @@ std::vector<double> run_many(v1::Filigree::Stub& stub, const std::string& bytes,
   return fps;
 }
 
+// --against: `a` and `b` alternate on one mesh, `rounds` times each (one
+// server idle while the other is driven), and print each round and the
+// medians of both with b's over a's.
+int compare_servers(const std::string& a, const std::string& b, const std::string& which, int rounds) {
+  const std::string repo = FILIGREE_REPO_DATA_DIR, shared = FILIGREE_SHARED_DATA_DIR;
+  RepairReport report;
+  TriMesh mesh;
+  if (which == "small") {
+    mesh = std::filesystem::exists(shared + "/camel.off") ? repair_mesh(read_mesh(shared + "/camel.off"), {}, &report)
+                                                          : repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report);
+  } else if (which == "medium") {
+    mesh = std::filesystem::exists(shared + "/bunny.off")
+               ? bench::subdivide(repair_mesh(read_mesh(shared + "/bunny.off"), {}, &report), 1, 0)
+               : bench::subdivide(repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report), 1, 0);
+  } else if (which == "large") {
+    const TriMesh large = bench::subdivide(repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report), 2, 1);
+    mesh = permute_vertices(large, locality_order(large.positions));
+  } else {
+    throw std::invalid_argument("--mesh must be small, medium or large, got " + which);
+  }
+  const std::string bytes = obj_bytes(mesh);
+  const int poses = mesh.vertex_count() > 500000 ? 60 : 300;
+  struct Side {
+    std::string binary;
+    std::filesystem::path data;
+    std::unique_ptr<test::ServerProcess> server;
+    std::unique_ptr<v1::Filigree::Stub> stub;
+    v1::CreateSessionResponse::Created created;
+    std::vector<double> encode, compute, ratio, p50;
+  };
+  std::array<Side, 2> sides;
+  for (int k = 0; k < 2; ++k) {
+    Side& s = sides[static_cast<std::size_t>(k)];
+    s.binary = k == 0 ? a : b;
+    s.data = std::filesystem::temp_directory_path() / ("filigree_bench_ab_" + std::to_string(::getpid()) + "_" + std::to_string(k));
+    s.server = std::make_unique<test::ServerProcess>(s.binary, std::vector<std::string>{"--data-dir", s.data.string(), "--max-message-mib", "256"});
+    s.stub = v1::Filigree::NewStub(
+        grpc::CreateCustomChannel(s.server->address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()));
+    s.created = upload(*s.stub, bytes);
+  }
+  std::printf("# Before/after: %zu vertices, whole body, 1 watcher, %d poses a round\n\n"
+              "| round | server | compute p50 ms | encode p50 ms | encode / compute | p50 ms |\n|---:|---|---:|---:|---:|---:|\n",
+              mesh.vertex_count(), poses);
+  for (int r = 0; r < rounds; ++r)
+    for (int i = 0; i < 2; ++i) {
+      // Each round starts with the other server, so neither always runs first.
+      Side& s = sides[static_cast<std::size_t>((r + i) % 2)];
+      const Result res = run(*s.stub, s.created, 1, poses);
+      s.encode.push_back(res.encode_p50), s.compute.push_back(res.compute_p50), s.p50.push_back(res.p50);
+      s.ratio.push_back(res.encode_p50 / res.compute_p50);
+      std::printf("| %d | %s | %.3f | %.3f | %.3f | %.3f |\n", r + 1, (r + i) % 2 == 0 ? "a" : "b", res.compute_p50, res.encode_p50,
+                  s.ratio.back(), res.p50);
+      std::fflush(stdout);
+    }
+  std::printf("\n| medians | compute p50 ms | encode p50 ms | encode / compute | p50 ms |\n|---|---:|---:|---:|---:|\n");
+  for (int k = 0; k < 2; ++k) {
+    Side& s = sides[static_cast<std::size_t>(k)];
+    std::printf("| %s: %s | %.3f | %.3f | %.3f | %.3f |\n", k == 0 ? "a" : "b", s.binary.c_str(), percentile(s.compute, 0.5),
+                percentile(s.encode, 0.5), percentile(s.ratio, 0.5), percentile(s.p50, 0.5));
+  }
+  const auto over = [&](std::vector<double> Side::*v) { return percentile(sides[1].*v, 0.5) / percentile(sides[0].*v, 0.5); };
+  std::printf("| b / a | %.3f | %.3f | %.3f | %.3f |\n", over(&Side::compute), over(&Side::encode), over(&Side::ratio), over(&Side::p50));
+  for (Side& s : sides) {
+    s.server->terminate();
+    std::filesystem::remove_all(s.data);
+  }
+  return 0;
+}
+
 int main_impl(int argc, char** argv) {
   std::string server_binary = FILIGREE_SERVER_BINARY;
   bool quick = false, large_only = false;
+  std::string against, which = "medium";
+  int rounds = 5;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--format" && i + 1 < argc) {
+    if (a == "--against" && i + 1 < argc) {
+      against = argv[++i];
+    } else if (a == "--rounds" && i + 1 < argc) {
+      rounds = std::max(1, std::stoi(argv[++i]));
+    } else if (a == "--mesh" && i + 1 < argc) {
+      which = argv[++i];
+    } else if (a == "--format" && i + 1 < argc) {
       g_format = std::string(argv[++i]) == "single" ? v1::FRAME_FORMAT_SINGLE : v1::FRAME_FORMAT_CHUNKED;
     } else if (a == "--quick") {
       quick = true;
@@ -299,6 +381,7 @@ int main_impl(int argc, char** argv) {
       server_binary = a;
     }
   }
+  if (!against.empty()) return compare_servers(server_binary, against, which, rounds);
   const std::string repo = FILIGREE_REPO_DATA_DIR;
   const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_data_" + std::to_string(::getpid()));
   test::ServerProcess server(server_binary, {"--data-dir", data_dir.string(), "--max-message-mib", "256"});
