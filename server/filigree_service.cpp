@@ -525,8 +525,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 // ------------------------------------------------------------ Drive, Watch
 
 // The streaming methods are raw (their frames go out serialized once, see
-// serialized_frame.h), so their requests are parsed here; a request that is
-// not a valid message is the caller's error.
+// serialized_frame.h), and so are JoinSession and SetOptions (their meshes,
+// session_info_wire.h), so their requests are parsed here; a request that
+// is not a valid message is the caller's error.
 template <class Message>
 grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   grpc::ByteBuffer copy(bytes);  // Deserialize consumes its buffer (a copy shares the slices)
@@ -1001,10 +1002,16 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::Callbac
 
 // ------------------------------------------------------------ unary calls
 
-grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context,
-                                                       const v1::JoinSessionRequest* request, v1::SessionInfo* response) {
-  return unary_on_session(context, request->session_id(), Role::kViewer, [response](Session& s) {
-    *response = s.info();
+grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                                       grpc::ByteBuffer* response) {
+  v1::JoinSessionRequest r;
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) {
+    auto* reactor = context->DefaultReactor();
+    reactor->Finish(parsed);
+    return reactor;
+  }
+  return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
+    *response = s.info_wire();
     return grpc::Status::OK;
   });
 }
@@ -1063,13 +1070,12 @@ grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext*
 
 namespace {
 
-grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, v1::SessionInfo* response) {
+grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, grpc::ByteBuffer* response) {
   try {
     const std::uint64_t accepted = s.set_threshold(threshold, whole_mesh);
-    *response = s.info();
     // Not the current frame's version: a frame may have been published since
     // the change, and a client waiting for a frame after it would wait forever.
-    response->set_version(accepted);
+    *response = s.info_wire(accepted);
   } catch (const StoreUnavailable& e) {
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
   } catch (const HierarchyError& e) {
@@ -1085,9 +1091,14 @@ grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, v1::Se
 
 }  // namespace
 
-grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context,
-                                                      const v1::SetOptionsRequest* request, v1::SessionInfo* response) {
+grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
+                                                      grpc::ByteBuffer* response) {
   auto* reactor = context->DefaultReactor();
+  auto request = std::make_shared<v1::SetOptionsRequest>();
+  if (const grpc::Status parsed = parse_request(*request_bytes, *request); !parsed.ok()) {
+    reactor->Finish(parsed);
+    return reactor;
+  }
   with_session(*context, request->session_id(), Role::kEditor,
                [this, reactor, request, response](grpc::Status status, std::shared_ptr<Session> s) {
     if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))

@@ -41,12 +41,14 @@ struct ServiceLimits {
 // Every method on the callback API (v1::Filigree::CallbackService, spelled
 // out: a method left out here would be a synchronous one). The frame streams
 // (Drive, Watch, PlayClip) are raw methods: each frame is serialized once
-// and its bytes written by every stream (serialized_frame.h).
+// and its bytes written by every stream (serialized_frame.h); so are the
+// answers with a SessionInfo (JoinSession, SetOptions), whose meshes are
+// serialized once per mesh (session_info_wire.h).
 using rpc = v1::Filigree;
-using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithCallbackMethod_JoinSession<
+using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCallbackMethod_JoinSession<
     rpc::WithRawCallbackMethod_Drive<rpc::WithCallbackMethod_SubmitPose<rpc::WithCallbackMethod_SetHandles<
         rpc::WithCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithCallbackMethod_GetState<
-            rpc::WithCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
+            rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<rpc::Service>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
@@ -59,8 +61,10 @@ class FiligreeService final : public FiligreeServiceBase {
 
   grpc::ServerBidiReactor<v1::CreateSessionRequest, v1::CreateSessionResponse>* CreateSession(
       grpc::CallbackServerContext* context) override;
-  grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const v1::JoinSessionRequest* request,
-                                        v1::SessionInfo* response) override;
+  // Request: a JoinSessionRequest; answer: a SessionInfo whose meshes are
+  // serialized once per mesh (session_info_wire.h).
+  grpc::ServerUnaryReactor* JoinSession(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                        grpc::ByteBuffer* response) override;
   // Requests: a DriveRequest per message; frames out.
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Drive(grpc::CallbackServerContext* context) override;
   // Request: a PlayClipRequest; frames out.
@@ -77,8 +81,9 @@ class FiligreeService final : public FiligreeServiceBase {
                                                     const grpc::ByteBuffer* request) override;
   grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,
                                      v1::SessionState* response) override;
-  grpc::ServerUnaryReactor* SetOptions(grpc::CallbackServerContext* context, const v1::SetOptionsRequest* request,
-                                       v1::SessionInfo* response) override;
+  // Request: a SetOptionsRequest; answer: a SessionInfo, as JoinSession's.
+  grpc::ServerUnaryReactor* SetOptions(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                       grpc::ByteBuffer* response) override;
   grpc::ServerUnaryReactor* CloseSession(grpc::CallbackServerContext* context, const v1::CloseSessionRequest* request,
                                          v1::CloseSessionResponse* response) override;
   grpc::ServerUnaryReactor* LocateSession(grpc::CallbackServerContext* context, const v1::LocateSessionRequest* request,

@@ -21,6 +21,7 @@
 #include "runtime/handle_solver.h"
 #include "runtime/pose.h"
 #include "server/secret.h"
+#include "server/session_info_wire.h"
 #include "server/state/session_store.h"
 #include "skinning/animation_clip.h"
 #include "skinning/rig_file.h"
@@ -988,17 +989,31 @@ v1::Overlays Session::overlays() {
 }
 
 v1::SessionInfo Session::info() const {
+  // The meshes are immutable: built and copied outside the session's lock.
+  v1::SessionInfo info = own_info();
+  *info.mutable_base() = assets_->base;
+  *info.mutable_rest() = rest_mesh_message(assets_->hierarchy());
+  info.mutable_rest()->mutable_uploaded_ids()->Add(record_.uploaded_ids.begin(), record_.uploaded_ids.end());
+  return info;
+}
+
+v1::SessionInfo Session::own_info() const {
   v1::SessionInfo info;
   std::lock_guard lock(mutex_);
   info.set_session_id(record_.id);
   info.set_mesh_hash(record_.hierarchy_key.substr(0, 16));
-  *info.mutable_base() = assets_->base;
-  *info.mutable_rest() = assets_->rest;
-  info.mutable_rest()->mutable_uploaded_ids()->Add(record_.uploaded_ids.begin(), record_.uploaded_ids.end());
   *info.mutable_options() = record_.options;
   info.set_version(record_.version);
   if (rig_) *info.mutable_skeleton() = skeleton_info_;
   return info;
+}
+
+grpc::ByteBuffer Session::info_wire(std::optional<std::uint64_t> version) const {
+  v1::SessionInfo own = own_info();
+  if (version) own.set_version(*version);
+  // The ids never change after the session is made (record_.uploaded_ids is written only then).
+  std::call_once(ids_wire_once_, [this] { ids_wire_ = uploaded_ids_field(record_.uploaded_ids); });
+  return session_info_wire(own, *assets_->info_wire, ids_wire_);
 }
 
 void Session::describe(v1::ListSessionsResponse::Entry& entry) const {
@@ -1006,7 +1021,7 @@ void Session::describe(v1::ListSessionsResponse::Entry& entry) const {
     std::lock_guard lock(mutex_);
     entry.set_session_id(record_.id);
     entry.set_mesh_hash(record_.hierarchy_key.substr(0, 16));
-    entry.set_vertex_count(assets_->rest.vertex_count());
+    entry.set_vertex_count(static_cast<std::uint32_t>(assets_->hierarchy().vertex_count()));
     entry.set_base_vertex_count(static_cast<std::uint32_t>(assets_->base.original_ids_size()));
     entry.set_version(record_.version);
   }

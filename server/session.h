@@ -184,9 +184,13 @@ class Session {
   // The overlays of the latest frame; asking keeps them built for 5 s.
   v1::Overlays overlays();
 
+  // The whole SessionInfo as a message: builds the rest mesh (36+ bytes per
+  // vertex), for the one answer that is no raw method (CreateSession's).
   v1::SessionInfo info() const;
-  // Its ListSessions entry: ids, counts, version, streams; no mesh copied
-  // (info() copies the base and rest meshes, 36+ bytes per vertex).
+  // The same as wire bytes (session_info_wire.h), the mesh's shared;
+  // `version` replaces the current version when given (SetOptions).
+  grpc::ByteBuffer info_wire(std::optional<std::uint64_t> version = std::nullopt) const;
+  // Its ListSessions entry: ids, counts, version, streams; no mesh copied.
   void describe(v1::ListSessionsResponse::Entry& entry) const;
   // The merged pose and the current frame in `format` (with its keyframe
   // when chunked and sparse).
@@ -211,6 +215,8 @@ class Session {
 
  private:
   [[noreturn]] void throw_evicted() const;  // mutex_ held
+  // info()'s fields but the meshes (base, rest).
+  v1::SessionInfo own_info() const;
   // Handles not yet solved into record_.pose (mutex_ held).
   bool handles_pending_locked() const { return handles_dirty_ || handles_solving_; }
   // A frame between compute and publication.
@@ -273,6 +279,9 @@ class Session {
   std::uint64_t in_flight_locked() const { return assigned_version_ - record_.version; }
 
   const std::shared_ptr<const SessionAssets> assets_;  // shared by every session of the mesh
+  // record_.uploaded_ids as RestMesh wire bytes, made by the first info_wire().
+  mutable std::once_flag ids_wire_once_;
+  mutable grpc::Slice ids_wire_;
   // The base mesh's rig and the joint state skeletal poses merge into; null
   // without a skinned upload. skeleton_mutex_ orders skeletal poses (taken
   // before mutex_, never after).

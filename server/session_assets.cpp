@@ -5,6 +5,7 @@
 #include "codec/frame_encoder.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/deformer_model.h"
+#include "server/session_info_wire.h"
 
 namespace filigree::server {
 namespace {
@@ -31,13 +32,7 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   for (const Triangle& f : base.faces)
     for (Index v : f) a->base.add_faces(v);
   for (Index v : h.base_vertices) a->base.add_original_ids(v);
-  a->rest.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
-  a->rest.mutable_positions()->Reserve(static_cast<int>(3 * h.vertex_count()));
-  for (const Vec3& p : h.rest_positions)
-    for (int k = 0; k < 3; ++k) a->rest.add_positions(static_cast<float>(p[k]));
-  a->rest.mutable_faces()->Reserve(static_cast<int>(3 * h.original_face_count()));
-  for (const Triangle& f : h.original_faces)
-    for (Index v : f) a->rest.add_faces(v);
+  a->info_wire = std::make_shared<const MeshWire>(a->base, rest_mesh_message(h));
   a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
   // Frames: a few in flight at once. Staging: two frames' chunks, enough for
   // one encoding while the next frame quantizes.
@@ -50,6 +45,18 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
 }
 
 }  // namespace
+
+v1::RestMesh rest_mesh_message(const Hierarchy& h) {
+  v1::RestMesh rest;
+  rest.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
+  rest.mutable_positions()->Reserve(static_cast<int>(3 * h.vertex_count()));
+  for (const Vec3& p : h.rest_positions)
+    for (int k = 0; k < 3; ++k) rest.add_positions(static_cast<float>(p[k]));
+  rest.mutable_faces()->Reserve(static_cast<int>(3 * h.original_face_count()));
+  for (const Triangle& f : h.original_faces)
+    for (Index v : f) rest.add_faces(v);
+  return rest;
+}
 
 const Hierarchy& SessionAssets::hierarchy() const { return model->hierarchy(); }
 

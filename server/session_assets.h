@@ -21,10 +21,18 @@ class DeformerModel;
 
 namespace filigree::server {
 
+class MeshWire;
+
+// The rest mesh as clients receive it: positions (float) and faces, in
+// original order, without uploaded_ids.
+v1::RestMesh rest_mesh_message(const Hierarchy& h);
+
 struct SessionAssets {
   std::shared_ptr<const DeformerModel> model;
   v1::BaseMesh base;
-  v1::RestMesh rest;  // positions and faces; a session adds its upload's ids when it answers
+  // SessionInfo's base and rest (positions and faces) as wire bytes; a
+  // session adds its upload's ids when it answers.
+  std::shared_ptr<const MeshWire> info_wire;
   double rest_diagonal = 1.0;
   // Vertices per frame chunk, the same for every session of the mesh (see
   // chunk_vertices_for in session_assets.cpp).

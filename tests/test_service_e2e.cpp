@@ -446,8 +446,8 @@ TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
 }
 
 // The frame streams are raw methods (the server parses their requests
-// itself): bytes that are no request message are refused as such, and the
-// session keeps answering good poses.
+// itself), and so are JoinSession and SetOptions: bytes that are no request
+// message are refused as such, and the session keeps answering good poses.
 TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
   const Created c = upload(file_bytes(kBunny), "obj");
   ASSERT_TRUE(c.status.ok());
@@ -482,7 +482,9 @@ TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
   const std::string garbage("\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff\xff", 11);  // a tag whose varint never ends
   for (const auto& [method, type] : {std::pair<std::string, std::string>{"Drive", "filigree.v1.DriveRequest"},
                                      {"Watch", "filigree.v1.WatchRequest"},
-                                     {"PlayClip", "filigree.v1.PlayClipRequest"}}) {
+                                     {"PlayClip", "filigree.v1.PlayClipRequest"},
+                                     {"JoinSession", "filigree.v1.JoinSessionRequest"},
+                                     {"SetOptions", "filigree.v1.SetOptionsRequest"}}) {
     const grpc::Status status = call_with_bytes("/filigree.v1.Filigree/" + method, garbage);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << method << ": " << status.error_message();
     EXPECT_NE(status.error_message().find("not a valid " + type), std::string::npos) << status.error_message();

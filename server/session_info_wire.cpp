@@ -1,0 +1,82 @@
+#include "server/session_info_wire.h"
+
+#include <array>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace filigree::server {
+namespace {
+
+// Wire types and tags (protobuf encoding): SessionInfo.base = 3 and .rest =
+// 4, RestMesh.uploaded_ids = 4, all length-delimited.
+constexpr std::uint8_t kLengthDelimited = 2;
+constexpr std::uint8_t kBaseTag = (3 << 3) | kLengthDelimited;
+constexpr std::uint8_t kRestTag = (4 << 3) | kLengthDelimited;
+constexpr std::uint8_t kUploadedIdsTag = (4 << 3) | kLengthDelimited;
+
+void append_varint(std::string& out, std::uint64_t v) {
+  for (; v >= 0x80; v >>= 7) out.push_back(static_cast<char>(v | 0x80));
+  out.push_back(static_cast<char>(v));
+}
+
+void check_size(std::size_t bytes, const char* what) {
+  if (bytes > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw std::invalid_argument(std::string(what) + " of " + std::to_string(bytes) + " bytes is over protobuf's 2 GiB limit");
+}
+
+// A slice over `bytes`, which it owns until gRPC lets go of the last slice over them.
+grpc::Slice owned_slice(std::string bytes) {
+  if (bytes.empty()) return grpc::Slice();
+  auto* owned = new std::string(std::move(bytes));
+  return grpc::Slice(owned->data(), owned->size(), [](void* p) { delete static_cast<std::string*>(p); }, owned);
+}
+
+}  // namespace
+
+MeshWire::MeshWire(const v1::BaseMesh& base, const v1::RestMesh& rest) {
+  if (rest.uploaded_ids_size() > 0) throw std::invalid_argument("a mesh's shared rest must not carry a session's uploaded_ids");
+  const std::size_t base_size = base.ByteSizeLong(), rest_size = rest.ByteSizeLong();
+  check_size(base_size, "a base mesh");
+  check_size(rest_size, "a rest mesh");
+  std::string field(1, static_cast<char>(kBaseTag));
+  append_varint(field, base_size);
+  base.AppendToString(&field);
+  base_field_ = owned_slice(std::move(field));
+  std::string body;
+  body.reserve(rest_size);
+  rest.AppendToString(&body);
+  rest_body_ = owned_slice(std::move(body));
+}
+
+grpc::Slice uploaded_ids_field(std::span<const std::uint32_t> ids) {
+  if (ids.empty()) return grpc::Slice();
+  std::string packed;
+  packed.reserve(5 * ids.size());
+  for (const std::uint32_t id : ids) append_varint(packed, id);
+  std::string field(1, static_cast<char>(kUploadedIdsTag));
+  append_varint(field, packed.size());
+  field += packed;
+  check_size(field.size(), "uploaded ids");
+  return owned_slice(std::move(field));
+}
+
+grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& mesh, const grpc::Slice& ids) {
+  if (own.has_base() || own.has_rest()) throw std::invalid_argument("a session's own SessionInfo fields must leave base and rest to the mesh");
+  std::string head;
+  own.SerializeToString(&head);
+  const std::size_t rest_size = mesh.rest_body().size() + ids.size();
+  check_size(rest_size, "a rest mesh with its uploaded ids");
+  head.push_back(static_cast<char>(kRestTag));
+  append_varint(head, rest_size);
+  // Empty slices are left out: gRPC may not expect them.
+  std::array<grpc::Slice, 4> slices;
+  std::size_t n = 0;
+  slices[n++] = grpc::Slice(head);
+  for (const grpc::Slice* s : {&mesh.rest_body(), &ids, &mesh.base_field()})
+    if (s->size() > 0) slices[n++] = *s;
+  return grpc::ByteBuffer(slices.data(), n);
+}
+
+}  // namespace filigree::server
