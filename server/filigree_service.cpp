@@ -526,8 +526,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 
 // The streaming methods are raw (their frames go out serialized once, see
 // serialized_frame.h), and so are JoinSession and SetOptions (their meshes,
-// session_info_wire.h), so their requests are parsed here; a request that
-// is not a valid message is the caller's error.
+// session_info_wire.h) and GetState (its frames), so their requests are
+// parsed here; a request that is not a valid message is the caller's error.
 template <class Message>
 grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   grpc::ByteBuffer copy(bytes);  // Deserialize consumes its buffer (a copy shares the slices)
@@ -1056,11 +1056,17 @@ grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerConte
   });
 }
 
-grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context,
-                                                    const v1::GetStateRequest* request, v1::SessionState* response) {
-  return unary_on_session(context, request->session_id(), Role::kViewer, [request, response](Session& s) -> grpc::Status {
+grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                                    grpc::ByteBuffer* response) {
+  v1::GetStateRequest r;
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) {
+    auto* reactor = context->DefaultReactor();
+    reactor->Finish(parsed);
+    return reactor;
+  }
+  return unary_on_session(context, r.session_id(), Role::kViewer, [format = r.frame_format(), response](Session& s) -> grpc::Status {
     try {
-      *response = s.state(request->frame_format());
+      *response = s.state_wire(format);
     } catch (const std::exception& e) {
       return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }

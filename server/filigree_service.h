@@ -43,11 +43,12 @@ struct ServiceLimits {
 // (Drive, Watch, PlayClip) are raw methods: each frame is serialized once
 // and its bytes written by every stream (serialized_frame.h); so are the
 // answers with a SessionInfo (JoinSession, SetOptions), whose meshes are
-// serialized once per mesh (session_info_wire.h).
+// serialized once per mesh (session_info_wire.h), and GetState's, which
+// shares the frames' bytes.
 using rpc = v1::Filigree;
 using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCallbackMethod_JoinSession<
     rpc::WithRawCallbackMethod_Drive<rpc::WithCallbackMethod_SubmitPose<rpc::WithCallbackMethod_SetHandles<
-        rpc::WithCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithCallbackMethod_GetState<
+        rpc::WithCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<rpc::Service>>>>>>>>>>>>>;
 
@@ -79,8 +80,10 @@ class FiligreeService final : public FiligreeServiceBase {
   // Request: a WatchRequest; frames out.
   grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
                                                     const grpc::ByteBuffer* request) override;
-  grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const v1::GetStateRequest* request,
-                                     v1::SessionState* response) override;
+  // Request: a GetStateRequest; answer: a SessionState whose frames are the
+  // bytes the streams send (serialized_frame.h).
+  grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                     grpc::ByteBuffer* response) override;
   // Request: a SetOptionsRequest; answer: a SessionInfo, as JoinSession's.
   grpc::ServerUnaryReactor* SetOptions(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                        grpc::ByteBuffer* response) override;

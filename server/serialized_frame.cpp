@@ -55,6 +55,23 @@ grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id) const {
   return grpc::ByteBuffer(slices.data(), slices.size());
 }
 
+grpc::ByteBuffer message_with_frames(std::string head, std::initializer_list<FrameField> frames) {
+  std::vector<grpc::Slice> slices;
+  const auto append_varint = [](std::string& out, std::uint64_t v) {
+    for (; v >= 0x80; v >>= 7) out.push_back(static_cast<char>(v | 0x80));
+    out.push_back(static_cast<char>(v));
+  };
+  for (const FrameField& f : frames) {
+    append_varint(head, std::uint64_t{f.number} << 3 | 2);  // length-delimited
+    append_varint(head, f.frame->size());
+    slices.emplace_back(head);
+    head.clear();
+    if (f.frame->size() > 0) slices.push_back(f.frame->bytes());  // an empty one adds nothing
+  }
+  if (!head.empty() || slices.empty()) slices.emplace_back(head);
+  return grpc::ByteBuffer(slices.data(), slices.size());
+}
+
 const SerializedFrame& LazySerializedFrame::get(const v1::Frame& frame, const std::shared_ptr<BufferPool<char>>& pool) const {
   std::lock_guard lock(mutex_);
   if (!value_) value_.emplace(frame, pool);

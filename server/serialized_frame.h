@@ -11,6 +11,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <initializer_list>
+#include <string>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -36,10 +38,24 @@ class SerializedFrame {
   // its pose_id field set to `pose_id`. Shares the serialized bytes.
   grpc::ByteBuffer for_stream(std::uint64_t pose_id) const;
   std::size_t size() const { return body_.size(); }
+  const grpc::Slice& bytes() const { return body_; }
 
  private:
   grpc::Slice body_;
 };
+
+// A frame embedded in an answer as a message field (SessionState.frame,
+// .keyframe): its field number and its bytes.
+struct FrameField {
+  std::uint32_t number;
+  const SerializedFrame* frame;
+};
+
+// The wire bytes of a message: `head` (its other fields, serialized), then
+// each frame as its length-delimited field, sharing the frames' bytes
+// (GetState's answer: at 1.25M vertices a frame and its keyframe are ~2 MB,
+// which the typed answer copied, and gRPC serialized, on every call).
+grpc::ByteBuffer message_with_frames(std::string head, std::initializer_list<FrameField> frames);
 
 // A frame's SerializedFrame, made by the first stream that needs it and
 // shared after; thread-safe. A copy starts empty (it may serialize a

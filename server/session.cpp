@@ -1030,24 +1030,26 @@ void Session::describe(v1::ListSessionsResponse::Entry& entry) const {
   entry.set_watchers(static_cast<std::uint32_t>(subscriber_count()));
 }
 
-v1::SessionState Session::state(v1::FrameFormat format) {
-  // The single buffer may have to be made first (outside the lock).
-  std::shared_ptr<const PublishedFrame> single;
+grpc::ByteBuffer Session::state_wire(v1::FrameFormat format) {
+  v1::SessionState own;
+  std::shared_ptr<const PublishedFrame> frame;
+  {
+    // The version, the pose and the frame of one moment.
+    std::lock_guard lock(mutex_);
+    own.set_version(record_.version);
+    own.mutable_pose()->Add(record_.pose.begin(), record_.pose.end());
+    frame = current_;
+  }
+  std::string head = own.SerializeAsString();
+  // SessionState.frame and .keyframe.
+  constexpr std::uint32_t kFrame = 3, kKeyframe = 4;
+  if (!frame) return message_with_frames(std::move(head), {});
   if (format == v1::FRAME_FORMAT_SINGLE) {
-    single = current_frame();
-    if (single && !single->single) single = with_single(single);
+    if (!frame->single) frame = with_single(frame);  // the same frame, transcoded
+    return message_with_frames(std::move(head), {{kFrame, &frame->single_bytes()}});
   }
-  v1::SessionState s;
-  std::lock_guard lock(mutex_);
-  s.set_version(record_.version);
-  for (float c : record_.pose) s.add_pose(c);
-  if (single) {
-    *s.mutable_frame() = *single->single;
-  } else if (current_) {
-    *s.mutable_frame() = current_->frame;
-    if (current_->keyframe) *s.mutable_keyframe() = current_->keyframe->frame;
-  }
-  return s;
+  if (frame->keyframe) return message_with_frames(std::move(head), {{kFrame, &frame->frame_bytes()}, {kKeyframe, &frame->keyframe->frame_bytes()}});
+  return message_with_frames(std::move(head), {{kFrame, &frame->frame_bytes()}});
 }
 
 SessionRecord Session::record() const {

@@ -192,9 +192,12 @@ class Session {
   grpc::ByteBuffer info_wire(std::optional<std::uint64_t> version = std::nullopt) const;
   // Its ListSessions entry: ids, counts, version, streams; no mesh copied.
   void describe(v1::ListSessionsResponse::Entry& entry) const;
-  // The merged pose and the current frame in `format` (with its keyframe
-  // when chunked and sparse).
-  v1::SessionState state(v1::FrameFormat format);
+  // GetState's answer as wire bytes: the merged pose and the current frame
+  // in `format` (with its keyframe when chunked and sparse), the frames'
+  // bytes shared with the streams that send them. A single buffer not made
+  // yet is transcoded here first (tens of ms at 1.25M vertices); throws
+  // DeltaCodecError if that fails.
+  grpc::ByteBuffer state_wire(v1::FrameFormat format);
   // With the handles and, for an adaptive cut, the cut of the latest frame
   // (O(nodes): waits for a frame computing now).
   SessionRecord record() const;

@@ -73,6 +73,38 @@ TEST(SerializedFrame, StreamsShareOneCopyOfTheBytes) {
   EXPECT_EQ(a[0].size(), wire.size());
 }
 
+TEST(SerializedFrame, EmbeddedInAnAnswerItParsesAsTheTypedMessageAndIsNotCopied) {
+  // GetState's answer: a head (version, pose), the frame and its keyframe.
+  const v1::Frame frame = sample_frame();
+  v1::Frame key = sample_frame();
+  key.set_version(5);
+  const SerializedFrame frame_wire(frame, nullptr), key_wire(key, nullptr), empty_wire(v1::Frame{}, nullptr);
+  v1::SessionState head;
+  head.set_version(7);
+  for (int i = 0; i < 300; ++i) head.add_pose(0.5f * static_cast<float>(i));
+  v1::SessionState expected = head;
+  *expected.mutable_frame() = frame;
+  *expected.mutable_keyframe() = key;
+  const auto parse = [](grpc::ByteBuffer b) {
+    v1::SessionState s;
+    EXPECT_TRUE(grpc::SerializationTraits<v1::SessionState>::Deserialize(&b, &s).ok());
+    return s;
+  };
+  const grpc::ByteBuffer both = message_with_frames(head.SerializeAsString(), {{3, &frame_wire}, {4, &key_wire}});
+  EXPECT_EQ(parse(both).SerializeAsString(), expected.SerializeAsString());
+  const auto slices = slices_of(both);
+  ASSERT_EQ(slices.size(), 4u);
+  EXPECT_EQ(slices[1].begin(), frame_wire.bytes().begin()) << "the frame was copied";
+  EXPECT_EQ(slices[3].begin(), key_wire.bytes().begin()) << "the keyframe was copied";
+
+  // An empty frame (the rest pose's) is still present; no frames: the head alone.
+  const v1::SessionState with_empty = parse(message_with_frames(head.SerializeAsString(), {{3, &empty_wire}}));
+  EXPECT_TRUE(with_empty.has_frame());
+  EXPECT_FALSE(with_empty.has_keyframe());
+  EXPECT_EQ(parse(message_with_frames(head.SerializeAsString(), {})).SerializeAsString(), head.SerializeAsString());
+  EXPECT_EQ(parse(message_with_frames(std::string(), {})).SerializeAsString(), std::string());
+}
+
 TEST(SerializedFrame, ItsBufferGoesBackToThePoolOnlyWhenTheLastWriteReleasesIt) {
   auto pool = std::make_shared<BufferPool<char>>(1);
   grpc::ByteBuffer in_flight;  // a stream's write that outlives the frame

@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <mutex>
 
+#include <grpcpp/impl/codegen/proto_utils.h>
 #include <gtest/gtest.h>
 
 #include "hierarchy/hierarchy.h"
@@ -152,7 +153,9 @@ TEST_F(SessionSharing, AnEvictedSessionRefusesChangesInsteadOfLosingThemAndLoads
   auto again = registry_->find(s->id());
   ASSERT_TRUE(again != nullptr);
   EXPECT_NE(again.get(), s.get());
-  const v1::SessionState state = again->state(v1::FRAME_FORMAT_CHUNKED);
+  grpc::ByteBuffer wire = again->state_wire(v1::FRAME_FORMAT_CHUNKED);
+  v1::SessionState state;
+  ASSERT_TRUE(grpc::SerializationTraits<v1::SessionState>::Deserialize(&wire, &state).ok());
   ASSERT_GE(state.pose_size(), 3);
   EXPECT_EQ(state.pose(0), 0.5f);
   EXPECT_EQ(state.pose(1), 0.25f);
