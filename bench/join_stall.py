@@ -17,13 +17,13 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
 import filigree
+from closed_loop_driver import ClosedLoopDriver
 
 REPO = Path(__file__).resolve().parent.parent
 SECONDS = 4.0
@@ -60,20 +60,8 @@ def main() -> None:
             large.free()
             small = client.create_session(REPO / "tests" / "data" / "bunny_small.obj",
                                           options=filigree.SessionOptions(base_vertices=150))
-            driver = small.drive()
-            base = small.base_positions.copy()
-            stamps = []
-            stop = threading.Event()
-
-            def drive() -> None:
-                k = 0
-                while not stop.is_set():
-                    k += 1
-                    driver.wait_for_pose(driver.send(base + np.float32(0.001 * (k % 10))))
-                    stamps.append(time.monotonic())
-
-            driving = threading.Thread(target=drive)
-            driving.start()
+            driver = ClosedLoopDriver(small)
+            driver.start()
             time.sleep(2.0)  # the driver's steady state first
             # Processes, not threads: a join's client-side decoding must not hold the driver's interpreter.
             spawn = mp.get_context("spawn")  # gRPC does not survive a fork
@@ -87,11 +75,10 @@ def main() -> None:
                 p.join()
             end, cpu_end = time.monotonic(), server_cpu_seconds(server.pid)
             time.sleep(0.5)
-            stop.set()
-            driving.join()
+            driver.stop()
             joins = sum(n for n, _ in results)
-            before = np.diff([s for s in stamps if s < start])
-            during = [b - a for a, b in zip(stamps, stamps[1:]) if b > start and a < end]
+            before = driver.intervals_before(start)
+            during = driver.intervals_during(start, end)
             print(f"{joins} joins by {joiners} clients in {end - start:.2f} s (slowest {max(w for _, w in results):.2f} s); "
                   f"server CPU {cpu_end - cpu_start:.2f} s, {1000 * (cpu_end - cpu_start) / max(joins, 1):.0f} ms a join "
                   f"(the driver's frames included)")

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import filigree
+from closed_loop_driver import ClosedLoopDriver
 
 REPO = Path(__file__).resolve().parent.parent
 binary = sys.argv[1]
@@ -54,20 +55,8 @@ try:
         small = client.create_session(REPO / "tests" / "data" / "bunny_small.obj", options=filigree.SessionOptions(base_vertices=150))
         with evictions:
             evictions.wait_for(lambda: all(i in evicted for i, _ in large), timeout=120)
-        driver = small.drive()
-        base = small.base_positions.copy()
-        stamps = []
-        stop = threading.Event()
-
-        def drive() -> None:
-            k = 0
-            while not stop.is_set():
-                k += 1
-                driver.wait_for_pose(driver.send(base + np.float32(0.001 * (k % 10))))
-                stamps.append(time.monotonic())
-
-        driving = threading.Thread(target=drive)
-        driving.start()
+        driver = ClosedLoopDriver(small)
+        driver.start()
         time.sleep(2.0)  # the driver's steady state before the loads
         joined = {}
 
@@ -85,10 +74,9 @@ try:
             j.join()
         loads_end = time.monotonic()
         time.sleep(1.0)
-        stop.set()
-        driving.join()
-        intervals = np.diff(np.array(stamps))
-        during = [b - a for a, b in zip(stamps, stamps[1:]) if b > loads_start and a < loads_end]
+        driver.stop()
+        intervals = driver.intervals_before(float("inf"))
+        during = driver.intervals_during(loads_start, loads_end)
         print(f"joins (each loads a session): {', '.join(f'{t:.2f}' for t in joined.values())} s")
         print(f"driver: interval p50 {1000 * np.median(intervals):.2f} ms; while the loads ran ({loads_end - loads_start:.2f} s): "
               f"{len(during)} frames, longest interval {1000 * max(during, default=float('nan')):.1f} ms")

@@ -535,6 +535,13 @@ grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   return {grpc::StatusCode::INVALID_ARGUMENT, "the request is not a valid " + out.GetTypeName() + " message"};
 }
 
+// A unary call answered with `status` at once (a request refused before any work).
+grpc::ServerUnaryReactor* finished(grpc::CallbackServerContext* context, const grpc::Status& status) {
+  auto* reactor = context->DefaultReactor();
+  reactor->Finish(status);
+  return reactor;
+}
+
 // A frame as one stream writes it: the frame's shared wire bytes (with the
 // stream's pose id), and the version it has if it is a chunked keyframe.
 struct OutgoingFrame {
@@ -1005,11 +1012,7 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::Callbac
 grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                        grpc::ByteBuffer* response) {
   v1::JoinSessionRequest r;
-  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) {
-    auto* reactor = context->DefaultReactor();
-    reactor->Finish(parsed);
-    return reactor;
-  }
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
   return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
     *response = s.info_wire();
     return grpc::Status::OK;
@@ -1059,11 +1062,7 @@ grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerConte
 grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                     grpc::ByteBuffer* response) {
   v1::GetStateRequest r;
-  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) {
-    auto* reactor = context->DefaultReactor();
-    reactor->Finish(parsed);
-    return reactor;
-  }
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
   return unary_on_session(context, r.session_id(), Role::kViewer, [format = r.frame_format(), response](Session& s) -> grpc::Status {
     try {
       *response = s.state_wire(format);
@@ -1099,12 +1098,9 @@ grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, grpc::
 
 grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
                                                       grpc::ByteBuffer* response) {
-  auto* reactor = context->DefaultReactor();
   auto request = std::make_shared<v1::SetOptionsRequest>();
-  if (const grpc::Status parsed = parse_request(*request_bytes, *request); !parsed.ok()) {
-    reactor->Finish(parsed);
-    return reactor;
-  }
+  if (const grpc::Status parsed = parse_request(*request_bytes, *request); !parsed.ok()) return finished(context, parsed);
+  auto* reactor = context->DefaultReactor();
   with_session(*context, request->session_id(), Role::kEditor,
                [this, reactor, request, response](grpc::Status status, std::shared_ptr<Session> s) {
     if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
