@@ -107,11 +107,11 @@ const Kind kKinds[] = {
     {"unknown session (Watch)", StatusCode::NOT_FOUND},
     {"malformed mesh (CreateSession)", StatusCode::INVALID_ARGUMENT},
     {"upload without begin (CreateSession)", StatusCode::INVALID_ARGUMENT},
-    // Bytes that are no GetStateRequest: gRPC refuses them before the service
-    // sees the call. Its callback API answers a request that does not
-    // deserialise with UNIMPLEMENTED and no message (CallbackUnaryHandler::
-    // RunHandler, gRPC 1.51), not INVALID_ARGUMENT: what the server returns.
-    {"corrupt request bytes (GetState)", StatusCode::UNIMPLEMENTED},
+    // Bytes that are no GetStateRequest. GetState is a raw method (its answer
+    // shares the frames' bytes): the service parses the request itself and
+    // says what is wrong. (For a typed method gRPC's callback API answers
+    // UNIMPLEMENTED with no message, CallbackUnaryHandler::RunHandler, 1.51.)
+    {"corrupt request bytes (GetState)", StatusCode::INVALID_ARGUMENT},
 };
 
 }  // namespace
