@@ -526,8 +526,9 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
 
 // The streaming methods are raw (their frames go out serialized once, see
 // serialized_frame.h), and so are JoinSession and SetOptions (their meshes,
-// session_info_wire.h) and GetState (its frames), so their requests are
-// parsed here; a request that is not a valid message is the caller's error.
+// session_info_wire.h), GetState (its frames) and GetOverlays, so their
+// requests are parsed here; a request that is not a valid message is the
+// caller's error.
 template <class Message>
 grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   grpc::ByteBuffer copy(bytes);  // Deserialize consumes its buffer (a copy shares the slices)
@@ -1051,10 +1052,12 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
   });
 }
 
-grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context,
-                                                       const v1::GetOverlaysRequest* request, v1::Overlays* response) {
-  return unary_on_session(context, request->session_id(), Role::kViewer, [response](Session& s) {
-    *response = s.overlays();
+grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                                       grpc::ByteBuffer* response) {
+  v1::GetOverlaysRequest r;
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
+  return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
+    *response = s.overlays_wire();
     return grpc::Status::OK;
   });
 }

@@ -43,12 +43,12 @@ struct ServiceLimits {
 // (Drive, Watch, PlayClip) are raw methods: each frame is serialized once
 // and its bytes written by every stream (serialized_frame.h); so are the
 // answers with a SessionInfo (JoinSession, SetOptions), whose meshes are
-// serialized once per mesh (session_info_wire.h), and GetState's, which
-// shares the frames' bytes.
+// serialized once per mesh (session_info_wire.h), GetState's, which shares
+// the frames' bytes, and GetOverlays', serialized once per frame.
 using rpc = v1::Filigree;
 using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCallbackMethod_JoinSession<
     rpc::WithRawCallbackMethod_Drive<rpc::WithCallbackMethod_SubmitPose<rpc::WithCallbackMethod_SetHandles<
-        rpc::WithCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
+        rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<rpc::Service>>>>>>>>>>>>>;
 
@@ -75,8 +75,9 @@ class FiligreeService final : public FiligreeServiceBase {
                                        v1::SubmitPoseResponse* response) override;
   grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,
                                        v1::SetHandlesResponse* response) override;
-  grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const v1::GetOverlaysRequest* request,
-                                        v1::Overlays* response) override;
+  // Request: a GetOverlaysRequest; answer: an Overlays serialized once per frame.
+  grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
+                                        grpc::ByteBuffer* response) override;
   // Request: a WatchRequest; frames out.
   grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
                                                     const grpc::ByteBuffer* request) override;

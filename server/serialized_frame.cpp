@@ -55,6 +55,17 @@ grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id) const {
   return grpc::ByteBuffer(slices.data(), slices.size());
 }
 
+grpc::Slice owned_slice(std::string bytes) {
+  if (bytes.empty()) return grpc::Slice();
+  auto* owned = new std::string(std::move(bytes));
+  return grpc::Slice(owned->data(), owned->size(), [](void* p) { delete static_cast<std::string*>(p); }, owned);
+}
+
+grpc::ByteBuffer SerializedOnce::bytes() const {
+  std::call_once(once_, [this] { bytes_ = owned_slice(message_->SerializeAsString()); });
+  return grpc::ByteBuffer(&bytes_, 1);
+}
+
 grpc::ByteBuffer message_with_frames(std::string head, std::initializer_list<FrameField> frames) {
   std::vector<grpc::Slice> slices;
   const auto append_varint = [](std::string& out, std::uint64_t v) {

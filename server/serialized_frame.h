@@ -16,6 +16,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <utility>
 
 #include <grpcpp/support/byte_buffer.h>
 #include <grpcpp/support/slice.h>
@@ -42,6 +43,26 @@ class SerializedFrame {
 
  private:
   grpc::Slice body_;
+};
+
+// A slice over `bytes`, which it owns until gRPC lets go of the last slice
+// over them (empty bytes: an empty slice).
+grpc::Slice owned_slice(std::string bytes);
+
+// A published message's wire bytes, serialized by the first caller that
+// needs them and shared after (GetOverlays: at 1.25M vertices a frame's
+// overlays are megabytes, which every poll copied and serialized).
+// Thread-safe; the message must not change once published.
+class SerializedOnce {
+ public:
+  explicit SerializedOnce(std::shared_ptr<const google::protobuf::MessageLite> message) : message_(std::move(message)) {}
+  const google::protobuf::MessageLite& message() const { return *message_; }
+  grpc::ByteBuffer bytes() const;
+
+ private:
+  std::shared_ptr<const google::protobuf::MessageLite> message_;
+  mutable std::once_flag once_;
+  mutable grpc::Slice bytes_;
 };
 
 // A frame embedded in an answer as a message field (SessionState.frame,

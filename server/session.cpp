@@ -957,7 +957,8 @@ void Session::publish(InFlight& f) {
     record_.version = f.version;
     if (f.overlays) {
       f.overlays->set_version(record_.version);
-      overlays_ = f.overlays;
+      overlays_ = std::make_shared<const SerializedOnce>(std::move(f.overlays));
+      overlays_version_ = record_.version;
     }
     current_ = shared;
     if (!shared->keyframe) keyframe_ = shared;
@@ -977,22 +978,21 @@ void Session::publish(InFlight& f) {
   for (const auto& s : sinks) s->offer(shared);
 }
 
-v1::Overlays Session::overlays() {
-  bool had_recent;
-  v1::Overlays out;
+grpc::ByteBuffer Session::overlays_wire() {
+  std::shared_ptr<const SerializedOnce> recent;
   {
     std::lock_guard lock(mutex_);
-    had_recent = overlays_ && overlays_->version() == record_.version;
+    if (overlays_ && overlays_version_ == record_.version) recent = overlays_;
     overlays_wanted_until_ = Clock::now() + std::chrono::seconds(5);
-    if (had_recent) {
-      out = *overlays_;
-    } else {
+    if (!recent) {
       pending_ = true;  // recompute the current pose once, with overlays
       maybe_compute_locked();
     }
     touch();
   }
-  return out;  // ready == false until a frame with overlays exists
+  if (recent) return recent->bytes();  // serialized by the first caller, outside the lock
+  const grpc::Slice none;                // an empty Overlays: ready == false
+  return grpc::ByteBuffer(&none, 1);
 }
 
 v1::SessionInfo Session::info() const {

@@ -181,8 +181,10 @@ class Session {
   // Why the session stopped computing here (its journal failed), or empty.
   std::string failure() const;
 
-  // The overlays of the latest frame; asking keeps them built for 5 s.
-  v1::Overlays overlays();
+  // GetOverlays' answer as wire bytes: the overlays of the latest frame,
+  // serialized once and shared by every caller, or `ready: false` (an
+  // empty message) until a frame has them; asking keeps them built for 5 s.
+  grpc::ByteBuffer overlays_wire();
 
   // The whole SessionInfo as a message: builds the rest mesh (36+ bytes per
   // vertex), for the one answer that is no raw method (CreateSession's).
@@ -339,7 +341,8 @@ class Session {
   bool evicted_ = false;  // by evict_if_unused(): requests must go to a fresh copy
   std::vector<std::weak_ptr<FrameSink>> sinks_;
   std::shared_ptr<const PublishedFrame> current_;
-  std::shared_ptr<const v1::Overlays> overlays_;
+  std::shared_ptr<const SerializedOnce> overlays_;  // of the frame of version overlays_version_
+  std::uint64_t overlays_version_ = 0;
   std::chrono::steady_clock::time_point overlays_wanted_until_{};
   std::chrono::steady_clock::time_point last_activity_;
   const Journal journal_;

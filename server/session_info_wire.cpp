@@ -1,5 +1,7 @@
 #include "server/session_info_wire.h"
 
+#include "server/serialized_frame.h"
+
 #include <array>
 #include <limits>
 #include <stdexcept>
@@ -24,13 +26,6 @@ void append_varint(std::string& out, std::uint64_t v) {
 void check_size(std::size_t bytes, const char* what) {
   if (bytes > static_cast<std::size_t>(std::numeric_limits<int>::max()))
     throw std::invalid_argument(std::string(what) + " of " + std::to_string(bytes) + " bytes is over protobuf's 2 GiB limit");
-}
-
-// A slice over `bytes`, which it owns until gRPC lets go of the last slice over them.
-grpc::Slice owned_slice(std::string bytes) {
-  if (bytes.empty()) return grpc::Slice();
-  auto* owned = new std::string(std::move(bytes));
-  return grpc::Slice(owned->data(), owned->size(), [](void* p) { delete static_cast<std::string*>(p); }, owned);
 }
 
 }  // namespace

@@ -105,6 +105,29 @@ TEST(SerializedFrame, EmbeddedInAnAnswerItParsesAsTheTypedMessageAndIsNotCopied)
   EXPECT_EQ(parse(message_with_frames(std::string(), {})).SerializeAsString(), std::string());
 }
 
+TEST(SerializedOnce, EveryCallerGetsTheSameBytesSerializedOnce) {
+  // A frame's overlays, as GetOverlays answers every poll of every viewer.
+  auto overlays = std::make_shared<v1::Overlays>();
+  overlays->set_ready(true);
+  overlays->set_version(12);
+  for (std::uint32_t i = 0; i < 50000; ++i) overlays->add_region_of(i % 7);
+  overlays->set_region_count(7);
+  const SerializedOnce once(overlays);
+  // First callers racing: one serialization, one copy of the bytes.
+  std::vector<std::vector<grpc::Slice>> seen(4);
+  std::vector<std::thread> callers;
+  for (auto& slices : seen) callers.emplace_back([&] { slices = slices_of(once.bytes()); });
+  for (auto& t : callers) t.join();
+  for (const auto& slices : seen) {
+    ASSERT_EQ(slices.size(), 1u);
+    EXPECT_EQ(slices[0].begin(), seen[0][0].begin()) << "serialized more than once";
+  }
+  grpc::ByteBuffer bytes = once.bytes();
+  v1::Overlays parsed;
+  ASSERT_TRUE(grpc::SerializationTraits<v1::Overlays>::Deserialize(&bytes, &parsed).ok());
+  EXPECT_EQ(parsed.SerializeAsString(), overlays->SerializeAsString());
+}
+
 TEST(SerializedFrame, ItsBufferGoesBackToThePoolOnlyWhenTheLastWriteReleasesIt) {
   auto pool = std::make_shared<BufferPool<char>>(1);
   grpc::ByteBuffer in_flight;  // a stream's write that outlives the frame

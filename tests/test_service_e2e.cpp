@@ -446,7 +446,7 @@ TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
 }
 
 // The frame streams are raw methods (the server parses their requests
-// itself), and so are JoinSession, SetOptions and GetState: bytes that are no request
+// itself), and so are JoinSession, SetOptions, GetState and GetOverlays: bytes that are no request
 // message are refused as such, and the session keeps answering good poses.
 TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
   const Created c = upload(file_bytes(kBunny), "obj");
@@ -485,7 +485,8 @@ TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
                                      {"PlayClip", "filigree.v1.PlayClipRequest"},
                                      {"JoinSession", "filigree.v1.JoinSessionRequest"},
                                      {"SetOptions", "filigree.v1.SetOptionsRequest"},
-                                     {"GetState", "filigree.v1.GetStateRequest"}}) {
+                                     {"GetState", "filigree.v1.GetStateRequest"},
+                                     {"GetOverlays", "filigree.v1.GetOverlaysRequest"}}) {
     const grpc::Status status = call_with_bytes("/filigree.v1.Filigree/" + method, garbage);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << method << ": " << status.error_message();
     EXPECT_NE(status.error_message().find("not a valid " + type), std::string::npos) << status.error_message();
