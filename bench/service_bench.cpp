@@ -22,6 +22,9 @@
 // Usage: filigree_bench_service [server-binary] [--format single|chunked]
 //        [--quick] (the quick run skips the ≥ 1M mesh and the 16 sessions)
 //        [--large] (only the ≥ 1M mesh's single-watcher drives: for profiling)
+//        [--single-stall] (a small session driven while two clients poll
+//        GetState in the single-buffer format on a driven 435k session: each
+//        new frame is transcoded into one buffer, off gRPC's callback threads)
 //        [--against OTHER-SERVER [--rounds N] [--mesh small|medium|large]]
 //        (before/after: both servers, one mesh, the single-watcher whole-body
 //        drive alternating between them N times, so that a drift of the
@@ -358,14 +361,85 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
   return 0;
 }
 
+// --single-stall: the small session's frame intervals, closed loop, while
+// a 435k session (the dragon when ../shared has it, else the Armadillo
+// subdivided twice, 416k) is driven and two clients poll GetState in the
+// default (single-buffer) format, so that nearly every call transcodes a
+// new frame. Prints the intervals' p50, p99 and longest, and the calls made.
+int single_stall(const std::string& server_binary) {
+  const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_single_" + std::to_string(::getpid()));
+  test::ServerProcess server(server_binary, {"--data-dir", data_dir.string(), "--max-message-mib", "256"});
+  auto stub = v1::Filigree::NewStub(
+      grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()));
+  RepairReport report;
+  const std::string dragon = std::string(FILIGREE_SHARED_DATA_DIR) + "/dragon.ply";
+  const TriMesh armadillo = repair_mesh(read_mesh(std::string(FILIGREE_REPO_DATA_DIR) + "/armadillo.off"), {}, &report);
+  const TriMesh large = std::filesystem::exists(dragon) ? repair_mesh(read_mesh(dragon), {}, &report) : bench::subdivide(armadillo, 2, 0);
+  const auto big = upload(*stub, obj_bytes(large));
+  const auto small = upload(*stub, obj_bytes(armadillo));
+  std::atomic<bool> stop{false};
+  std::atomic<int> calls{0};
+  std::vector<std::thread> load;
+  load.emplace_back([&] {
+    while (!stop) run(*stub, big, 0, 20);
+  });
+  for (int k = 0; k < 2; ++k)
+    load.emplace_back([&] {
+      v1::GetStateRequest r;
+      r.set_session_id(big.info().session_id());  // frame_format: the default, FRAME_FORMAT_SINGLE
+      while (!stop) {
+        v1::SessionState state;
+        if (stub->GetState(context(r.session_id(), big.viewer_token()).get(), r, &state).ok()) ++calls;
+      }
+    });
+  std::this_thread::sleep_for(std::chrono::seconds(2));  // the load's steady state
+  const std::string id = small.info().session_id();
+  auto ctx = context(id, small.editor_token());
+  auto drive = stub->Drive(ctx.get());
+  std::vector<double> intervals;
+  const auto start = Clock::now();
+  auto last = start;
+  for (std::uint64_t p = 1; std::chrono::duration<double>(Clock::now() - start).count() < 6.0; ++p) {
+    v1::DriveRequest r;  // base vertex 0 nudged: a partial pose
+    r.set_session_id(id);
+    r.set_pose_id(p);
+    r.add_indices(0);
+    for (const float c : {0.001f * static_cast<float>(p % 10), 0.0f, 0.0f}) r.add_positions(c);
+    drive->Write(r);
+    v1::Frame f;
+    do {
+      if (!drive->Read(&f)) throw std::runtime_error("the small session's drive ended");
+    } while (f.pose_id() != p);
+    const auto now = Clock::now();
+    intervals.push_back(std::chrono::duration<double, std::milli>(now - last).count());
+    last = now;
+  }
+  drive->WritesDone();
+  for (v1::Frame f; drive->Read(&f);) {
+  }
+  drive->Finish();
+  stop = true;
+  for (auto& t : load) t.join();
+  std::printf("# Single-buffer GetState polled on a driven %zu-vertex session\n\nsmall session (%zu vertices), 6 s closed loop: "
+              "%zu frames, interval p50 %.2f ms, p99 %.1f ms, longest %.1f ms; %d GetState calls answered\n",
+              large.vertex_count(), armadillo.vertex_count(), intervals.size(), percentile(intervals, 0.5), percentile(intervals, 0.99),
+              *std::max_element(intervals.begin(), intervals.end()), calls.load());
+  server.terminate();
+  std::filesystem::remove_all(data_dir);
+  return 0;
+}
+
 int main_impl(int argc, char** argv) {
   std::string server_binary = FILIGREE_SERVER_BINARY;
   bool quick = false, large_only = false;
   std::string against, which = "medium";
+  bool single_stall_only = false;
   int rounds = 5;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--against" && i + 1 < argc) {
+    if (a == "--single-stall") {
+      single_stall_only = true;
+    } else if (a == "--against" && i + 1 < argc) {
       against = argv[++i];
     } else if (a == "--rounds" && i + 1 < argc) {
       rounds = std::max(1, std::stoi(argv[++i]));
@@ -382,6 +456,7 @@ int main_impl(int argc, char** argv) {
     }
   }
   if (!against.empty()) return compare_servers(server_binary, against, which, rounds);
+  if (single_stall_only) return single_stall(server_binary);
   const std::string repo = FILIGREE_REPO_DATA_DIR;
   const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_data_" + std::to_string(::getpid()));
   test::ServerProcess server(server_binary, {"--data-dir", data_dir.string(), "--max-message-mib", "256"});

@@ -96,30 +96,24 @@ void FiligreeService::with_session(grpc::CallbackServerContext& context, const s
     const grpc::Status status = authorize(registry_, context, id, needed, &s);
     return then(status, std::move(s));
   }
-  if (!begin_job()) return then({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"}, nullptr);
-  // Shared: if the thread cannot start, `then` still answers the call.
+  // Shared: if the job cannot start, `then` still answers the call.
   auto next = std::make_shared<SessionContinuation>(std::move(then));
-  try {
-    std::thread([this, &context, id, needed, next]() mutable {
-      // A turn: a failover or a restart's first requests must not load every
-      // session at once (each load's memory, all of them slowed alike).
-      loads_.acquire();
-      std::shared_ptr<Session> s;
-      grpc::Status status;
-      try {
-        status = authorize(registry_, context, id, needed, &s);
-      } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
-        status = {grpc::StatusCode::INTERNAL, std::string("loading the session failed: ") + e.what()};
-      }
-      loads_.release();
-      (*next)(status, std::move(s));
-      next.reset();  // what it holds may need the service: release it while the service surely exists
-      end_job();     // the last touch of the service: drain() waits for it
-    }).detach();
-  } catch (const std::system_error& e) {
-    end_job();
-    (*next)({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()}, nullptr);
-  }
+  run_job(
+      [this, &context, id, needed, next] {
+        // A turn: a failover or a restart's first requests must not load every
+        // session at once (each load's memory, all of them slowed alike).
+        loads_.acquire();
+        std::shared_ptr<Session> s;
+        grpc::Status status;
+        try {
+          status = authorize(registry_, context, id, needed, &s);
+        } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
+          status = {grpc::StatusCode::INTERNAL, std::string("loading the session failed: ") + e.what()};
+        }
+        loads_.release();
+        (*next)(status, std::move(s));
+      },
+      [next](const grpc::Status& why) { (*next)(why, nullptr); });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServerContext* context, const std::string& id,
@@ -239,6 +233,20 @@ bool FiligreeService::begin_job() {
 void FiligreeService::end_job() {
   std::lock_guard lock(jobs_mutex_);
   if (--jobs_ == 0) jobs_done_.notify_all();
+}
+
+void FiligreeService::run_job(std::function<void()> work, const std::function<void(const grpc::Status&)>& refused) {
+  if (!begin_job()) return refused({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
+  try {
+    std::thread([this, work = std::move(work)]() mutable {
+      work();
+      work = nullptr;  // what it holds may need the service: released while the service surely exists
+      end_job();       // the last touch of the service: drain() waits for it
+    }).detach();
+  } catch (const std::system_error& e) {
+    end_job();
+    refused({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
+  }
 }
 
 void FiligreeService::acquire_preprocessing() { preprocessing_.acquire(); }
@@ -828,11 +836,25 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     if (status.ok()) {
       session_ = std::move(s);
       stream_->set_format(request_.frame_format());
-      // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
-      session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
-                                                                 : std::optional<std::uint64_t>(request_.after_version()));
+      if (request_.frame_format() == v1::FRAME_FORMAT_SINGLE && session_->needs_single()) {
+        // subscribe() transcodes the current frame into one buffer first: on
+        // a job thread, not one of the callback threads. The start holds
+        // this reactor until it ends.
+        return service_.run_job(
+            [this, started, stream] {
+              subscribe();
+              end_start(started, stream, grpc::Status::OK);
+            },
+            [started, stream](const grpc::Status& why) { end_start(started, stream, why); });
+      }
+      subscribe();
     }
     end_start(started, stream, status);
+  }
+  void subscribe() {
+    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
+    session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
+                                                               : std::optional<std::uint64_t>(request_.after_version()));
   }
 
   FiligreeService& service_;
@@ -1066,14 +1088,29 @@ grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext*
                                                     grpc::ByteBuffer* response) {
   v1::GetStateRequest r;
   if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
-  return unary_on_session(context, r.session_id(), Role::kViewer, [format = r.frame_format(), response](Session& s) -> grpc::Status {
-    try {
-      *response = s.state_wire(format);
-    } catch (const std::exception& e) {
-      return {grpc::StatusCode::UNAVAILABLE, e.what()};
-    }
-    return grpc::Status::OK;
+  auto* reactor = context->DefaultReactor();
+  with_session(*context, r.session_id(), Role::kViewer,
+               [this, reactor, response, format = r.frame_format()](grpc::Status status, std::shared_ptr<Session> s) {
+    if (!status.ok()) return reactor->Finish(status);
+    const auto answer = [reactor, response, format](Session& session) {
+      try {
+        *response = session.state_wire(format);
+      } catch (const std::exception& e) {
+        return reactor->Finish({grpc::StatusCode::UNAVAILABLE, e.what()});
+      }
+      reactor->Finish(grpc::Status::OK);
+    };
+    if (format != v1::FRAME_FORMAT_SINGLE || !s->needs_single()) return answer(*s);
+    // Transcoding the frame into one buffer: on a job thread, not one of the
+    // callback threads every call of the server shares.
+    run_job(
+        [s = std::move(s), answer]() mutable {
+          answer(*s);
+          s.reset();  // the session may end with its last holder: while the service surely exists
+        },
+        [reactor](const grpc::Status& why) { reactor->Finish(why); });
   });
+  return reactor;
 }
 
 namespace {
@@ -1117,18 +1154,13 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
     // optimisation factorises the mesh (seconds): on a thread of its own, not
     // one of gRPC's callback threads, which every other call of this server
     // shares. A job, so that drain() (and so the service's end) waits for it.
-    if (!begin_job()) return reactor->Finish({grpc::StatusCode::UNAVAILABLE, "the server is shutting down"});
-    try {
-      std::thread([this, s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
-        const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
-        s.reset();  // the session may end with its last holder: while the service surely exists
-        reactor->Finish(result);
-        end_job();  // the last touch of the service: drain() waits for it
-      }).detach();
-    } catch (const std::system_error& e) {
-      end_job();
-      reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED, std::string("the server could not start a thread: ") + e.what()});
-    }
+    run_job(
+        [s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
+          const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
+          s.reset();  // the session may end with its last holder: while the service surely exists
+          reactor->Finish(result);
+        },
+        [reactor](const grpc::Status& why) { reactor->Finish(why); });
   });
   return reactor;
 }

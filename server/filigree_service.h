@@ -102,6 +102,10 @@ class FiligreeService final : public FiligreeServiceBase {
   // clips): counted so drain() can wait for it.
   bool begin_job();
   void end_job();
+  // Runs `work` as a job on a thread of its own; when the server is shutting
+  // down (UNAVAILABLE) or no thread can start (RESOURCE_EXHAUSTED), calls
+  // `refused` with why instead, on the caller's thread.
+  void run_job(std::function<void()> work, const std::function<void(const grpc::Status&)>& refused);
   // Preprocessing turns (limits().preprocessing_slots at once): held while
   // an upload is parsed and preprocessed.
   void acquire_preprocessing();

@@ -1059,6 +1059,11 @@ grpc::ByteBuffer Session::state_wire(v1::FrameFormat format) {
   return message_with_frames(std::move(head), {{kFrame, &frame->frame_bytes()}});
 }
 
+bool Session::needs_single() const {
+  std::lock_guard lock(mutex_);
+  return current_ && !current_->single;
+}
+
 SessionRecord Session::record() const {
   SessionProgress p = progress();
   SessionRecord r;

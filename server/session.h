@@ -200,6 +200,10 @@ class Session {
   // yet is transcoded here first (tens of ms at 1.25M vertices); throws
   // DeltaCodecError if that fails.
   grpc::ByteBuffer state_wire(v1::FrameFormat format);
+  // Whether the current frame has no single buffer yet: answering or
+  // subscribing in FRAME_FORMAT_SINGLE then transcodes it first (hundreds of
+  // ms at 1.25M vertices; callers keep that off gRPC's callback threads).
+  bool needs_single() const;
   // With the handles and, for an adaptive cut, the cut of the latest frame
   // (O(nodes): waits for a frame computing now).
   SessionRecord record() const;
