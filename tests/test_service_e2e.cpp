@@ -1105,6 +1105,25 @@ TEST_F(ServiceTest, ChunkedFramesSparseLateJoinerAndSkippingWatcher) {
   EXPECT_EQ(f.keyframe_version(), f.version());
   EXPECT_EQ(f.stats().present_vertices(), n);
 
+  // A watcher in the default (single-buffer) format of a frame made without
+  // one: the frame transcoded for it (on a job thread), same version.
+  auto single_ctx = context(id, c.created.viewer_token());
+  v1::WatchRequest single_request;
+  single_request.set_session_id(id);
+  auto single_watch = stub_->Watch(single_ctx.get(), single_request);
+  v1::Frame single_frame;
+  ASSERT_TRUE(single_watch->Read(&single_frame));
+  EXPECT_EQ(single_frame.version(), f.version());
+  EXPECT_TRUE(single_frame.chunks().empty());
+  ChunkedClient keyed(n);
+  keyed.apply(f);
+  const std::vector<Vec3> transcoded = decode(single_frame);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k)
+      ASSERT_NEAR(transcoded[i][k], keyed.deltas.deltas()[3 * i + k], double{single_frame.max_error()} + 1e-7) << "vertex " << i;
+  single_ctx->TryCancel();
+  single_watch->Finish();
+
   drive->WritesDone();
   while (drive->Read(&f)) {
   }
