@@ -713,11 +713,51 @@ void end_start(const std::shared_ptr<StreamStart>& start, const std::shared_ptr<
   }
 }
 
-class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
+// What the three frame streams (Drive, Watch, PlayClip) share: the stream
+// with its mailbox, its start while the session loads, its place in the
+// session's stream limits, and the session once admitted. open() loads and
+// authorizes the session (FiligreeService::with_session), admits the stream
+// (admit_stream) and hands the reactor's start() the result: OK with
+// session_ set, or why not. start() must end with end_start(started, stream, …),
+// now or later; until then the reactor is not deleted.
+template <class Reactor, class Base>
+class FrameStreamReactor : public Base {
+ public:
+  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
+  void OnCancel() override {
+    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+  }
+
+ protected:
+  // `self`: the reactor being made (the stream's writer calls it later).
+  FrameStreamReactor(FiligreeService& service, std::uint64_t driver, Reactor* self)
+      : service_(service), driver_(driver), stream_(std::make_shared<FrameStream<Reactor>>(self, driver)) {}
+
+  void open(grpc::CallbackServerContext& context, const std::string& session_id, Role role) {
+    start_->begin();
+    service_.with_session(context, session_id, role, [this](grpc::Status status, std::shared_ptr<Session> s) {
+      const auto started = start_;
+      const auto stream = stream_;  // this reactor may end once the start does
+      status = admit_stream(*started, service_, status, s, &stream_slot_);
+      if (status.ok()) session_ = std::move(s);
+      start(status, started, stream);
+    });
+  }
+  virtual void start(const grpc::Status& admitted, const std::shared_ptr<StreamStart>& started,
+                     const std::shared_ptr<FrameStream<Reactor>>& stream) = 0;
+
+  FiligreeService& service_;
+  const std::uint64_t driver_;  // 0: a stream that does not drive (Watch)
+  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
+  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
+  std::shared_ptr<FrameStream<Reactor>> stream_;
+  std::shared_ptr<Session> session_;
+};
+
+class DriveReactor final : public FrameStreamReactor<DriveReactor, grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>> {
  public:
   DriveReactor(FiligreeService& service, grpc::CallbackServerContext* context)
-      : service_(service), context_(context), driver_(service.next_driver_id()),
-        stream_(std::make_shared<FrameStream<DriveReactor>>(this, driver_)) {
+      : FrameStreamReactor(service, service.next_driver_id(), this), context_(context) {
     // A driver that half-closes still gets the frame of its last pose: the
     // stream finishes once a frame includes it. The observer lives in the
     // stream (so `stream` is alive whenever it runs) and may outlive this.
@@ -740,17 +780,9 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
       return;
     }
     if (const grpc::Status parsed = parse_request(request_bytes_, request_); !parsed.ok()) return stream_->writer().finish(parsed);
-    if (!session_) {
-      // The first request names the session: no read until it is there.
-      start_->begin();
-      return service_.with_session(*context_, request_.session_id(), Role::kEditor,
-                                   [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
-    }
+    // The first request names the session: no read until it is there.
+    if (!session_) return open(*context_, request_.session_id(), Role::kEditor);
     take_request();
-  }
-  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
-  void OnCancel() override {
-    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
     leave(session_, *stream_, driver_);
@@ -758,12 +790,9 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
   }
 
  private:
-  void start(grpc::Status status, std::shared_ptr<Session> s) {
-    const auto started = start_;
-    const auto stream = stream_;  // this reactor may end once the start does
-    status = admit_stream(*started, service_, status, s, &stream_slot_);
+  void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
+             const std::shared_ptr<FrameStream<DriveReactor>>& stream) override {
     if (status.ok()) {
-      session_ = std::move(s);
       stream_->set_format(request_.frame_format());
       session_->subscribe(stream_, session_->version());
       take_request();  // may end the stream: `this` is not touched after it
@@ -793,34 +822,21 @@ class DriveReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc
     bool half_closed = false;
   };
 
-  FiligreeService& service_;
   grpc::CallbackServerContext* context_;
-  const std::uint64_t driver_;
   std::shared_ptr<Ending> ending_ = std::make_shared<Ending>();
-  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
-  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
-  std::shared_ptr<FrameStream<DriveReactor>> stream_;
-  std::shared_ptr<Session> session_;
   grpc::ByteBuffer request_bytes_;
   v1::DriveRequest request_;
 };
 
-class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
+class WatchReactor final : public FrameStreamReactor<WatchReactor, grpc::ServerWriteReactor<grpc::ByteBuffer>> {
  public:
   WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
-      : service_(service), stream_(std::make_shared<FrameStream<WatchReactor>>(this, 0)) {
-    grpc::Status status = parse_request(request_bytes, request_);
-    if (!status.ok()) {
-      stream_->writer().finish(status);
-      return;
+      : FrameStreamReactor(service, 0, this) {
+    if (const grpc::Status parsed = parse_request(request_bytes, request_); !parsed.ok()) {
+      stream_->writer().finish(parsed);
+    } else {
+      open(*context, request_.session_id(), Role::kViewer);
     }
-    start_->begin();
-    service.with_session(*context, request_.session_id(), Role::kViewer,
-                         [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
-  }
-  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
-  void OnCancel() override {
-    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
     if (session_) session_->unsubscribe(stream_.get());
@@ -829,12 +845,9 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
  private:
-  void start(grpc::Status status, std::shared_ptr<Session> s) {
-    const auto started = start_;
-    const auto stream = stream_;  // this reactor may end once the start does
-    status = admit_stream(*started, service_, status, s, &stream_slot_);
+  void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
+             const std::shared_ptr<FrameStream<WatchReactor>>& stream) override {
     if (status.ok()) {
-      session_ = std::move(s);
       stream_->set_format(request_.frame_format());
       if (request_.frame_format() == v1::FRAME_FORMAT_SINGLE && session_->needs_single()) {
         // subscribe() transcodes the current frame into one buffer first: on
@@ -857,35 +870,26 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
                                                                : std::optional<std::uint64_t>(request_.after_version()));
   }
 
-  FiligreeService& service_;
   v1::WatchRequest request_;
-  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
-  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
-  std::shared_ptr<FrameStream<WatchReactor>> stream_;
-  std::shared_ptr<Session> session_;
 };
 
 // Plays a clip of the session's rig: a thread samples it at the stream's
 // clock and submits each sample as a skeletal pose of this stream, waiting
 // for the frame that includes one before sampling the next (so a slow
 // session lowers the sample rate instead of queueing poses).
-class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
+class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::ServerWriteReactor<grpc::ByteBuffer>> {
  public:
   PlayClipReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
-      : service_(service), driver_(service.next_driver_id()), stream_(std::make_shared<FrameStream<PlayClipReactor>>(this, driver_)) {
-    grpc::Status status = parse_request(request_bytes, request_);
-    if (!status.ok()) {
-      stream_->writer().finish(status);
-      return;
+      : FrameStreamReactor(service, service.next_driver_id(), this) {
+    if (const grpc::Status parsed = parse_request(request_bytes, request_); !parsed.ok()) {
+      stream_->writer().finish(parsed);
+    } else {
+      open(*context, request_.session_id(), Role::kEditor);
     }
-    start_->begin();
-    service.with_session(*context, request_.session_id(), Role::kEditor,
-                         [this](grpc::Status status, std::shared_ptr<Session> s) { start(status, std::move(s)); });
   }
-  void OnWriteDone(bool ok) override { stream_->writer().on_write_done(ok); }
   void OnCancel() override {
     state_->end();
-    if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
+    FrameStreamReactor::OnCancel();
   }
   void OnDone() override {
     state_->end();
@@ -895,14 +899,9 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
   }
 
  private:
-  void start(grpc::Status status, std::shared_ptr<Session> s) {
-    const auto started = start_;
-    const auto stream = stream_;  // this reactor may end once the start does
-    status = admit_stream(*started, service_, status, s, &stream_slot_);
-    if (status.ok()) {
-      session_ = std::move(s);
-      status = check();
-    }
+  void start(const grpc::Status& admitted, const std::shared_ptr<StreamStart>& started,
+             const std::shared_ptr<FrameStream<PlayClipReactor>>& stream) override {
+    grpc::Status status = admitted.ok() ? check() : admitted;
     if (status.ok() && !service_.begin_job()) status = {grpc::StatusCode::UNAVAILABLE, "the server is shutting down"};
     if (!status.ok()) {
       session_.reset();
@@ -940,7 +939,6 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
     end_start(started, stream, status);
   }
 
-  std::shared_ptr<void> stream_slot_;  // of the session owner's stream quota
   static constexpr double kMostSamplesPerSecond = 60.0;
 
   grpc::Status check() {
@@ -986,12 +984,7 @@ class PlayClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> 
     }
   }
 
-  FiligreeService& service_;
   v1::PlayClipRequest request_;  // set once, in the constructor
-  const std::uint64_t driver_;
-  const std::shared_ptr<StreamStart> start_ = std::make_shared<StreamStart>();
-  std::shared_ptr<FrameStream<PlayClipReactor>> stream_;
-  std::shared_ptr<Session> session_;
   const AnimationClip* clip_ = nullptr;  // owned by the session's rig
   struct PlayState {
     std::mutex mutex;

@@ -47,11 +47,10 @@ SerializedFrame::SerializedFrame(const v1::Frame& frame, std::shared_ptr<BufferP
 
 grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id) const {
   if (pose_id == 0) return grpc::ByteBuffer(&body_, 1);
-  std::array<std::uint8_t, 11> tail{kPoseIdTag};  // the tag and at most 10 bytes of varint
-  std::size_t n = 1;
-  for (; pose_id >= 0x80; pose_id >>= 7) tail[n++] = static_cast<std::uint8_t>(pose_id | 0x80);
-  tail[n++] = static_cast<std::uint8_t>(pose_id);
-  const std::array<grpc::Slice, 2> slices{body_, grpc::Slice(tail.data(), n)};
+  // The tag and at most 10 bytes of varint: within std::string's small buffer, no allocation.
+  std::string tail(1, static_cast<char>(kPoseIdTag));
+  append_varint(tail, pose_id);
+  const std::array<grpc::Slice, 2> slices{body_, grpc::Slice(tail)};
   return grpc::ByteBuffer(slices.data(), slices.size());
 }
 
@@ -61,6 +60,11 @@ grpc::Slice owned_slice(std::string bytes) {
   return grpc::Slice(owned->data(), owned->size(), [](void* p) { delete static_cast<std::string*>(p); }, owned);
 }
 
+void append_varint(std::string& out, std::uint64_t v) {
+  for (; v >= 0x80; v >>= 7) out.push_back(static_cast<char>(v | 0x80));
+  out.push_back(static_cast<char>(v));
+}
+
 grpc::ByteBuffer SerializedOnce::bytes() const {
   std::call_once(once_, [this] { bytes_ = owned_slice(message_->SerializeAsString()); });
   return grpc::ByteBuffer(&bytes_, 1);
@@ -68,10 +72,6 @@ grpc::ByteBuffer SerializedOnce::bytes() const {
 
 grpc::ByteBuffer message_with_frames(std::string head, std::initializer_list<FrameField> frames) {
   std::vector<grpc::Slice> slices;
-  const auto append_varint = [](std::string& out, std::uint64_t v) {
-    for (; v >= 0x80; v >>= 7) out.push_back(static_cast<char>(v | 0x80));
-    out.push_back(static_cast<char>(v));
-  };
   for (const FrameField& f : frames) {
     append_varint(head, std::uint64_t{f.number} << 3 | 2);  // length-delimited
     append_varint(head, f.frame->size());

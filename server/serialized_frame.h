@@ -49,6 +49,9 @@ class SerializedFrame {
 // over them (empty bytes: an empty slice).
 grpc::Slice owned_slice(std::string bytes);
 
+// Appends `v` as a protobuf varint (for tags and lengths written by hand).
+void append_varint(std::string& out, std::uint64_t v);
+
 // A published message's wire bytes, serialized by the first caller that
 // needs them and shared after (GetOverlays: at 1.25M vertices a frame's
 // overlays are megabytes, which every poll copied and serialized).
@@ -56,7 +59,6 @@ grpc::Slice owned_slice(std::string bytes);
 class SerializedOnce {
  public:
   explicit SerializedOnce(std::shared_ptr<const google::protobuf::MessageLite> message) : message_(std::move(message)) {}
-  const google::protobuf::MessageLite& message() const { return *message_; }
   grpc::ByteBuffer bytes() const;
 
  private:

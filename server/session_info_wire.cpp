@@ -18,11 +18,6 @@ constexpr std::uint8_t kBaseTag = (3 << 3) | kLengthDelimited;
 constexpr std::uint8_t kRestTag = (4 << 3) | kLengthDelimited;
 constexpr std::uint8_t kUploadedIdsTag = (4 << 3) | kLengthDelimited;
 
-void append_varint(std::string& out, std::uint64_t v) {
-  for (; v >= 0x80; v >>= 7) out.push_back(static_cast<char>(v | 0x80));
-  out.push_back(static_cast<char>(v));
-}
-
 void check_size(std::size_t bytes, const char* what) {
   if (bytes > static_cast<std::size_t>(std::numeric_limits<int>::max()))
     throw std::invalid_argument(std::string(what) + " of " + std::to_string(bytes) + " bytes is over protobuf's 2 GiB limit");

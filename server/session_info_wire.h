@@ -31,7 +31,6 @@ class MeshWire {
 
   const grpc::Slice& base_field() const { return base_field_; }  // SessionInfo.base: tag, length, message
   const grpc::Slice& rest_body() const { return rest_body_; }    // RestMesh's fields, no tag or length
-  std::size_t bytes() const { return base_field_.size() + rest_body_.size(); }
 
  private:
   grpc::Slice base_field_, rest_body_;
