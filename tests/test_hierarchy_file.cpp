@@ -105,6 +105,24 @@ TEST_F(HierarchyFileTest, MemoryRoundTripIsBitIdentical) {
   EXPECT_NO_THROW(validate_hierarchy(back));
 }
 
+TEST_F(HierarchyFileTest, LargeHierarchiesLoadOnTwoThreadsBitIdentical) {
+  // From 100k vertices a load copies on two threads while it checks; the
+  // shipped meshes are smaller, so a grid of 103k vertices takes that path.
+  PreprocessOptions options;
+  options.base_vertices = 400;
+  const Hierarchy h = preprocess(test::wavy_grid(320), options);
+  ASSERT_GE(h.vertex_count(), 100000u);
+  const std::string bytes = serialize_hierarchy(h);
+  const Hierarchy back = deserialize_hierarchy(bytes);
+  expect_same_hierarchy(back, h);
+  EXPECT_EQ(serialize_hierarchy(back), bytes);
+  // A forged node on that path is still refused, with what is wrong.
+  Hierarchy forged = h;
+  forged.node_vertex[5] = forged.node_vertex[2];
+  const std::string msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("node 5 removes vertex"), std::string::npos) << msg;
+}
+
 TEST_F(HierarchyFileTest, FloatAndFixedPointFieldsRoundTripBitExact) {
   // float32 and 16-bit fields: stored as they are in memory, no conversion on the way.
   Hierarchy h = *hierarchy_;

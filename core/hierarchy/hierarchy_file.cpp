@@ -292,8 +292,10 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
 
 namespace {
 
-// A file mapped read-only for the duration of a load. The kernel pages it in
-// from the page cache as the checks stream through it: no read buffer.
+// A file mapped read-only for the duration of a load, no read buffer. Its
+// pages are mapped in one go (MAP_POPULATE) rather than faulted in one by
+// one: the checksum reads every byte anyway (1.25M vertices: loads 3–15%
+// faster here, where a page fault is costly).
 class MappedFile {
  public:
   explicit MappedFile(const std::filesystem::path& path) {
@@ -306,7 +308,7 @@ class MappedFile {
     }
     size_ = static_cast<std::size_t>(st.st_size);
     if (size_ > 0) {
-      void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd, 0);
+      void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
       const int err = errno;
       ::close(fd);
       if (p == MAP_FAILED) throw HierarchyFileError(path.string() + ": cannot map (" + std::strerror(err) + ")");
