@@ -1,6 +1,10 @@
 // The geometric building blocks of vertex removal and direct recovery.
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <map>
 #include <numbers>
 
 #include <Eigen/Geometry>
@@ -174,6 +178,43 @@ TEST(CotangentLaplacian, FlatInteriorIsZeroAndWeightsAreClamped) {
   sliver.faces = {{0, 1, 2}, {0, 3, 1}};
   const CotangentLaplacian S = cotangent_laplacian(sliver);
   for (const Vec3& d : S.apply(sliver.positions)) EXPECT_TRUE(d.allFinite());
+}
+
+// The plain definition, kept as the reference: every corner's half
+// cotangent added to its opposite edge in both rows, face by face, then
+// clamped. Same additions in the same order, so the same bits.
+CotangentLaplacian reference_cotangent_laplacian(const TriMesh& mesh) {
+  std::vector<std::map<Index, double>> rows(mesh.positions.size());
+  for (const Triangle& f : mesh.faces)
+    for (int c = 0; c < 3; ++c) {
+      const Index a = f[c], b = f[(c + 1) % 3], d = f[(c + 2) % 3];
+      const double half_cot = 0.5 * cotangent_at(mesh.positions[a], mesh.positions[b], mesh.positions[d]);
+      rows[b][d] += half_cot;
+      rows[d][b] += half_cot;
+    }
+  CotangentLaplacian L;
+  L.offsets.push_back(0);
+  for (const auto& row : rows) {
+    for (const auto& [to, w] : row) {
+      L.neighbors.push_back(to);
+      L.weights.push_back(std::clamp(w, CotangentLaplacian::kMinWeight, CotangentLaplacian::kMaxWeight));
+    }
+    L.offsets.push_back(static_cast<Index>(L.neighbors.size()));
+  }
+  return L;
+}
+
+TEST(CotangentLaplacian, EqualsThePlainDefinitionBitForBit) {
+  TriMesh degenerate = test::wavy_grid(6);
+  degenerate.faces.push_back({3, 3, 10});  // a vertex twice in one face
+  degenerate.faces.push_back({3, 10, 4});  // an edge in three faces
+  for (const TriMesh& mesh : {test::wavy_grid(12), test::torus(10, 7), test::two_spheres(2), test::shipped_mesh("head_open.off"), degenerate}) {
+    const CotangentLaplacian L = cotangent_laplacian(mesh), R = reference_cotangent_laplacian(mesh);
+    EXPECT_EQ(L.offsets, R.offsets);
+    EXPECT_EQ(L.neighbors, R.neighbors);
+    ASSERT_EQ(L.weights.size(), R.weights.size());
+    for (std::size_t k = 0; k < L.weights.size(); ++k) ASSERT_EQ(std::bit_cast<std::uint64_t>(L.weights[k]), std::bit_cast<std::uint64_t>(R.weights[k])) << k;
+  }
 }
 
 TEST(TriangleGeometry, QualityAndCotangent) {

@@ -17,39 +17,52 @@ std::vector<Vec3> CotangentLaplacian::apply(const std::vector<Vec3>& x) const {
 }
 
 CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) {
-  // Half-weights bucketed by their row (a counting sort, O(n)), then each
-  // short row sorted by column and its repeats summed: a global sort of all
-  // half-weights took seconds and 24 bytes each at a million vertices.
+  // Row by row over each vertex's faces (a counting sort of the corners,
+  // O(n)), in ascending face order, so that each row sees its half-weights
+  // in the order a pass over the faces would give them; each short row is
+  // then sorted by column and its repeats summed. A global sort of all
+  // half-weights took seconds and 24 bytes each at a million vertices, and
+  // bucketing them all first still wrote 16 bytes per half-weight (240 MB
+  // of fresh memory at 1.25M vertices); the corner lists are 4 bytes a
+  // corner. 1.25M vertices on this VM: 2.06–2.14 s → 1.33 s, same bits.
   const std::size_t n = mesh.positions.size();
-  std::vector<Index> start(n + 1, 0);
+  std::vector<Index> first_face(n + 1, 0);
   for (const Triangle& f : mesh.faces)
-    for (Index v : f) start[v + 1] += 2;  // each corner's vertex gets a half-weight from both other corners' angles
-  for (std::size_t i = 0; i < n; ++i) start[i + 1] += start[i];
+    for (Index v : f) ++first_face[v + 1];
+  for (std::size_t i = 0; i < n; ++i) first_face[i + 1] += first_face[i];
+  std::vector<Index> faces_of(first_face[n]);
+  {
+    std::vector<Index> fill(first_face.begin(), first_face.end() - 1);
+    for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+      for (Index v : mesh.faces[f]) faces_of[fill[v]++] = static_cast<Index>(f);
+  }
   struct Half {
     Index to;
     double w;
   };
-  std::vector<Half> halves(start[n]);
-  std::vector<Index> fill(start.begin(), start.end() - 1);
-  for (const Triangle& f : mesh.faces) {
-    for (int c = 0; c < 3; ++c) {
-      // The angle at corner c weighs the opposite edge (f[c+1], f[c+2]).
-      const Index a = f[c], b = f[(c + 1) % 3], d = f[(c + 2) % 3];
-      const double half_cot = 0.5 * cotangent_at(mesh.positions[a], mesh.positions[b], mesh.positions[d]);
-      halves[fill[b]++] = {d, half_cot};
-      halves[fill[d]++] = {b, half_cot};
-    }
-  }
-  fill = {};
+  std::vector<Half> row;
   CotangentLaplacian L;
   L.offsets.assign(n + 1, 0);
-  L.neighbors.reserve(halves.size() / 2);
-  L.weights.reserve(halves.size() / 2);
+  L.neighbors.reserve(first_face[n]);
+  L.weights.reserve(first_face[n]);
   for (std::size_t i = 0; i < n; ++i) {
-    Half* first = halves.data() + start[i];
-    Half* last = halves.data() + start[i + 1];
+    row.clear();
+    for (Index k = first_face[i]; k < first_face[i + 1]; ++k) {
+      if (k > first_face[i] && faces_of[k] == faces_of[k - 1]) continue;  // a face listing i twice, seen once
+      const Triangle& f = mesh.faces[faces_of[k]];
+      for (int c = 0; c < 3; ++c) {
+        // The angle at corner c weighs the opposite edge (f[c+1], f[c+2]).
+        const Index a = f[c], b = f[(c + 1) % 3], d = f[(c + 2) % 3];
+        if (b != i && d != i) continue;
+        const double half_cot = 0.5 * cotangent_at(mesh.positions[a], mesh.positions[b], mesh.positions[d]);
+        if (b == i) row.push_back({d, half_cot});
+        if (d == i) row.push_back({b, half_cot});
+      }
+    }
     // Insertion sort: rows are short, and it is stable, so repeats are
     // summed in face order.
+    Half* const first = row.data();
+    Half* const last = first + row.size();
     for (Half* h = first + 1; h < last; ++h)
       for (Half* g = h; g > first && g[-1].to > g->to; --g) std::swap(g[-1], g[0]);
     for (Half* h = first; h != last;) {
