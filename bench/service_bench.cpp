@@ -292,33 +292,66 @@ std::vector<double> run_many(v1::Filigree::Stub& stub, const std::string& bytes,
   return fps;
 }
 
+// A server of the bench's own on a fresh data directory, and a stub with the
+// client library's channel settings: no limit on a SessionInfo's size, and a
+// fixed frame window (filigree/channel_arguments.h; with gRPC's adaptive one
+// a 1.25M frame took 3 ms more to arrive). Stopped, its data removed, when
+// destroyed.
+struct BenchServer {
+  BenchServer(const std::string& binary, const std::string& tag)
+      : data(std::filesystem::temp_directory_path() / ("filigree_bench_" + tag + "_" + std::to_string(::getpid()))),
+        server(binary, {"--data-dir", data.string(), "--max-message-mib", "256"}),
+        stub(v1::Filigree::NewStub(
+            grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()))) {}
+  ~BenchServer() {
+    server.terminate();
+    std::error_code ignored;  // a destructor must not throw
+    std::filesystem::remove_all(data, ignored);
+  }
+  BenchServer(const BenchServer&) = delete;
+  BenchServer& operator=(const BenchServer&) = delete;
+
+  std::filesystem::path data;
+  test::ServerProcess server;
+  std::unique_ptr<v1::Filigree::Stub> stub;
+};
+
+// The bench's meshes by size: "small" ≈10k and "medium" ≈150k (the real
+// camel, and the bunny scan subdivided once: no real mesh of that size here
+// is manifold) when the shared meshes are there, else the shipped Armadillo
+// and its subdivision; "large" ≥ 1M (the Armadillo subdivided, Loop twice
+// and √3 once, 1.25M), in locality order.
+struct Case {
+  std::string name;
+  TriMesh mesh;
+};
+Case bench_mesh(const std::string& size) {
+  const std::string repo = FILIGREE_REPO_DATA_DIR, shared = FILIGREE_SHARED_DATA_DIR;
+  const bool have_shared = std::filesystem::exists(shared + "/camel.off") && std::filesystem::exists(shared + "/bunny.off");
+  RepairReport report;
+  const auto load = [&](const std::string& path) { return repair_mesh(read_mesh(path), {}, &report); };
+  if (size == "small")
+    return have_shared ? Case{"camel (real, 9.8k)", load(shared + "/camel.off")} : Case{"armadillo (real, 26k)", load(repo + "/armadillo.off")};
+  if (size == "medium")
+    return have_shared ? Case{"bunny Loop x1", bench::subdivide(load(shared + "/bunny.off"), 1, 0)}
+                       : Case{"armadillo Loop x1 (104k)", bench::subdivide(load(repo + "/armadillo.off"), 1, 0)};
+  if (size == "large") {
+    const TriMesh large = bench::subdivide(load(repo + "/armadillo.off"), 2, 1);
+    return {"armadillo Loop x2 + sqrt3", permute_vertices(large, locality_order(large.positions))};
+  }
+  throw std::invalid_argument("--mesh must be small, medium or large, got " + size);
+}
+
 // --against: `a` and `b` alternate on one mesh, `rounds` times each (one
 // server idle while the other is driven), and print each round and the
 // medians of both with b's over a's.
 int compare_servers(const std::string& a, const std::string& b, const std::string& which, int rounds) {
-  const std::string repo = FILIGREE_REPO_DATA_DIR, shared = FILIGREE_SHARED_DATA_DIR;
-  RepairReport report;
-  TriMesh mesh;
-  if (which == "small") {
-    mesh = std::filesystem::exists(shared + "/camel.off") ? repair_mesh(read_mesh(shared + "/camel.off"), {}, &report)
-                                                          : repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report);
-  } else if (which == "medium") {
-    mesh = std::filesystem::exists(shared + "/bunny.off")
-               ? bench::subdivide(repair_mesh(read_mesh(shared + "/bunny.off"), {}, &report), 1, 0)
-               : bench::subdivide(repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report), 1, 0);
-  } else if (which == "large") {
-    const TriMesh large = bench::subdivide(repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report), 2, 1);
-    mesh = permute_vertices(large, locality_order(large.positions));
-  } else {
-    throw std::invalid_argument("--mesh must be small, medium or large, got " + which);
-  }
+  const TriMesh mesh = bench_mesh(which).mesh;
   const std::string bytes = obj_bytes(mesh);
   const int poses = mesh.vertex_count() > 500000 ? 60 : 300;
   struct Side {
     std::string binary;
-    std::filesystem::path data;
-    std::unique_ptr<test::ServerProcess> server;
-    std::unique_ptr<v1::Filigree::Stub> stub;
+    std::unique_ptr<BenchServer> server;
     v1::CreateSessionResponse::Created created;
     std::vector<double> encode, compute, ratio, p50;
   };
@@ -326,11 +359,8 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
   for (int k = 0; k < 2; ++k) {
     Side& s = sides[static_cast<std::size_t>(k)];
     s.binary = k == 0 ? a : b;
-    s.data = std::filesystem::temp_directory_path() / ("filigree_bench_ab_" + std::to_string(::getpid()) + "_" + std::to_string(k));
-    s.server = std::make_unique<test::ServerProcess>(s.binary, std::vector<std::string>{"--data-dir", s.data.string(), "--max-message-mib", "256"});
-    s.stub = v1::Filigree::NewStub(
-        grpc::CreateCustomChannel(s.server->address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()));
-    s.created = upload(*s.stub, bytes);
+    s.server = std::make_unique<BenchServer>(s.binary, "ab_" + std::to_string(k));
+    s.created = upload(*s.server->stub, bytes);
   }
   std::printf("# Before/after: %zu vertices, whole body, 1 watcher, %d poses a round\n\n"
               "| round | server | compute p50 ms | encode p50 ms | encode / compute | p50 ms |\n|---:|---|---:|---:|---:|---:|\n",
@@ -339,7 +369,7 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
     for (int i = 0; i < 2; ++i) {
       // Each round starts with the other server, so neither always runs first.
       Side& s = sides[static_cast<std::size_t>((r + i) % 2)];
-      const Result res = run(*s.stub, s.created, 1, poses);
+      const Result res = run(*s.server->stub, s.created, 1, poses);
       s.encode.push_back(res.encode_p50), s.compute.push_back(res.compute_p50), s.p50.push_back(res.p50);
       s.ratio.push_back(res.encode_p50 / res.compute_p50);
       std::printf("| %d | %s | %.3f | %.3f | %.3f | %.3f |\n", r + 1, (r + i) % 2 == 0 ? "a" : "b", res.compute_p50, res.encode_p50,
@@ -354,10 +384,6 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
   }
   const auto over = [&](std::vector<double> Side::*v) { return percentile(sides[1].*v, 0.5) / percentile(sides[0].*v, 0.5); };
   std::printf("| b / a | %.3f | %.3f | %.3f | %.3f |\n", over(&Side::compute), over(&Side::encode), over(&Side::ratio), over(&Side::p50));
-  for (Side& s : sides) {
-    s.server->terminate();
-    std::filesystem::remove_all(s.data);
-  }
   return 0;
 }
 
@@ -367,10 +393,8 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
 // default (single-buffer) format, so that nearly every call transcodes a
 // new frame. Prints the intervals' p50, p99 and longest, and the calls made.
 int single_stall(const std::string& server_binary) {
-  const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_single_" + std::to_string(::getpid()));
-  test::ServerProcess server(server_binary, {"--data-dir", data_dir.string(), "--max-message-mib", "256"});
-  auto stub = v1::Filigree::NewStub(
-      grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()));
+  BenchServer bench_server(server_binary, "single");
+  v1::Filigree::Stub* const stub = bench_server.stub.get();
   RepairReport report;
   const std::string dragon = std::string(FILIGREE_SHARED_DATA_DIR) + "/dragon.ply";
   const TriMesh armadillo = repair_mesh(read_mesh(std::string(FILIGREE_REPO_DATA_DIR) + "/armadillo.off"), {}, &report);
@@ -424,8 +448,6 @@ int single_stall(const std::string& server_binary) {
               "%zu frames, interval p50 %.2f ms, p99 %.1f ms, longest %.1f ms; %d GetState calls answered\n",
               large.vertex_count(), armadillo.vertex_count(), intervals.size(), percentile(intervals, 0.5), percentile(intervals, 0.99),
               *std::max_element(intervals.begin(), intervals.end()), calls.load());
-  server.terminate();
-  std::filesystem::remove_all(data_dir);
   return 0;
 }
 
@@ -457,40 +479,13 @@ int main_impl(int argc, char** argv) {
   }
   if (!against.empty()) return compare_servers(server_binary, against, which, rounds);
   if (single_stall_only) return single_stall(server_binary);
-  const std::string repo = FILIGREE_REPO_DATA_DIR;
-  const auto data_dir = std::filesystem::temp_directory_path() / ("filigree_bench_data_" + std::to_string(::getpid()));
-  test::ServerProcess server(server_binary, {"--data-dir", data_dir.string(), "--max-message-mib", "256"});
-  // The client library's settings: no limit on a SessionInfo's size, and a
-  // fixed frame window (filigree/channel_arguments.h; with gRPC's adaptive
-  // one a 1.25M frame took 3 ms more to arrive).
-  auto stub = v1::Filigree::NewStub(
-      grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()));
+  BenchServer bench_server(server_binary, "data");
+  const test::ServerProcess& server = bench_server.server;
+  v1::Filigree::Stub* const stub = bench_server.stub.get();
 
-  RepairReport report;
-  const TriMesh armadillo = repair_mesh(read_mesh(repo + "/armadillo.off"), {}, &report);
-  struct Case {
-    std::string name;
-    TriMesh mesh;
-  };
-  // ≈10k and ≈150k meshes (the real camel, and the bunny scan subdivided once:
-  // no real mesh of that size here is manifold) when the shared meshes are
-  // there, else the shipped Armadillo and its subdivision; and ≥ 1M: the
-  // Armadillo subdivided (Loop twice, √3 once, 1.25M), in locality order.
-  const std::string shared = FILIGREE_SHARED_DATA_DIR;
   std::vector<Case> cases;
-  if (!large_only) {
-    if (std::filesystem::exists(shared + "/camel.off") && std::filesystem::exists(shared + "/bunny.off")) {
-      cases.push_back({"camel (real, 9.8k)", repair_mesh(read_mesh(shared + "/camel.off"), {}, &report)});
-      cases.push_back({"bunny Loop x1", bench::subdivide(repair_mesh(read_mesh(shared + "/bunny.off"), {}, &report), 1, 0)});
-    } else {
-      cases.push_back({"armadillo (real, 26k)", armadillo});
-      cases.push_back({"armadillo Loop x1 (104k)", bench::subdivide(armadillo, 1, 0)});
-    }
-  }
-  if (!quick) {
-    const TriMesh large = bench::subdivide(armadillo, 2, 1);
-    cases.push_back({"armadillo Loop x2 + sqrt3", permute_vertices(large, locality_order(large.positions))});
-  }
+  if (!large_only) cases.push_back(bench_mesh("small")), cases.push_back(bench_mesh("medium"));
+  if (!quick) cases.push_back(bench_mesh("large"));
   std::printf("# Filigree service benchmark (%s frames)\n\n", g_format == v1::FRAME_FORMAT_SINGLE ? "single-buffer" : "chunked");
   std::printf("| mesh | vertices | motion | watchers | first frame ms | p50 ms | p99 ms | compute p50 ms | encode p50 ms | other p50 ms | encode / compute | "
               "p99 / (compute+encode) p99 | frames/s | bytes/vertex/frame | vertices sent | max error / diag | watcher frames |\n");
@@ -536,11 +531,7 @@ int main_impl(int argc, char** argv) {
               kWarmupFrames + 5);
   for (const Memory& m : memory) std::printf("| %s | %zu | %.0f | %.0f |\n", m.name.c_str(), m.vertices, m.first, m.further);
 
-  if (large_only) {
-    server.terminate();
-    std::filesystem::remove_all(data_dir);
-    return 0;
-  }
+  if (large_only) return 0;
   // Many sessions of the ≈150k mesh sharing the machine's cores.
   const double n_many = static_cast<double>(cases[1].mesh.vertex_count());
   std::printf("\nMany sessions of %s (%.0f vertices), each driven closed-loop with the whole-body motion for 10 s.\n\n"
@@ -555,8 +546,6 @@ int main_impl(int argc, char** argv) {
     std::printf("| %d | %.1f | %.2e | %.2f | %.2f | %.2f |\n", sessions, total, total * n_many, mean, slowest, slowest / mean);
     std::fflush(stdout);
   }
-  server.terminate();
-  std::filesystem::remove_all(data_dir);
   return 0;
 }
 

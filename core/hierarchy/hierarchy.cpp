@@ -1,6 +1,7 @@
 #include "hierarchy/hierarchy.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
@@ -396,25 +397,23 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
   // first. (Copying is mostly first touches of fresh memory, which cost
   // ~2 ms a MB on a VM whose host backs pages lazily: 1.25M vertices,
   // four loads in one process, 400–661 ms with the helper copying alone.)
+  using Copy = void (*)(Hierarchy&, const StoredHierarchy&);
+  static constexpr auto kCopies = std::to_array<Copy>({
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.rest_positions, s.rest_positions); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.original_faces, s.original_faces); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_vertices, s.ring_vertices); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_weights, s.ring_weights); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_offset, s.node_offset); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.created_corners, s.created_corners); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.maps_face, s.maps_face); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.maps_bary, s.maps_bary); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_vertex, s.node_vertex); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_offsets, s.ring_offsets); },
+      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_closed, s.node_closed); },
+  });
   std::atomic<std::size_t> next_copy{0};
-  const auto copy_one = [&](std::size_t i) {
-    switch (i) {
-      case 0: return copy_into(h.rest_positions, s.rest_positions);
-      case 1: return copy_into(h.original_faces, s.original_faces);
-      case 2: return copy_into(h.ring_vertices, s.ring_vertices);
-      case 3: return copy_into(h.ring_weights, s.ring_weights);
-      case 4: return copy_into(h.node_offset, s.node_offset);
-      case 5: return copy_into(h.created_corners, s.created_corners);
-      case 6: return copy_into(h.maps_face, s.maps_face);
-      case 7: return copy_into(h.maps_bary, s.maps_bary);
-      case 8: return copy_into(h.node_vertex, s.node_vertex);
-      case 9: return copy_into(h.ring_offsets, s.ring_offsets);
-      case 10: return copy_into(h.node_closed, s.node_closed);
-    }
-  };
-  constexpr std::size_t kArrays = 11;
   const auto copy_left = [&] {
-    for (std::size_t i; (i = next_copy.fetch_add(1, std::memory_order_relaxed)) < kArrays;) copy_one(i);
+    for (std::size_t i; (i = next_copy.fetch_add(1, std::memory_order_relaxed)) < kCopies.size();) kCopies[i](h, s);
   };
   std::exception_ptr helper_error;
   const auto helper_work = [&] {
