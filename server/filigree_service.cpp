@@ -117,18 +117,25 @@ void FiligreeService::with_session(grpc::CallbackServerContext& context, const s
 }
 
 grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServerContext* context, const std::string& id,
-                                                            Role needed, std::function<grpc::Status(Session&)> body) {
+                                                            Role needed, std::function<grpc::Status(Session&)> body,
+                                                            std::function<bool(const Session&)> slow) {
   auto* reactor = context->DefaultReactor();
-  with_session(*context, id, needed, [reactor, body = std::move(body)](grpc::Status status, std::shared_ptr<Session> s) {
-    if (status.ok()) {
-      try {
-        status = body(*s);
-      } catch (const std::exception& e) {
-        status = {grpc::StatusCode::INTERNAL, e.what()};
+  with_session(*context, id, needed,
+               [this, reactor, body = std::move(body), slow = std::move(slow)](grpc::Status status, std::shared_ptr<Session> s) {
+    const auto answer = [reactor, body](grpc::Status status, std::shared_ptr<Session> s) {
+      if (status.ok()) {
+        try {
+          status = body(*s);
+        } catch (const std::exception& e) {  // off a gRPC thread an escaped exception would end the process
+          status = {grpc::StatusCode::INTERNAL, e.what()};
+        }
       }
-    }
-    s.reset();  // before the call ends, so that a session closed meanwhile ends here
-    reactor->Finish(status);
+      s.reset();  // before the call ends, so that a session closed meanwhile ends here
+      reactor->Finish(status);
+    };
+    if (!status.ok() || !slow || !slow(*s)) return answer(status, std::move(s));
+    run_job([answer, s = std::move(s)]() mutable { answer(grpc::Status::OK, std::move(s)); },
+            [reactor](const grpc::Status& why) { reactor->Finish(why); });
   });
   return reactor;
 }
@@ -544,13 +551,6 @@ grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
   return {grpc::StatusCode::INVALID_ARGUMENT, "the request is not a valid " + out.GetTypeName() + " message"};
 }
 
-// A unary call answered with `status` at once (a request refused before any work).
-grpc::ServerUnaryReactor* finished(grpc::CallbackServerContext* context, const grpc::Status& status) {
-  auto* reactor = context->DefaultReactor();
-  reactor->Finish(status);
-  return reactor;
-}
-
 // A frame as one stream writes it: the frame's shared wire bytes (with the
 // stream's pose id), and the version it has if it is a chunked keyframe.
 struct OutgoingFrame {
@@ -849,7 +849,7 @@ class WatchReactor final : public FrameStreamReactor<WatchReactor, grpc::ServerW
              const std::shared_ptr<FrameStream<WatchReactor>>& stream) override {
     if (status.ok()) {
       stream_->set_format(request_.frame_format());
-      if (request_.frame_format() == v1::FRAME_FORMAT_SINGLE && session_->needs_single()) {
+      if (session_->needs_single(request_.frame_format())) {
         // subscribe() transcodes the current frame into one buffer first: on
         // a job thread, not one of the callback threads. The start holds
         // this reactor until it ends.
@@ -1028,7 +1028,7 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::Callbac
 grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                        grpc::ByteBuffer* response) {
   v1::JoinSessionRequest r;
-  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finish_unary(context, parsed);
   return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
     *response = s.info_wire();
     return grpc::Status::OK;
@@ -1070,7 +1070,7 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
 grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                        grpc::ByteBuffer* response) {
   v1::GetOverlaysRequest r;
-  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finish_unary(context, parsed);
   return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
     *response = s.overlays_wire();
     return grpc::Status::OK;
@@ -1080,30 +1080,20 @@ grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerConte
 grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                     grpc::ByteBuffer* response) {
   v1::GetStateRequest r;
-  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finished(context, parsed);
-  auto* reactor = context->DefaultReactor();
-  with_session(*context, r.session_id(), Role::kViewer,
-               [this, reactor, response, format = r.frame_format()](grpc::Status status, std::shared_ptr<Session> s) {
-    if (!status.ok()) return reactor->Finish(status);
-    const auto answer = [reactor, response, format](Session& session) {
-      try {
-        *response = session.state_wire(format);
-      } catch (const std::exception& e) {
-        return reactor->Finish({grpc::StatusCode::UNAVAILABLE, e.what()});
-      }
-      reactor->Finish(grpc::Status::OK);
-    };
-    if (format != v1::FRAME_FORMAT_SINGLE || !s->needs_single()) return answer(*s);
-    // Transcoding the frame into one buffer: on a job thread, not one of the
-    // callback threads every call of the server shares.
-    run_job(
-        [s = std::move(s), answer]() mutable {
-          answer(*s);
-          s.reset();  // the session may end with its last holder: while the service surely exists
-        },
-        [reactor](const grpc::Status& why) { reactor->Finish(why); });
-  });
-  return reactor;
+  if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finish_unary(context, parsed);
+  const v1::FrameFormat format = r.frame_format();
+  return unary_on_session(
+      context, r.session_id(), Role::kViewer,
+      [response, format](Session& s) -> grpc::Status {
+        try {
+          *response = s.state_wire(format);
+        } catch (const std::exception& e) {
+          return {grpc::StatusCode::UNAVAILABLE, e.what()};
+        }
+        return grpc::Status::OK;
+      },
+      // Transcoding the frame into one buffer: a job.
+      [format](const Session& s) { return s.needs_single(format); });
 }
 
 namespace {
@@ -1131,31 +1121,21 @@ grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, grpc::
 
 grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request_bytes,
                                                       grpc::ByteBuffer* response) {
-  auto request = std::make_shared<v1::SetOptionsRequest>();
-  if (const grpc::Status parsed = parse_request(*request_bytes, *request); !parsed.ok()) return finished(context, parsed);
-  auto* reactor = context->DefaultReactor();
-  with_session(*context, request->session_id(), Role::kEditor,
-               [this, reactor, request, response](grpc::Status status, std::shared_ptr<Session> s) {
-    if (status.ok() && (!(request->threshold() >= 0.0) || std::isinf(request->threshold())))
-      status = {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-    if (!status.ok()) return reactor->Finish(status);
-    const double threshold = request->threshold();
-    const bool whole_mesh = request->whole_mesh();
-    if (!s->threshold_needs_preparation(threshold, whole_mesh)) return reactor->Finish(apply_options(*s, threshold, whole_mesh, response));
-    // The first finite T of a mesh derives its node graph and region
-    // optimisation's data (~1 s at 1.25M vertices), and whole-mesh
-    // optimisation factorises the mesh (seconds): on a thread of its own, not
-    // one of gRPC's callback threads, which every other call of this server
-    // shares. A job, so that drain() (and so the service's end) waits for it.
-    run_job(
-        [s = std::move(s), threshold, whole_mesh, response, reactor]() mutable {
-          const grpc::Status result = apply_options(*s, threshold, whole_mesh, response);
-          s.reset();  // the session may end with its last holder: while the service surely exists
-          reactor->Finish(result);
-        },
-        [reactor](const grpc::Status& why) { reactor->Finish(why); });
-  });
-  return reactor;
+  v1::SetOptionsRequest r;
+  if (const grpc::Status parsed = parse_request(*request_bytes, r); !parsed.ok()) return finish_unary(context, parsed);
+  const double threshold = r.threshold();
+  const bool whole_mesh = r.whole_mesh();
+  const bool valid = threshold >= 0.0 && !std::isinf(threshold);
+  return unary_on_session(
+      context, r.session_id(), Role::kEditor,
+      [threshold, whole_mesh, valid, response](Session& s) -> grpc::Status {
+        if (!valid) return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+        return apply_options(s, threshold, whole_mesh, response);
+      },
+      // The first finite T of a mesh derives its node graph and region
+      // optimisation's data (~1 s at 1.25M vertices), and whole-mesh
+      // optimisation factorises the mesh (seconds): a job.
+      [threshold, whole_mesh, valid](const Session& s) { return valid && s.threshold_needs_preparation(threshold, whole_mesh); });
 }
 
 grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerContext* context,

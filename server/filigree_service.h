@@ -156,9 +156,12 @@ class FiligreeService final : public FiligreeServiceBase {
   // every call of this server shares. `then` may run before this returns.
   // A server shutting down answers UNAVAILABLE.
   void with_session(grpc::CallbackServerContext& context, const std::string& id, Role needed, SessionContinuation then);
-  // A unary call on a session: `body(session)` gives the status to finish with.
+  // A unary call on a session: `body(session)` gives the status to finish
+  // with. Where `slow(session)` says so, the body runs as a job (run_job),
+  // not on the callback thread every call of this server shares.
   grpc::ServerUnaryReactor* unary_on_session(grpc::CallbackServerContext* context, const std::string& id, Role needed,
-                                             std::function<grpc::Status(Session&)> body);
+                                             std::function<grpc::Status(Session&)> body,
+                                             std::function<bool(const Session&)> slow = {});
 
  private:
   SessionRegistry& registry_;

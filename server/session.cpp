@@ -955,11 +955,10 @@ void Session::publish(InFlight& f) {
   {
     std::lock_guard lock(mutex_);
     record_.version = f.version;
-    if (f.overlays) {
-      f.overlays->set_version(record_.version);
-      overlays_ = std::make_shared<const SerializedOnce>(std::move(f.overlays));
-      overlays_version_ = record_.version;
-    }
+    if (f.overlays) f.overlays->set_version(record_.version);
+    // Only the current frame's overlays are answered: a frame without them
+    // lets the previous ones (megabytes at 1.25M vertices) go.
+    overlays_ = f.overlays ? std::make_shared<const SerializedOnce>(std::move(f.overlays)) : nullptr;
     current_ = shared;
     if (!shared->keyframe) keyframe_ = shared;
     touch();
@@ -982,7 +981,7 @@ grpc::ByteBuffer Session::overlays_wire() {
   std::shared_ptr<const SerializedOnce> recent;
   {
     std::lock_guard lock(mutex_);
-    if (overlays_ && overlays_version_ == record_.version) recent = overlays_;
+    recent = overlays_;
     overlays_wanted_until_ = Clock::now() + std::chrono::seconds(5);
     if (!recent) {
       pending_ = true;  // recompute the current pose once, with overlays
@@ -1059,7 +1058,8 @@ grpc::ByteBuffer Session::state_wire(v1::FrameFormat format) {
   return message_with_frames(std::move(head), {{kFrame, &frame->frame_bytes()}});
 }
 
-bool Session::needs_single() const {
+bool Session::needs_single(v1::FrameFormat format) const {
+  if (format != v1::FRAME_FORMAT_SINGLE) return false;
   std::lock_guard lock(mutex_);
   return current_ && !current_->single;
 }

@@ -200,10 +200,11 @@ class Session {
   // yet is transcoded here first (tens of ms at 1.25M vertices); throws
   // DeltaCodecError if that fails.
   grpc::ByteBuffer state_wire(v1::FrameFormat format);
-  // Whether the current frame has no single buffer yet: answering or
-  // subscribing in FRAME_FORMAT_SINGLE then transcodes it first (hundreds of
-  // ms at 1.25M vertices; callers keep that off gRPC's callback threads).
-  bool needs_single() const;
+  // Whether answering or subscribing in `format` transcodes the current frame
+  // first: FRAME_FORMAT_SINGLE, and the frame has no single buffer yet
+  // (hundreds of ms at 1.25M vertices; callers keep that off gRPC's callback
+  // threads).
+  bool needs_single(v1::FrameFormat format) const;
   // With the handles and, for an adaptive cut, the cut of the latest frame
   // (O(nodes): waits for a frame computing now).
   SessionRecord record() const;
@@ -345,8 +346,7 @@ class Session {
   bool evicted_ = false;  // by evict_if_unused(): requests must go to a fresh copy
   std::vector<std::weak_ptr<FrameSink>> sinks_;
   std::shared_ptr<const PublishedFrame> current_;
-  std::shared_ptr<const SerializedOnce> overlays_;  // of the frame of version overlays_version_
-  std::uint64_t overlays_version_ = 0;
+  std::shared_ptr<const SerializedOnce> overlays_;  // the current frame's, if it has them
   std::chrono::steady_clock::time_point overlays_wanted_until_{};
   std::chrono::steady_clock::time_point last_activity_;
   const Journal journal_;

@@ -1107,6 +1107,7 @@ TEST_F(ServiceTest, ChunkedFramesSparseLateJoinerAndSkippingWatcher) {
 
   // A watcher in the default (single-buffer) format of a frame made without
   // one: the frame transcoded for it (on a job thread), same version.
+  ASSERT_FALSE(f.chunks().empty()) << "the current frame must be chunked for the watcher to need a transcode";
   auto single_ctx = context(id, c.created.viewer_token());
   v1::WatchRequest single_request;
   single_request.set_session_id(id);

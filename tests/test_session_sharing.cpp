@@ -70,6 +70,21 @@ TEST_F(SessionSharing, TwoSessionsOfOneMeshShareOneHierarchyAndModel) {
   EXPECT_EQ(registry_->live_meshes(), 2u);
 }
 
+TEST_F(SessionSharing, InfoWireNamesTheVersionItIsGivenAndOtherwiseIsTheTypedInfo) {
+  // SetOptions answers with the version at which the change was accepted,
+  // not the current one: info_wire(v) must carry v, and the rest as info().
+  std::string key;
+  auto s = registry_->create(hierarchy_of(test::icosphere(3), key), key, {}, {});
+  grpc::ByteBuffer wire = s->info_wire(42);
+  v1::SessionInfo parsed;
+  ASSERT_TRUE(grpc::SerializationTraits<v1::SessionInfo>::Deserialize(&wire, &parsed).ok());
+  EXPECT_EQ(parsed.version(), 42u);
+  v1::SessionInfo typed = s->info();
+  EXPECT_NE(typed.version(), 42u);
+  typed.set_version(42);
+  EXPECT_EQ(parsed.SerializeAsString(), typed.SerializeAsString());
+}
+
 TEST_F(SessionSharing, ASmallMeshsFramesAreSplitForEveryFrameThread) {
   // 10242 vertices, under 2 · 2 chunks of 16384: with two frame threads its
   // frames come in 4 even chunks (two per thread), with one in 2.
