@@ -679,7 +679,7 @@ void Session::quantize_part_of(InFlight& f, std::size_t p) {
     return;
   }
   // The single buffer: every delta over one range (FRAME_FORMAT_SINGLE).
-  const std::vector<Vec3>& rest = assets_->hierarchy().rest_positions;
+  const std::span<const Vec3> rest = assets_->hierarchy().rest_positions;
   f.single_values.resize(3 * rest.size());
   bool all_zero = true;
   for (std::size_t i = 0; i < rest.size(); ++i)

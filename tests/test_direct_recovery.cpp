@@ -29,7 +29,7 @@ namespace filigree {
 namespace {
 
 std::vector<Vec3> reference_recovery(const Hierarchy& h, const Pose& pose) {
-  std::vector<Vec3> x = h.rest_positions;
+  std::vector<Vec3> x = h.rest_positions.to_vector();
   for (Index i = 0; i < h.base_vertices.size(); ++i) x[h.base_vertices[i]] = pose.positions[i];
   for (NodeId k : recovery_order(h))
     x[h.node_vertex[k]] = ring_frame(h.ring(k), h.weights(k), x, h.node_closed[k] != 0).from_local(h.node_offset[k].cast<double>());

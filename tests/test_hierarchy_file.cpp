@@ -55,25 +55,25 @@ class HierarchyFileTest : public ::testing::Test {
 
 // Same bytes, element by element (float fields compared as bits, not values).
 template <class T>
-void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+void expect_same_bytes(std::span<const T> a, std::span<const T> b, const char* what) {
   ASSERT_EQ(a.size(), b.size()) << what;
   EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(T)), 0) << what;
 }
 
 void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
-  expect_same_bytes(a.rest_positions, b.rest_positions, "rest_positions");
-  expect_same_bytes(a.original_faces, b.original_faces, "original_faces");
-  expect_same_bytes(a.created_corners, b.created_corners, "created_corners");
-  expect_same_bytes(a.node_vertex, b.node_vertex, "node_vertex");
-  expect_same_bytes(a.node_closed, b.node_closed, "node_closed");
-  expect_same_bytes(a.ring_offsets, b.ring_offsets, "ring_offsets");
-  expect_same_bytes(a.ring_vertices, b.ring_vertices, "ring_vertices");
-  expect_same_bytes(a.ring_weights, b.ring_weights, "ring_weights");
-  expect_same_bytes(a.node_offset, b.node_offset, "node_offset");
-  expect_same_bytes(a.base_vertices, b.base_vertices, "base_vertices");
-  expect_same_bytes(a.base_faces, b.base_faces, "base_faces");
-  expect_same_bytes(a.maps_face, b.maps_face, "maps_face");
-  expect_same_bytes(a.maps_bary, b.maps_bary, "maps_bary");
+  expect_same_bytes<Vec3>(a.rest_positions, b.rest_positions, "rest_positions");
+  expect_same_bytes<Triangle>(a.original_faces, b.original_faces, "original_faces");
+  expect_same_bytes<RingCorners>(a.created_corners, b.created_corners, "created_corners");
+  expect_same_bytes<Index>(a.node_vertex, b.node_vertex, "node_vertex");
+  expect_same_bytes<std::uint8_t>(a.node_closed, b.node_closed, "node_closed");
+  expect_same_bytes<Index>(a.ring_offsets, b.ring_offsets, "ring_offsets");
+  expect_same_bytes<Index>(a.ring_vertices, b.ring_vertices, "ring_vertices");
+  expect_same_bytes<std::uint16_t>(a.ring_weights, b.ring_weights, "ring_weights");
+  expect_same_bytes<Vec3f>(a.node_offset, b.node_offset, "node_offset");
+  expect_same_bytes<Index>(a.base_vertices, b.base_vertices, "base_vertices");
+  expect_same_bytes<FaceId>(a.base_faces, b.base_faces, "base_faces");
+  expect_same_bytes<Index>(a.maps_face, b.maps_face, "maps_face");
+  expect_same_bytes<Barycentric16>(a.maps_bary, b.maps_bary, "maps_bary");
   EXPECT_EQ(a.mesh_hash, b.mesh_hash);
   EXPECT_EQ(a.build.build_seconds, b.build.build_seconds);
   EXPECT_EQ(a.build.requested_base_vertices, b.build.requested_base_vertices);
@@ -118,7 +118,7 @@ TEST_F(HierarchyFileTest, LargeHierarchiesLoadOnTwoThreadsBitIdentical) {
   EXPECT_EQ(serialize_hierarchy(back), bytes);
   // A forged node on that path is still refused, with what is wrong.
   Hierarchy forged = h;
-  forged.node_vertex[5] = forged.node_vertex[2];
+  forged.node_vertex.edit()[5] = forged.node_vertex[2];
   const std::string msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("node 5 removes vertex"), std::string::npos) << msg;
 }
@@ -126,10 +126,10 @@ TEST_F(HierarchyFileTest, LargeHierarchiesLoadOnTwoThreadsBitIdentical) {
 TEST_F(HierarchyFileTest, FloatAndFixedPointFieldsRoundTripBitExact) {
   // float32 and 16-bit fields: stored as they are in memory, no conversion on the way.
   Hierarchy h = *hierarchy_;
-  h.ring_weights[0] = static_cast<std::uint16_t>(h.ring_weights[0] + 1);
-  h.node_offset[1].x() = std::nextafter(h.node_offset[1].x(), 0.0f);
-  h.node_offset[2].z() = 0x1p-140f;  // subnormal
-  h.maps_bary[3] = {16384, 32769};
+  h.ring_weights.edit()[0] = static_cast<std::uint16_t>(h.ring_weights[0] + 1);
+  h.node_offset.edit()[1].x() = std::nextafter(h.node_offset[1].x(), 0.0f);
+  h.node_offset.edit()[2].z() = 0x1p-140f;  // subnormal
+  h.maps_bary.edit()[3] = {16384, 32769};
   const Hierarchy back = deserialize_hierarchy(serialize_hierarchy(h));
   expect_same_hierarchy(back, h);
 }
@@ -366,7 +366,7 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   // the checksum is right, the content is not.
   Hierarchy forged = *hierarchy_;
   const NodeId last = static_cast<NodeId>(forged.node_count() - 1);
-  forged.ring_vertices[forged.ring_offsets[last]] = forged.node_vertex[0];  // gone before the last node
+  forged.ring_vertices.edit()[forged.ring_offsets[last]] = forged.node_vertex[0];  // gone before the last node
   std::string msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("corrupt: invalid hierarchy: node " + std::to_string(last) + " has ring vertex " +
                      std::to_string(forged.node_vertex[0]) + ", removed before it"),
@@ -374,22 +374,22 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
       << msg;
 
   forged = *hierarchy_;
-  forged.node_vertex[5] = forged.node_vertex[2];
+  forged.node_vertex.edit()[5] = forged.node_vertex[2];
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("node 5 removes vertex"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.original_faces[3][1] = static_cast<Index>(forged.vertex_count());
+  forged.original_faces.edit()[3][1] = static_cast<Index>(forged.vertex_count());
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("face 3"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.maps_bary[7] = {40000, 40000};
+  forged.maps_bary.edit()[7] = {40000, 40000};
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("barycentric"), std::string::npos) << msg;
 
   forged = *hierarchy_;
-  forged.ring_weights[2] = 0;
+  forged.ring_weights.edit()[2] = 0;
   EXPECT_NE(error_of(serialize_hierarchy(forged)).find("zero ring weight"), std::string::npos);
 
   // Open and closed rings swapped between a boundary node and an inner one:
@@ -402,7 +402,7 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   };
   const NodeId open = first_with(0), closed = first_with(1);
   ASSERT_LT(open, forged.node_count());  // the fixture has a boundary
-  forged.node_closed[open] = 1, forged.node_closed[closed] = 0;
+  forged.node_closed.edit()[open] = 1, forged.node_closed.edit()[closed] = 0;
   msg = error_of(serialize_hierarchy(forged));
   const NodeId first = std::min(open, closed);
   EXPECT_NE(msg.find("node " + std::to_string(first) + " says its ring is " + (first == open ? "closed, but its vertex is on" : "open, but its vertex is not on") +
@@ -419,11 +419,11 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   }();
   const std::size_t at = hierarchy_->first_created_face(quad) - hierarchy_->original_face_count();
   forged = *hierarchy_;
-  std::swap(forged.created_corners[at][1], forged.created_corners[at][2]);
+  std::swap(forged.created_corners.edit()[at][1], forged.created_corners.edit()[at][2]);
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("node " + std::to_string(quad) + "'s created faces do not triangulate its ring"), std::string::npos) << msg;
   forged = *hierarchy_;
-  forged.created_corners[at + 1] = forged.created_corners[at];
+  forged.created_corners.edit()[at + 1] = forged.created_corners[at];
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("do not triangulate its ring"), std::string::npos) << msg;
 
@@ -471,7 +471,7 @@ TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {
     return "no error";
   };
   Hierarchy h = *hierarchy_;
-  h.created_corners.back() = {0, 1, 1};
+  h.created_corners.edit().back() = {0, 1, 1};
   EXPECT_NE(message(h).find("corners outside its ring"), std::string::npos) << message(h);
   h = *hierarchy_;
   h.base_vertices.pop_back();

@@ -6,7 +6,7 @@
 
 namespace filigree {
 
-std::vector<Vec3> CotangentLaplacian::apply(const std::vector<Vec3>& x) const {
+std::vector<Vec3> CotangentLaplacian::apply(std::span<const Vec3> x) const {
   std::vector<Vec3> out(vertex_count(), Vec3::Zero());
   for (std::size_t i = 0; i < vertex_count(); ++i) {
     Vec3 acc = Vec3::Zero();

@@ -2,6 +2,7 @@
 // The cotangent Laplacian of a triangle mesh and its differential coordinates
 // (thesis eq. 3.3; DESIGN §2.1.5).
 
+#include <span>
 #include <vector>
 
 #include "mesh/tri_mesh.h"
@@ -25,7 +26,7 @@ struct CotangentLaplacian {
 
   std::size_t vertex_count() const { return offsets.empty() ? 0 : offsets.size() - 1; }
   // δ_i = Σ_j w_ij (x_i − x_j), i.e. (L x)_i.
-  std::vector<Vec3> apply(const std::vector<Vec3>& x) const;
+  std::vector<Vec3> apply(std::span<const Vec3> x) const;
 };
 
 // Precondition: faces index valid vertices; the mesh may be non-manifold, an

@@ -13,7 +13,7 @@ Vec3 RingFrame::from_local(const Vec3& local) const { return center + scale * (a
 namespace {
 
 template <class W>
-RingFrame frame_of(std::span<const Index> ring, std::span<const W> weights, const std::vector<Vec3>& positions, bool closed) {
+RingFrame frame_of(std::span<const Index> ring, std::span<const W> weights, std::span<const Vec3> positions, bool closed) {
   const std::size_t k = ring.size();
   RingFrame frame;
   frame.center = Vec3::Zero();
@@ -54,12 +54,12 @@ RingFrame frame_of(std::span<const Index> ring, std::span<const W> weights, cons
 }  // namespace
 
 RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
-                     const std::vector<Vec3>& positions, bool closed) {
+                     std::span<const Vec3> positions, bool closed) {
   return frame_of(ring, weights, positions, closed);
 }
 
 RingFrame ring_frame(std::span<const Index> ring, std::span<const std::uint16_t> weights,
-                     const std::vector<Vec3>& positions, bool closed) {
+                     std::span<const Vec3> positions, bool closed) {
   return frame_of(ring, weights, positions, closed);
 }
 

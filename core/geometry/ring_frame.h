@@ -32,8 +32,8 @@ struct RingFrame {
 // division the centre would drift by (Σ w − 1)·x, growing with the
 // distance from the coordinate origin.
 RingFrame ring_frame(std::span<const Index> ring, std::span<const double> weights,
-                     const std::vector<Vec3>& positions, bool closed);
+                     std::span<const Vec3> positions, bool closed);
 RingFrame ring_frame(std::span<const Index> ring, std::span<const std::uint16_t> weights,
-                     const std::vector<Vec3>& positions, bool closed);
+                     std::span<const Vec3> positions, bool closed);
 
 }  // namespace filigree

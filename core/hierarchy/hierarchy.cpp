@@ -274,16 +274,18 @@ Checked check(const StoredHierarchy& s) {
 // 0.8–1.1 s one time in three on a VM that reports free 8 MB blocks to its
 // host, so it is not done.)
 template <class T>
-void copy_into(std::vector<T>& out, std::span<const T> in) {
-  out.reserve(in.size());
+void copy_into(MappedArray<T>& out, std::span<const T> in) {
+  std::vector<T> v;
+  v.reserve(in.size());
   if constexpr (std::is_trivially_copyable_v<T>) {
-    out.assign(in.begin(), in.end());
+    v.assign(in.begin(), in.end());
   } else {
     // Eigen vectors: plain floats, but not trivially copyable by type; their
     // default constructor leaves them uninitialised, so resize costs nothing.
-    out.resize(in.size());
-    if (!in.empty()) std::memcpy(static_cast<void*>(out.data()), in.data(), in.size() * sizeof(T));
+    v.resize(in.size());
+    if (!in.empty()) std::memcpy(static_cast<void*>(v.data()), in.data(), in.size() * sizeof(T));
   }
+  out = std::move(v);
 }
 
 template <class T>
@@ -313,8 +315,8 @@ Triangle Hierarchy::face(FaceId f) const {
 
 TriMesh Hierarchy::original_mesh() const {
   TriMesh m;
-  m.positions = rest_positions;
-  m.faces = original_faces;
+  m.positions = rest_positions.to_vector();
+  m.faces = original_faces.to_vector();
   return m;
 }
 
@@ -338,7 +340,7 @@ Vec3 Hierarchy::maps_barycentric(Index i) const {
   return {b0, b1, std::max(0.0, 1.0 - b0 - b1)};
 }
 
-Vec3 Hierarchy::maps_position(Index i, const std::vector<Vec3>& positions) const {
+Vec3 Hierarchy::maps_position(Index i, std::span<const Vec3> positions) const {
   const Triangle t = face(base_faces[maps_face[i]]);
   const Vec3 b = maps_barycentric(i);
   return b[0] * positions[t[0]] + b[1] * positions[t[1]] + b[2] * positions[t[2]];
@@ -380,9 +382,9 @@ Barycentric16 quantize_barycentric(const Vec3& b) {
 }
 
 std::size_t Hierarchy::memory_bytes() const {
-  return bytes_of(rest_positions) + bytes_of(original_faces) + bytes_of(created_corners) + bytes_of(node_vertex) + bytes_of(node_closed) + bytes_of(ring_offsets) +
-         bytes_of(ring_vertices) + bytes_of(ring_weights) + bytes_of(node_offset) + bytes_of(base_vertices) + bytes_of(base_faces) +
-         bytes_of(maps_face) + bytes_of(maps_bary);
+  return rest_positions.bytes() + original_faces.bytes() + created_corners.bytes() + node_vertex.bytes() + node_closed.bytes() +
+         ring_offsets.bytes() + ring_vertices.bytes() + ring_weights.bytes() + node_offset.bytes() + bytes_of(base_vertices) +
+         bytes_of(base_faces) + maps_face.bytes() + maps_bary.bytes();
 }
 
 void validate_hierarchy(const StoredHierarchy& s) { check(s); }

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "mesh/tri_mesh.h"
+#include "util/mapped_array.h"
 
 namespace filigree {
 
@@ -70,19 +71,19 @@ struct BuildInfo {
 struct Hierarchy {
   // ---- The original mesh (rest pose), in input order. Double: the identity
   // pose must give back the rest mesh within 1e-9 of the bbox diagonal.
-  std::vector<Vec3> rest_positions;  // n
+  MappedArray<Vec3> rest_positions;  // n
   // Every face that ever existed, numbered: [0, original_face_count()) the
   // original mesh in input order, then the faces created by removals, in
   // order (face()). Only the original ones are stored as triangles.
-  std::vector<Triangle> original_faces;
+  MappedArray<Triangle> original_faces;
 
   // ---- Nodes. Node k is the k-th vertex removal. Its ring vertices were
   // removed after it (or never), so they are recovered before it.
-  std::vector<Index> node_vertex;         // removed vertex (original id)
-  std::vector<std::uint8_t> node_closed;  // 1: interior vertex, closed ring; 0: boundary, open ring
+  MappedArray<Index> node_vertex;         // removed vertex (original id)
+  MappedArray<std::uint8_t> node_closed;  // 1: interior vertex, closed ring; 0: boundary, open ring
   // Removal-time 1-ring, ordered so that (v, ring[k], ring[k+1]) were faces.
-  std::vector<Index> ring_offsets;        // N+1
-  std::vector<Index> ring_vertices;
+  MappedArray<Index> ring_offsets;        // N+1
+  MappedArray<Index> ring_vertices;
   // Relative weights in 16-bit fixed point, each ≥ 1: w_i = ring_weights[i] / Σ
   // (geometry/ring_weights.h, then quantize_ring_weights(); Σ is 65535 up to
   // a step per weight). Enough because
@@ -90,13 +91,13 @@ struct Hierarchy {
   // offset is exact for the stored weights, and ring_frame() divides by
   // their sum, so the rounding only changes which (equally valid) centre the
   // offset is relative to.
-  std::vector<std::uint16_t> ring_weights;
+  MappedArray<std::uint16_t> ring_weights;
   // v's position in the RingFrame of its ring (geometry/ring_frame.h): direct
   // recovery puts v back at frame.from_local(node_offset) (thesis eq. 3.10).
   // Float32: the offset is rotation- and scale-free, O(1), so rounding moves
   // v by ~1e-7 of its ring's radius; the rest pose stays exact because direct
   // recovery adds back its float error of the rest pose.
-  std::vector<Vec3f> node_offset;
+  MappedArray<Vec3f> node_offset;
   // The removal deleted v's fan: face (v, ring[i], ring[i+1]) for each ring
   // slot i (fan_face()), one fewer for an open ring. Which face ids those
   // are is derived (NodeGraph::removed_faces_of).
@@ -106,7 +107,7 @@ struct Hierarchy {
   // original_face_count() + ring_offsets[k] − 2k onwards (created_faces_of),
   // stored here at index ring_offsets[k] − 2k onwards. 3 bytes a face
   // instead of a 12-byte triangle.
-  std::vector<RingCorners> created_corners;
+  MappedArray<RingCorners> created_corners;
 
   // ---- Base mesh: the vertices never removed and the faces alive at the end
   // (derived).
@@ -119,8 +120,8 @@ struct Hierarchy {
   // The first two barycentrics in 16-bit fixed point (maps_barycentric());
   // rounding moves the point by ~1e-5 of its base triangle, far below the
   // parameterisation's own distortion.
-  std::vector<Index> maps_face;
-  std::vector<Barycentric16> maps_bary;
+  MappedArray<Index> maps_face;
+  MappedArray<Barycentric16> maps_bary;
 
   std::uint64_t mesh_hash = 0;  // hash_mesh() of the mesh it was built from
   BuildInfo build;
@@ -175,7 +176,7 @@ struct Hierarchy {
   Vec3 maps_barycentric(Index i) const;
   // Position of vertex i through the MAPS parameterisation on the base mesh
   // whose vertices (original ids) are at `positions`.
-  Vec3 maps_position(Index i, const std::vector<Vec3>& positions) const;
+  Vec3 maps_position(Index i, std::span<const Vec3> positions) const;
   // Longest chain of dependent nodes (0 for no nodes): node k depends on the
   // nodes that removed its ring vertices.
   std::size_t depth() const;

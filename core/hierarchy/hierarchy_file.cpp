@@ -273,8 +273,9 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
       // Its offsets are in the frames of its float weights: redo them in the
       // frames of the 16-bit ones, as preprocessing now does, so that the
       // pair puts every vertex back where it was (validated indices by now).
+      const std::span<Vec3f> offsets = h.node_offset.edit();
       for (NodeId k = 0; k < h.node_count(); ++k)
-        h.node_offset[k] = ring_frame(h.ring(k), h.weights(k), h.rest_positions, h.node_closed[k] != 0)
+        offsets[k] = ring_frame(h.ring(k), h.weights(k), h.rest_positions, h.node_closed[k] != 0)
                                .to_local(h.rest_positions[h.node_vertex[k]])
                                .cast<float>();
     }

@@ -2,7 +2,7 @@
 
 namespace filigree {
 
-double bounding_box_diagonal(const std::vector<Vec3>& positions) {
+double bounding_box_diagonal(std::span<const Vec3> positions) {
   if (positions.empty()) return 0.0;
   Vec3 lo = positions.front(), hi = positions.front();
   for (const Vec3& p : positions) {

@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include <Eigen/Core>
@@ -25,7 +26,7 @@ struct TriMesh {
 };
 
 // Length of the diagonal of the axis-aligned bounding box (0 for an empty mesh).
-double bounding_box_diagonal(const std::vector<Vec3>& positions);
+double bounding_box_diagonal(std::span<const Vec3> positions);
 
 // Points from packed x y z floats, the form of the wire and the client
 // library (a trailing partial point is ignored).

@@ -19,7 +19,7 @@ std::uint64_t spread(std::uint64_t x) {
 
 }  // namespace
 
-std::vector<Index> locality_order(const std::vector<Vec3>& positions) {
+std::vector<Index> locality_order(std::span<const Vec3> positions) {
   std::vector<Index> order(positions.size());
   if (positions.empty()) return order;
   Vec3 lo = positions[0], hi = lo;

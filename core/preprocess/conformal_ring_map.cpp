@@ -8,7 +8,7 @@
 namespace filigree {
 
 std::vector<Vec2> conformal_ring_map(const Vec3& center, std::span<const Index> ring,
-                                     const std::vector<Vec3>& positions, bool closed) {
+                                     std::span<const Vec3> positions, bool closed) {
   const std::size_t k = ring.size();
   std::vector<double> theta(k, 0.0), radius(k);
   double mean_radius = 0.0;

@@ -21,6 +21,6 @@ using Vec2 = Eigen::Vector2d;
 // map does not depend on the mesh's units. Returns an empty vector when the fan
 // is degenerate (a zero-length spoke or a total angle of ~0).
 std::vector<Vec2> conformal_ring_map(const Vec3& center, std::span<const Index> ring,
-                                     const std::vector<Vec3>& positions, bool closed);
+                                     std::span<const Vec3> positions, bool closed);
 
 }  // namespace filigree

@@ -255,10 +255,10 @@ class Simplifier {
     // the offset in the frame of the rounded weights, so that the stored pair
     // puts v back where it was (only the offset's own float rounding remains).
     const std::vector<std::uint16_t> stored = quantize_ring_weights(ring_weights(x[v], r, x, p.ring.closed));
-    out_.ring_weights.insert(out_.ring_weights.end(), stored.begin(), stored.end());
+    out_.ring_weights.insert_back(stored.begin(), stored.end());
     out_.node_vertex.push_back(v);
     out_.node_closed.push_back(p.ring.closed ? 1 : 0);
-    out_.ring_vertices.insert(out_.ring_vertices.end(), r.begin(), r.end());
+    out_.ring_vertices.insert_back(r.begin(), r.end());
     out_.ring_offsets.push_back(static_cast<Index>(out_.ring_vertices.size()));
     out_.node_offset.push_back(ring_frame(r, std::span<const std::uint16_t>(stored), x, p.ring.closed).to_local(x[v]).cast<float>());
 
@@ -303,20 +303,22 @@ class Simplifier {
       base_index[f] = static_cast<Index>(out_.base_faces.size());
       out_.base_faces.push_back(f);
     }
-    out_.maps_face.assign(n, kNone);
-    out_.maps_bary.assign(n, Barycentric16{});
+    std::vector<Index> maps_face(n, kNone);
+    std::vector<Barycentric16> maps_bary(n);
     for (Index v = 0; v < n; ++v) {
       if (removed_[v]) {
-        out_.maps_face[v] = base_index[point_face_[v]];
-        out_.maps_bary[v] = quantize_barycentric(point_bary_[v]);
+        maps_face[v] = base_index[point_face_[v]];
+        maps_bary[v] = quantize_barycentric(point_bary_[v]);
       } else {
         // A base vertex is the corner of its first live face.
         const FaceId f = mesh_.vertex_faces(v).front();
         const Triangle& t = mesh_.face(f);
-        out_.maps_face[v] = base_index[f];
-        out_.maps_bary[v] = quantize_barycentric(Vec3(t[0] == v, t[1] == v, t[2] == v));
+        maps_face[v] = base_index[f];
+        maps_bary[v] = quantize_barycentric(Vec3(t[0] == v, t[1] == v, t[2] == v));
       }
     }
+    out_.maps_face = std::move(maps_face);
+    out_.maps_bary = std::move(maps_bary);
   }
 
   const SimplifyOptions& opt_;

@@ -29,7 +29,7 @@ struct PatchFace {
 // eq. 3.7), and the patch's rest area. With G_p, G_x the Gram matrices of the
 // rest and posed edge vectors, Γ² + γ² = tr(G_p⁻¹ G_x) and Γγ = |n_x| / |n_p|,
 // so Γ + γ = √(Γ² + γ² + 2Γγ): no SVD, two square roots.
-void add_stretch(const PatchFace& f, const std::vector<Vec3>& p, const std::vector<Vec3>& x, double& stretch_sum,
+void add_stretch(const PatchFace& f, std::span<const Vec3> p, const std::vector<Vec3>& x, double& stretch_sum,
                  double& area_sum) {
   const double rest_area2 = f.rest_normal.squaredNorm();  // det G_p
   if (!(rest_area2 > 0.0)) return;                        // a degenerate rest triangle has no area to weigh

@@ -41,7 +41,7 @@ struct Deformer::Optimised {
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
       : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.node_graph(), m.laplacian(), o.threshold),
-        solver(m.laplacian(), m.differential_coordinates(), &m.region_factors()), positions(m.hierarchy().rest_positions) {
+        solver(m.laplacian(), m.differential_coordinates(), &m.region_factors()), positions(m.hierarchy().rest_positions.to_vector()) {
     cut.reset(o.threshold);
   }
 };

@@ -35,7 +35,7 @@ inline NodeId flip_a_quad_diagonal(Hierarchy& h) {
   for (NodeId k = 0; k < h.node_count(); ++k) {
     const auto ring = h.ring(k);
     if (ring.size() != 4 || std::any_of(ring.begin(), ring.end(), [&](Index u) { return node_of[u] == kNone; })) continue;
-    RingCorners* made = &h.created_corners[h.first_created_face(k) - h.original_face_count()];
+    RingCorners* made = &h.created_corners.edit()[h.first_created_face(k) - h.original_face_count()];
     const bool across_0_2 = std::count(made[0].begin(), made[0].end(), 0) && std::count(made[0].begin(), made[0].end(), 2);
     if (across_0_2) {
       made[0] = {1, 2, 3}, made[1] = {3, 0, 1};
