@@ -106,8 +106,9 @@ TEST_F(HierarchyFileTest, MemoryRoundTripIsBitIdentical) {
 }
 
 TEST_F(HierarchyFileTest, LargeHierarchiesLoadOnTwoThreadsBitIdentical) {
-  // From 100k vertices a load copies on two threads while it checks; the
-  // shipped meshes are smaller, so a grid of 103k vertices takes that path.
+  // From 100k vertices a load checks on two threads (the boundary check and
+  // the checksum on a helper), and copies on both; the shipped meshes are
+  // smaller, so a grid of 103k vertices takes that path.
   PreprocessOptions options;
   options.base_vertices = 400;
   const Hierarchy h = preprocess(test::wavy_grid(320), options);
@@ -116,11 +117,55 @@ TEST_F(HierarchyFileTest, LargeHierarchiesLoadOnTwoThreadsBitIdentical) {
   const Hierarchy back = deserialize_hierarchy(bytes);
   expect_same_hierarchy(back, h);
   EXPECT_EQ(serialize_hierarchy(back), bytes);
-  // A forged node on that path is still refused, with what is wrong.
+  // From a file, in place.
+  const auto path = temp_file("large.fgh");
+  save_hierarchy(h, path);
+  const Hierarchy mapped = load_hierarchy(path);
+  std::filesystem::remove(path);
+  EXPECT_TRUE(mapped.rest_positions.viewing());
+  expect_same_hierarchy(mapped, h);
+  // A forged node on that path is still refused, with what is wrong: from
+  // either thread's checks.
   Hierarchy forged = h;
   forged.node_vertex.edit()[5] = forged.node_vertex[2];
-  const std::string msg = error_of(serialize_hierarchy(forged));
+  std::string msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("node 5 removes vertex"), std::string::npos) << msg;
+  // Open and closed swapped between the grid's first boundary node and the
+  // inner node after it (so the face count still adds up).
+  forged = h;
+  NodeId open = 0;
+  while (open < forged.node_count() && forged.node_closed[open] != 0) ++open;
+  NodeId closed = open;
+  while (closed < forged.node_count() && forged.node_closed[closed] == 0) ++closed;
+  ASSERT_LT(closed, forged.node_count());
+  forged.node_closed.edit()[open] = 1, forged.node_closed.edit()[closed] = 0;
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("node " + std::to_string(open) + " says its ring is closed, but its vertex is on the mesh's boundary"), std::string::npos) << msg;
+}
+
+TEST_F(HierarchyFileTest, ALoadedHierarchyReadsItsFileInPlaceAndOutlivesItsName) {
+  const auto path = temp_file("in_place.fgh");
+  save_hierarchy(*hierarchy_, path);
+  Hierarchy h = load_hierarchy(path);
+  // Every stored array is a view of the mapping: nothing copied.
+  EXPECT_TRUE(h.rest_positions.viewing() && h.original_faces.viewing() && h.created_corners.viewing() && h.node_vertex.viewing() &&
+              h.node_closed.viewing() && h.ring_offsets.viewing() && h.ring_vertices.viewing() && h.ring_weights.viewing() &&
+              h.node_offset.viewing() && h.maps_face.viewing() && h.maps_bary.viewing());
+  EXPECT_EQ(h.memory_bytes(), deserialize_hierarchy(*bytes_).memory_bytes());
+  // Replaced by a rename, as writers do: the loaded hierarchy still reads
+  // what it loaded; then deleted: still so.
+  Hierarchy other = *hierarchy_;
+  other.mesh_hash ^= 1;
+  save_hierarchy(other, path);
+  EXPECT_EQ(serialize_hierarchy(h), *bytes_);
+  std::filesystem::remove(path);
+  EXPECT_EQ(serialize_hierarchy(h), *bytes_);
+  // Writing to a loaded array copies it; the other views are untouched.
+  const Hierarchy before = h;
+  h.ring_weights.edit()[0] = static_cast<std::uint16_t>(h.ring_weights[0] + 1);
+  EXPECT_FALSE(h.ring_weights.viewing());
+  EXPECT_TRUE(before.ring_weights.viewing());
+  EXPECT_EQ(serialize_hierarchy(before), *bytes_);
 }
 
 TEST_F(HierarchyFileTest, FloatAndFixedPointFieldsRoundTripBitExact) {

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <cstring>
 #include <exception>
+#include <optional>
 #include <sstream>
 #include <thread>
 #include <type_traits>
@@ -149,7 +150,40 @@ std::span<const typename V::Scalar> coordinates(std::span<const V> a) {
   return {a.empty() ? nullptr : a.data()->data(), 3 * a.size()};
 }
 
-Checked check(const StoredHierarchy& s) {
+// A removed vertex's ring is open exactly when the vertex is on the original
+// mesh's boundary (simplification keeps every vertex's boundary status): the
+// first node whose closed flag says otherwise, as a message. A vertex is
+// inside when its faces' next corners are their previous corners over again
+// (a closed fan): compared as sums of a 64-bit mix of the ids, one pass over
+// the faces, no edge table. Safe on any input: with a face corner or a
+// node's vertex out of range it says nothing (check() reports those).
+std::optional<std::string> boundary_mismatch(const StoredHierarchy& s) {
+  const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
+  if (s.node_closed.size() != nodes) return std::nullopt;
+  std::vector<std::uint64_t> balance(n, 0);  // Σ mix(next corner) − Σ mix(previous corner)
+  const auto mix = [](Index v) {
+    std::uint64_t x = (static_cast<std::uint64_t>(v) + 1) * 0x9E3779B97F4A7C15ull;
+    x ^= x >> 31;
+    return x * 0xBF58476D1CE4E5B9ull;
+  };
+  for (const Triangle& t : s.original_faces) {
+    if (t[0] >= n || t[1] >= n || t[2] >= n) return std::nullopt;
+    for (int i = 0; i < 3; ++i) balance[t[i]] += mix(t[(i + 1) % 3]) - mix(t[(i + 2) % 3]);
+  }
+  for (std::size_t k = 0; k < nodes; ++k) {
+    if (s.node_vertex[k] >= n) return std::nullopt;
+    if ((balance[s.node_vertex[k]] == 0) != (s.node_closed[k] != 0))
+      return "node " + str(k) + " says its ring is " + (s.node_closed[k] ? "closed" : "open") + ", but its vertex is " +
+             (s.node_closed[k] ? "on" : "not on") + " the mesh's boundary";
+  }
+  return std::nullopt;
+}
+
+// Whether check() runs boundary_mismatch() itself, or leaves it to its
+// caller (who runs it on another thread).
+enum class Boundaries { kCheck, kLeftToCaller };
+
+Checked check(const StoredHierarchy& s, Boundaries boundaries = Boundaries::kCheck) {
   const std::size_t n = s.rest_positions.size();
   const std::size_t nodes = s.node_vertex.size();
   const std::size_t slots = s.ring_vertices.size();
@@ -192,25 +226,8 @@ Checked check(const StoredHierarchy& s) {
   for (std::size_t k = 0; k < nodes; ++k)
     if (c.removed_vertices.test_and_set(s.node_vertex[k])) fail("node " + str(k) + " removes vertex " + str(s.node_vertex[k]) + ", removed before");
 
-  // A removed vertex's ring is open exactly when the vertex is on the
-  // original mesh's boundary (simplification keeps every vertex's boundary
-  // status). A vertex is inside when its faces' next corners are their
-  // previous corners over again (a closed fan): compared as sums of a
-  // 64-bit mix of the ids, one pass over the faces, no edge table.
-  {
-    std::vector<std::uint64_t> balance(n, 0);  // Σ mix(next corner) − Σ mix(previous corner)
-    const auto mix = [](Index v) {
-      std::uint64_t x = (static_cast<std::uint64_t>(v) + 1) * 0x9E3779B97F4A7C15ull;
-      x ^= x >> 31;
-      return x * 0xBF58476D1CE4E5B9ull;
-    };
-    for (const Triangle& t : s.original_faces)
-      for (int i = 0; i < 3; ++i) balance[t[i]] += mix(t[(i + 1) % 3]) - mix(t[(i + 2) % 3]);
-    for (std::size_t k = 0; k < nodes; ++k)
-      if ((balance[s.node_vertex[k]] == 0) != (s.node_closed[k] != 0))
-        fail("node " + str(k) + " says its ring is " + (s.node_closed[k] ? "closed" : "open") + ", but its vertex is " +
-             (s.node_closed[k] ? "on" : "not on") + " the mesh's boundary");
-  }
+  if (boundaries == Boundaries::kCheck)
+    if (const std::optional<std::string> why = boundary_mismatch(s)) fail(*why);
 
   // Rings, last node first: a ring vertex is a base vertex or one removed
   // later (so direct recovery, in descending node order, has placed it).
@@ -286,6 +303,16 @@ void copy_into(MappedArray<T>& out, std::span<const T> in) {
     if (!in.empty()) std::memcpy(static_cast<void*>(v.data()), in.data(), in.size() * sizeof(T));
   }
   out = std::move(v);
+}
+
+// out = in: a view of it kept alive by `storage`, or (no storage) a copy.
+template <class T>
+void take(MappedArray<T>& out, std::span<const T> in, const std::shared_ptr<const void>& storage) {
+  if (storage) {
+    out = MappedArray<T>::view(in, storage);
+  } else {
+    copy_into(out, in);
+  }
 }
 
 template <class T>
@@ -389,39 +416,43 @@ std::size_t Hierarchy::memory_bytes() const {
 
 void validate_hierarchy(const StoredHierarchy& s) { check(s); }
 
-Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& concurrently) {
+Hierarchy hierarchy_from(const StoredHierarchy& s, const std::shared_ptr<const void>& storage, const std::function<void()>& concurrently) {
   Hierarchy h;
-  // The stored arrays are copied as they are: the copies need no checks
-  // first (nothing indexes with their values until the checks pass), and
-  // the checks and derivations read only `s`. So a helper thread runs
-  // `concurrently`, then copies, while this one checks and derives, then
-  // copies too: each array goes to whichever thread is free first, largest
-  // first. (Copying is mostly first touches of fresh memory, which cost
-  // ~2 ms a MB on a VM whose host backs pages lazily: 1.25M vertices,
-  // four loads in one process, 400–661 ms with the helper copying alone.)
-  using Copy = void (*)(Hierarchy&, const StoredHierarchy&);
-  static constexpr auto kCopies = std::to_array<Copy>({
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.rest_positions, s.rest_positions); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.original_faces, s.original_faces); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_vertices, s.ring_vertices); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_weights, s.ring_weights); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_offset, s.node_offset); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.created_corners, s.created_corners); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.maps_face, s.maps_face); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.maps_bary, s.maps_bary); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_vertex, s.node_vertex); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.ring_offsets, s.ring_offsets); },
-      [](Hierarchy& h, const StoredHierarchy& s) { copy_into(h.node_closed, s.node_closed); },
+  // In place: each array views `s`, kept alive by `storage`. Otherwise
+  // copied as they are: the copies need no checks first (nothing indexes
+  // with their values until the checks pass), and the checks and
+  // derivations read only `s`. So a helper thread runs `concurrently` and
+  // the boundary check (a third of the checks' time), then copies, while
+  // this one runs the other checks and derives, then copies too: each array
+  // goes to whichever thread is free first, largest first. (Copying is
+  // mostly first touches of fresh memory, which cost ~2 ms a MB on a VM
+  // whose host backs pages lazily: 1.25M vertices, four loads in one
+  // process, 400–661 ms with the helper copying alone.)
+  using Take = void (*)(Hierarchy&, const StoredHierarchy&, const std::shared_ptr<const void>&);
+  static constexpr auto kTakes = std::to_array<Take>({
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.rest_positions, s.rest_positions, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.original_faces, s.original_faces, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.ring_vertices, s.ring_vertices, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.ring_weights, s.ring_weights, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.node_offset, s.node_offset, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.created_corners, s.created_corners, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.maps_face, s.maps_face, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.maps_bary, s.maps_bary, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.node_vertex, s.node_vertex, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.ring_offsets, s.ring_offsets, keep); },
+      [](Hierarchy& h, const StoredHierarchy& s, const auto& keep) { take(h.node_closed, s.node_closed, keep); },
   });
-  std::atomic<std::size_t> next_copy{0};
-  const auto copy_left = [&] {
-    for (std::size_t i; (i = next_copy.fetch_add(1, std::memory_order_relaxed)) < kCopies.size();) kCopies[i](h, s);
+  std::atomic<std::size_t> next_take{0};
+  const auto take_left = [&] {
+    for (std::size_t i; (i = next_take.fetch_add(1, std::memory_order_relaxed)) < kTakes.size();) kTakes[i](h, s, storage);
   };
   std::exception_ptr helper_error;
+  std::optional<std::string> boundary_error;
   const auto helper_work = [&] {
     try {
       if (concurrently) concurrently();
-      copy_left();
+      boundary_error = boundary_mismatch(s);
+      take_left();
     } catch (...) {
       helper_error = std::current_exception();
     }
@@ -432,15 +463,16 @@ Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& 
     std::jthread helper;  // joins when this scope ends, by return or by exception
     if (parallel) helper = std::jthread(helper_work);
 
-    Checked c = check(s);
+    Checked c = check(s, Boundaries::kLeftToCaller);
     const std::size_t n = s.rest_positions.size(), nodes = s.node_vertex.size();
     h.base_vertices.reserve(n - nodes);
     c.removed_vertices.for_each_clear(n, [&](std::size_t v) { h.base_vertices.push_back(static_cast<Index>(v)); });
     h.base_faces = std::move(c.base_faces);  // reserved exactly by check()
-    if (parallel) copy_left();
+    if (parallel) take_left();
   }
   if (!parallel) helper_work();
   if (helper_error) std::rethrow_exception(helper_error);
+  if (boundary_error) fail(*boundary_error);
   return h;
 }
 

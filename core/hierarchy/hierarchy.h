@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -236,13 +237,15 @@ struct HierarchyError : std::runtime_error {
 // NodeGraph (node_graph.h).
 void validate_hierarchy(const StoredHierarchy& s);
 
-// Validates `s` and builds the hierarchy from it: its arrays copied, the
-// derived ones (the base mesh) computed. mesh_hash, build and
-// nothing else are left to the caller.
+// Validates `s` and builds the hierarchy from it: its arrays viewed in place
+// if `storage` is given (it keeps the memory `s` points into alive for as
+// long as any array views it), copied otherwise; the derived ones (the base
+// mesh) computed. mesh_hash, build and nothing else are left to the caller.
 // `concurrently` (if any) is called once, alongside the checks: on a helper
 // thread for a large hierarchy on a machine with a second core (the file
 // loader computes the payload's checksum there). Throws HierarchyError.
-Hierarchy hierarchy_from(const StoredHierarchy& s, const std::function<void()>& concurrently = {});
+Hierarchy hierarchy_from(const StoredHierarchy& s, const std::shared_ptr<const void>& storage = {},
+                         const std::function<void()>& concurrently = {});
 
 // The stored view of `h` (its arrays, no copy). Throws HierarchyError if the
 // ring offsets are not valid.

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -203,13 +204,17 @@ void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path) {
   std::filesystem::rename(tmp, path);
 }
 
-Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name) {
+namespace {
+
+// deserialize_hierarchy(), the arrays read in place from `bytes` if
+// `storage` (which keeps them alive) is given and the format allows it.
+Hierarchy deserialize(std::span<const char> bytes, const std::string& name, const std::shared_ptr<const void>& storage) {
   if (reinterpret_cast<std::uintptr_t>(bytes.data()) % 8 != 0) {
     // Sections are read in place, which needs the 8-byte alignment every
     // allocation and mapping has; a caller's odd slice gets an aligned copy.
     std::vector<std::uint64_t> aligned((bytes.size() + 7) / 8);
     std::memcpy(aligned.data(), bytes.data(), bytes.size());
-    return deserialize_hierarchy({reinterpret_cast<const char*>(aligned.data()), bytes.size()}, name);
+    return deserialize({reinterpret_cast<const char*>(aligned.data()), bytes.size()}, name, {});
   }
   const Header hd = parse_header(bytes, name);
   const std::span<const char> payload = bytes.subspan(sizeof(Header));
@@ -267,7 +272,8 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
     if (s.rest_positions.size() != hd.vertex_count || s.original_faces.size() != hd.original_face_count ||
         s.original_faces.size() + s.created_corners.size() != hd.face_count || s.node_vertex.size() != hd.node_count)
       fail(name, "corrupt: section sizes disagree with the header");
-    h = hierarchy_from(s, compute_hash);
+    // A version 2 file's converted arrays live here, not in `bytes`: copied.
+    h = hierarchy_from(s, v2 ? nullptr : storage, compute_hash);
     h.build = {build[0].requested_base_vertices, build[0].build_seconds, build[0].threads};
     if (v2) {
       // Its offsets are in the frames of its float weights: redo them in the
@@ -291,12 +297,11 @@ Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& 
   return h;
 }
 
-namespace {
-
-// A file mapped read-only for the duration of a load, no read buffer. Its
-// pages are mapped in one go (MAP_POPULATE) rather than faulted in one by
-// one: the checksum reads every byte anyway (1.25M vertices: loads 3–15%
-// faster here, where a page fault is costly).
+// A file mapped read-only; a loaded hierarchy's arrays are views of it, so
+// it lives as long as they do. Its pages are mapped in one go
+// (MAP_POPULATE) rather than faulted in one by one: the checksum reads
+// every byte anyway (1.25M vertices: loads 3–15% faster here, where a page
+// fault is costly).
 class MappedFile {
  public:
   explicit MappedFile(const std::filesystem::path& path) {
@@ -314,7 +319,6 @@ class MappedFile {
       ::close(fd);
       if (p == MAP_FAILED) throw HierarchyFileError(path.string() + ": cannot map (" + std::strerror(err) + ")");
       data_ = static_cast<const char*>(p);
-      ::madvise(const_cast<char*>(data_), size_, MADV_SEQUENTIAL);
     } else {
       ::close(fd);
     }
@@ -333,9 +337,11 @@ class MappedFile {
 
 }  // namespace
 
+Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name) { return deserialize(bytes, name, {}); }
+
 Hierarchy load_hierarchy(const std::filesystem::path& path) {
-  const MappedFile file(path);
-  return deserialize_hierarchy(file.bytes(), path.string());
+  const auto file = std::make_shared<const MappedFile>(path);
+  return deserialize(file->bytes(), path.string(), file);
 }
 
 HierarchyFileInfo read_hierarchy_file_info(const std::filesystem::path& path) {

@@ -22,10 +22,14 @@
 //
 // Loading maps the file read-only, checks the header, every size against the
 // bytes present, the payload hash, then validates the mapped arrays
-// (validate_hierarchy) before it copies them: a truncated, corrupt or forged
-// file is an error, never a crash or an out-of-bounds read. (A file truncated
-// *while* it is mapped would still fault: writers replace files by renaming
-// a finished one, as save_hierarchy does, never in place.)
+// (validate_hierarchy): a truncated, corrupt or forged file is an error,
+// never a crash or an out-of-bounds read. The loaded hierarchy's arrays are
+// then views of the mapping, not copies (issue 10: 1.25M vertices load in
+// well under half the time), so the file stays mapped while the hierarchy
+// lives. A file truncated *while* it is mapped would fault: writers replace
+// files by renaming a finished one, as save_hierarchy and the server's
+// cache do, never in place; a file replaced or deleted that way leaves the
+// mapping intact.
 
 #include <cstdint>
 #include <filesystem>
@@ -48,7 +52,9 @@ struct HierarchyFileError : std::runtime_error {
 void save_hierarchy(const Hierarchy& h, const std::filesystem::path& path);
 std::string serialize_hierarchy(const Hierarchy& h);
 
+// The arrays read in place from the mapped file (version 3).
 Hierarchy load_hierarchy(const std::filesystem::path& path);
+// The arrays copied out of `bytes`.
 Hierarchy deserialize_hierarchy(std::span<const char> bytes, const std::string& name_for_errors = "<memory>");
 
 // Header fields, read without loading the payload (for `inspect` and caches).
