@@ -498,9 +498,15 @@ TEST_F(HierarchyFileTest, ForgedFansFailWhenTheNodeGraphIsDerived) {
   EXPECT_NE(graph_error(loaded).find("which is not in its fan"), std::string::npos) << graph_error(loaded);
 
   // Through a model, the error reaches whoever first sets a finite T.
-  const auto model = DeformerModel::create(std::make_shared<const Hierarchy>(std::move(loaded)));
+  const auto forged = std::make_shared<const Hierarchy>(std::move(loaded));
+  const auto model = DeformerModel::create(forged);
   EXPECT_THROW((void)model->node_graph(), HierarchyError);
   EXPECT_THROW((void)model->node_graph(), HierarchyError);  // again: no half-built graph is handed out
+  // Also when the graph is derived on a second thread, beside the Laplacian.
+  const auto fresh = DeformerModel::create(forged);
+  EXPECT_THROW(fresh->derive_for_cuts(), HierarchyError);
+  EXPECT_TRUE(fresh->optimisation_data_derived());
+  EXPECT_THROW(fresh->derive_for_cuts(), HierarchyError);
 }
 
 TEST_F(HierarchyFileTest, InMemoryValidationChecksTheDerivedArrays) {

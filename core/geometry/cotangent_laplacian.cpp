@@ -16,7 +16,7 @@ std::vector<Vec3> CotangentLaplacian::apply(std::span<const Vec3> x) const {
   return out;
 }
 
-CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) {
+CotangentLaplacian cotangent_laplacian(std::span<const Vec3> positions, std::span<const Triangle> faces) {
   // Row by row over each vertex's faces (a counting sort of the corners,
   // O(n)), in ascending face order, so that each row sees its half-weights
   // in the order a pass over the faces would give them; each short row is
@@ -25,16 +25,16 @@ CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) {
   // bucketing them all first still wrote 16 bytes per half-weight (240 MB
   // of fresh memory at 1.25M vertices); the corner lists are 4 bytes a
   // corner. 1.25M vertices on this VM: 2.06–2.14 s → 1.33 s, same bits.
-  const std::size_t n = mesh.positions.size();
+  const std::size_t n = positions.size();
   std::vector<Index> first_face(n + 1, 0);
-  for (const Triangle& f : mesh.faces)
+  for (const Triangle& f : faces)
     for (Index v : f) ++first_face[v + 1];
   for (std::size_t i = 0; i < n; ++i) first_face[i + 1] += first_face[i];
   std::vector<Index> faces_of(first_face[n]);
   {
     std::vector<Index> fill(first_face.begin(), first_face.end() - 1);
-    for (std::size_t f = 0; f < mesh.faces.size(); ++f)
-      for (Index v : mesh.faces[f]) faces_of[fill[v]++] = static_cast<Index>(f);
+    for (std::size_t f = 0; f < faces.size(); ++f)
+      for (Index v : faces[f]) faces_of[fill[v]++] = static_cast<Index>(f);
   }
   struct Half {
     Index to;
@@ -49,12 +49,12 @@ CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) {
     row.clear();
     for (Index k = first_face[i]; k < first_face[i + 1]; ++k) {
       if (k > first_face[i] && faces_of[k] == faces_of[k - 1]) continue;  // a face listing i twice, seen once
-      const Triangle& f = mesh.faces[faces_of[k]];
+      const Triangle& f = faces[faces_of[k]];
       for (int c = 0; c < 3; ++c) {
         // The angle at corner c weighs the opposite edge (f[c+1], f[c+2]).
         const Index a = f[c], b = f[(c + 1) % 3], d = f[(c + 2) % 3];
         if (b != i && d != i) continue;
-        const double half_cot = 0.5 * cotangent_at(mesh.positions[a], mesh.positions[b], mesh.positions[d]);
+        const double half_cot = 0.5 * cotangent_at(positions[a], positions[b], positions[d]);
         if (b == i) row.push_back({d, half_cot});
         if (d == i) row.push_back({b, half_cot});
       }

@@ -31,6 +31,7 @@ struct CotangentLaplacian {
 
 // Precondition: faces index valid vertices; the mesh may be non-manifold, an
 // edge's weight then sums the cotangents of all its faces before clamping.
-CotangentLaplacian cotangent_laplacian(const TriMesh& mesh);
+CotangentLaplacian cotangent_laplacian(std::span<const Vec3> positions, std::span<const Triangle> faces);
+inline CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) { return cotangent_laplacian(mesh.positions, mesh.faces); }
 
 }  // namespace filigree

@@ -74,7 +74,10 @@ std::size_t Deformer::base_vertex_count() const { return model_->hierarchy().bas
 std::size_t Deformer::vertex_count() const { return model_->hierarchy().vertex_count(); }
 
 Deformer::Optimised& Deformer::optimised() {
-  if (!s_->optimised) s_->optimised = std::make_unique<Optimised>(*model_, options_);
+  if (!s_->optimised) {
+    model_->derive_for_cuts();
+    s_->optimised = std::make_unique<Optimised>(*model_, options_);
+  }
   return *s_->optimised;
 }
 

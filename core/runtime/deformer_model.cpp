@@ -1,5 +1,7 @@
 #include "runtime/deformer_model.h"
 
+#include <thread>
+
 #include "geometry/cotangent_laplacian.h"
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/node_graph.h"
@@ -32,7 +34,7 @@ DeformerModel::~DeformerModel() = default;
 const DeformerModel::Optimisation& DeformerModel::optimisation() const {
   std::call_once(optimisation_once_, [this] {
     const Hierarchy& h = *h_;
-    auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.original_mesh()), {}, {}});
+    auto o = std::make_unique<Optimisation>(Optimisation{cotangent_laplacian(h.rest_positions, h.original_faces), {}, {}});
     o->delta = o->laplacian.apply(h.rest_positions);
     const TriMesh base = h.base_mesh();  // its faces in base order, with base-order corners
     o->maps_corners.resize(h.vertex_count());
@@ -41,6 +43,22 @@ const DeformerModel::Optimisation& DeformerModel::optimisation() const {
     optimisation_built_.store(true, std::memory_order_release);
   });
   return *optimisation_;
+}
+
+void DeformerModel::derive_for_cuts() const {
+  if (!node_graph_derived() && std::thread::hardware_concurrency() > 1) {
+    // A refused graph is remembered by node_graph(), and thrown below.
+    std::jthread graph([this] {
+      try {
+        node_graph();
+      } catch (...) {
+      }
+    });
+    optimisation();
+  } else {
+    optimisation();
+  }
+  node_graph();
 }
 
 const CotangentLaplacian& DeformerModel::laplacian() const { return optimisation().laplacian; }
