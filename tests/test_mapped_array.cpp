@@ -35,6 +35,24 @@ TEST(MappedArray, AViewReadsInPlaceAndKeepsItsStorageAlive) {
   EXPECT_EQ(copy, (std::vector<int>{1, 2, 3, 4}));
 }
 
+TEST(MappedArray, AViewNeedsAKeeper) {
+  const std::vector<int> values = {1, 2};
+  EXPECT_THROW(MappedArray<int>::view(values, nullptr), std::invalid_argument);
+}
+
+TEST(MappedArray, GrowingAViewFromItsOwnElementsReadsThemBeforeReleasingThem) {
+  Storage s;
+  MappedArray<int> a = MappedArray<int>::view(s.span(), s.values);
+  s.values.reset();  // a holds the last reference
+  a.push_back(a[1]);
+  EXPECT_EQ(a, (std::vector<int>{1, 2, 3, 4, 2}));
+  Storage t;
+  MappedArray<int> b = MappedArray<int>::view(t.span(), t.values);
+  t.values.reset();
+  b.insert_back(b.begin(), b.begin() + 2);
+  EXPECT_EQ(b, (std::vector<int>{1, 2, 3, 4, 1, 2}));
+}
+
 TEST(MappedArray, TheLastViewGoneFreesTheStorage) {
   Storage s;
   std::weak_ptr<std::vector<int>> alive = s.values;

@@ -14,6 +14,7 @@
 #include <initializer_list>
 #include <memory>
 #include <span>
+#include <stdexcept>
 #include <utility>
 #include <vector>
 
@@ -31,8 +32,10 @@ class MappedArray {
   MappedArray(std::vector<T> v) : own_(std::move(v)) { sync(); }  // NOLINT: a vector is an owned array
   MappedArray(std::initializer_list<T> v) : own_(v) { sync(); }
   // Views `data` in place; `keeper` keeps the memory alive as long as this
-  // array (or any copy of it) views it.
+  // array (or any copy of it) views it. Throws std::invalid_argument for a
+  // null keeper (nothing would keep the memory alive).
   static MappedArray view(std::span<const T> data, std::shared_ptr<const void> keeper) {
+    if (!keeper) throw std::invalid_argument("MappedArray::view needs a keeper for the memory it views");
     MappedArray a;
     a.keeper_ = std::move(keeper);
     a.data_ = data.data();
@@ -91,12 +94,16 @@ class MappedArray {
     own();
     return own_;
   }
-  void push_back(const T& x) { own(), own_.push_back(x), sync(); }
+  // By value: `x` may be an element of this view, which own() may release.
+  void push_back(T x) { own(), own_.push_back(std::move(x)), sync(); }
+  // [first, last) may lie in this view, not in an owned array's own vector
+  // (std::vector::insert's rule).
   template <class It>
   void insert_back(It first, It last) {
+    const std::shared_ptr<const void> keep = keeper_;  // the range stays readable while it is copied
     own(), own_.insert(own_.end(), first, last), sync();
   }
-  void assign(std::size_t n, const T& x) { clear_view(), own_.assign(n, x), sync(); }
+  void assign(std::size_t n, T x) { clear_view(), own_.assign(n, x), sync(); }
   void reserve(std::size_t n) { own(), own_.reserve(n), sync(); }
   void resize(std::size_t n) { own(), own_.resize(n), sync(); }
   void clear() { clear_view(), own_.clear(), sync(); }
