@@ -2,7 +2,9 @@
 // The simplification hierarchy: everything the runtime needs to go from a
 // pose of the base mesh to the detailed mesh (DESIGN §2.1, thesis §3.1–3.2).
 // Plain arrays (structure of arrays) so that it (de)serialises by memcpy and
-// many of them fit in one server.
+// many of them fit in one server. The stored ones are MappedArrays: a
+// hierarchy loaded from a file reads them in place from the mapped file
+// (load_hierarchy), one built or deserialised in memory owns them.
 //
 // Compact (format v3, issue 10): 32-bit indices, float32 or 16-bit fixed
 // point wherever the value is relative to a local frame (see each field for
