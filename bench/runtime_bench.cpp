@@ -310,14 +310,16 @@ void run_mesh(const std::string& name, const TriMesh& mesh, int threads, int bou
       Timing tm;
       FrameStats s;
       std::vector<double> whole_here;
+      Pose previous = pose_at(kRampFrames - 1);
       for (int f = kRampFrames; f <= kLastFrame; ++f) {
-        const Pose pose = pose_at(f), previous = pose_at(f - 1);
+        Pose pose = pose_at(f);
         const auto whole_start = Clock::now();
         reference.deform(pose, paired);
         whole_here.push_back(ms_since(whole_start));
         d.deform(previous, result.positions);
         s = d.deform(pose, result.positions);
         tm.add(s);
+        previous = std::move(pose);
       }
       const std::string to_truth = quality(compare_meshes(result, truth)), to_best = quality(compare_meshes(result, best));
       std::string label = threshold == DeformerOptions::kInfinity ? "∞" : std::to_string(static_cast<long>(threshold));

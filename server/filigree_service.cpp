@@ -121,8 +121,8 @@ grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServer
                                                             std::function<bool(const Session&)> slow) {
   auto* reactor = context->DefaultReactor();
   with_session(*context, id, needed,
-               [this, reactor, body = std::move(body), slow = std::move(slow)](grpc::Status status, std::shared_ptr<Session> s) {
-    const auto answer = [reactor, body](grpc::Status status, std::shared_ptr<Session> s) {
+               [this, reactor, body = std::move(body), slow = std::move(slow)](grpc::Status status, std::shared_ptr<Session> s) mutable {
+    auto answer = [reactor, body = std::move(body)](grpc::Status status, std::shared_ptr<Session> s) {
       if (status.ok()) {
         try {
           status = body(*s);
@@ -134,7 +134,7 @@ grpc::ServerUnaryReactor* FiligreeService::unary_on_session(grpc::CallbackServer
       reactor->Finish(status);
     };
     if (!status.ok() || !slow || !slow(*s)) return answer(status, std::move(s));
-    run_job([answer, s = std::move(s)]() mutable { answer(grpc::Status::OK, std::move(s)); },
+    run_job([answer = std::move(answer), s = std::move(s)]() mutable { answer(grpc::Status::OK, std::move(s)); },
             [reactor](const grpc::Status& why) { reactor->Finish(why); });
   });
   return reactor;
@@ -644,8 +644,9 @@ class FrameStream : public FrameSink {
   std::uint64_t offered_version_ = 0;
 };
 
-// A driving stream's end (OnDone): it no longer subscribes or drives, and
-// its writer never touches the reactor again.
+// A frame stream's end (OnDone): it no longer subscribes or drives (a
+// watcher's driver 0 drives nothing), and its writer never touches the
+// reactor again.
 template <class Reactor>
 void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream, std::uint64_t driver) {
   if (session) {
@@ -727,6 +728,12 @@ class FrameStreamReactor : public Base {
   void OnCancel() override {
     if (start_->cancel()) stream_->writer().finish(grpc::Status::CANCELLED);
   }
+  // The stream no longer subscribes or drives (leave()), and the reactor is
+  // deleted: the last thing it does.
+  void OnDone() override {
+    leave(session_, *stream_, driver_);
+    delete static_cast<Reactor*>(this);
+  }
 
  protected:
   // `self`: the reactor being made (the stream's writer calls it later).
@@ -784,10 +791,6 @@ class DriveReactor final : public FrameStreamReactor<DriveReactor, grpc::ServerB
     if (!session_) return open(*context_, request_.session_id(), Role::kEditor);
     take_request();
   }
-  void OnDone() override {
-    leave(session_, *stream_, driver_);
-    delete this;
-  }
 
  private:
   void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
@@ -837,11 +840,6 @@ class WatchReactor final : public FrameStreamReactor<WatchReactor, grpc::ServerW
     } else {
       open(*context, request_.session_id(), Role::kViewer);
     }
-  }
-  void OnDone() override {
-    if (session_) session_->unsubscribe(stream_.get());
-    stream_->writer().detach();
-    delete this;
   }
 
  private:
@@ -894,8 +892,7 @@ class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::S
   void OnDone() override {
     state_->end();
     if (player_.joinable()) player_.get_id() == std::this_thread::get_id() ? player_.detach() : player_.join();
-    leave(session_, *stream_, driver_);
-    delete this;
+    FrameStreamReactor::OnDone();  // deletes this
   }
 
  private:

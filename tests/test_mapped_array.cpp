@@ -81,8 +81,9 @@ TEST(MappedArray, WritingAViewCopiesItFirstAndLeavesTheStorageAlone) {
   b.push_back(5);
   EXPECT_EQ(b, (std::vector<int>{1, 2, 3, 4, 5}));
   MappedArray<int> c = MappedArray<int>::view(s.span(), s.values);
-  c.resize(2);
-  EXPECT_EQ(c, (std::vector<int>{1, 2}));
+  c.reserve(16);  // owns now, its elements copied
+  EXPECT_FALSE(c.viewing());
+  EXPECT_EQ(c, (std::vector<int>{1, 2, 3, 4}));
   EXPECT_EQ(*s.values, (std::vector<int>{1, 2, 3, 4}));
 }
 

@@ -285,34 +285,29 @@ Checked check(const StoredHierarchy& s, Boundaries boundaries = Boundaries::kChe
     fail("vertex " + str(v) + " has invalid barycentric coordinates");
   return c;
 }
-// out = in, allocating exactly (a loaded hierarchy holds no slack); no zero
-// fill before the copy. (Advising these arrays onto transparent huge pages
-// took the load from ~400 to ~250 ms where huge pages are cheap, but to
-// 0.8–1.1 s one time in three on a VM that reports free 8 MB blocks to its
-// host, so it is not done.)
-template <class T>
-void copy_into(MappedArray<T>& out, std::span<const T> in) {
-  std::vector<T> v;
-  v.reserve(in.size());
-  if constexpr (std::is_trivially_copyable_v<T>) {
-    v.assign(in.begin(), in.end());
-  } else {
-    // Eigen vectors: plain floats, but not trivially copyable by type; their
-    // default constructor leaves them uninitialised, so resize costs nothing.
-    v.resize(in.size());
-    if (!in.empty()) std::memcpy(static_cast<void*>(v.data()), in.data(), in.size() * sizeof(T));
-  }
-  out = std::move(v);
-}
-
-// out = in: a view of it kept alive by `storage`, or (no storage) a copy.
+// out = in: a view of it kept alive by `storage`, or (no storage) a copy,
+// allocated exactly (a loaded hierarchy holds no slack) and not zero-filled
+// first. (Advising copies onto transparent huge pages took the load from
+// ~400 to ~250 ms where huge pages are cheap, but to 0.8–1.1 s one time in
+// three on a VM that reports free 8 MB blocks to its host, so it is not
+// done.)
 template <class T>
 void take(MappedArray<T>& out, std::span<const T> in, const std::shared_ptr<const void>& storage) {
   if (storage) {
     out = MappedArray<T>::view(in, storage);
-  } else {
-    copy_into(out, in);
+    return;
   }
+  std::vector<T> copy;
+  copy.reserve(in.size());
+  if constexpr (std::is_trivially_copyable_v<T>) {
+    copy.assign(in.begin(), in.end());
+  } else {
+    // Eigen vectors: plain floats, but not trivially copyable by type; their
+    // default constructor leaves them uninitialised, so resize costs nothing.
+    copy.resize(in.size());
+    if (!in.empty()) std::memcpy(static_cast<void*>(copy.data()), in.data(), in.size() * sizeof(T));
+  }
+  out = std::move(copy);
 }
 
 template <class T>

@@ -46,16 +46,15 @@ const DeformerModel::Optimisation& DeformerModel::optimisation() const {
 }
 
 void DeformerModel::derive_for_cuts() const {
-  if (!node_graph_derived() && std::thread::hardware_concurrency() > 1) {
-    // A refused graph is remembered by node_graph(), and thrown below.
-    std::jthread graph([this] {
-      try {
-        node_graph();
-      } catch (...) {
-      }
-    });
-    optimisation();
-  } else {
+  {
+    std::jthread graph;  // joined at the end of this scope
+    if (!node_graph_derived() && std::thread::hardware_concurrency() > 1)
+      graph = std::jthread([this] {
+        try {
+          node_graph();
+        } catch (...) {  // a refused graph is remembered by node_graph(), and thrown below
+        }
+      });
     optimisation();
   }
   node_graph();

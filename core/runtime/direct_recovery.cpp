@@ -14,6 +14,7 @@
 #include "mesh/vertex_order.h"
 #include "util/cpu_features.h"
 #include "util/helper_team.h"
+#include "util/parallel_for.h"
 #include "util/spin_barrier.h"
 
 namespace filigree {
@@ -419,7 +420,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
   }
 
   // Each block padded to its largest ring: sized first, so that the arrays
-  // are allocated once, then filled on two threads (blocks are
+  // are allocated once, then filled on a thread per partition (blocks are
   // independent; the fill is mostly cache misses into the hierarchy, in
   // traversal order rather than node order).
   const std::size_t blocks = order.size() / W;
@@ -463,12 +464,7 @@ DirectRecovery::DirectRecovery(const Hierarchy& h, std::size_t partitions, std::
       }
     }
   };
-  if (blocks >= kNodesPerThread / W && std::thread::hardware_concurrency() > 1) {
-    std::jthread other(fill, blocks / 2, blocks);
-    fill(0, blocks / 2);
-  } else {
-    fill(0, blocks);
-  }
+  parallel_ranges(blocks, partitions_, fill);
 
   check_schedule();
 

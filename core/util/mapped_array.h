@@ -78,7 +78,6 @@ class MappedArray {
   const T& operator[](std::size_t i) const { return data_[i]; }
   const T* begin() const { return data_; }
   const T* end() const { return data_ + size_; }
-  const T& front() const { return data_[0]; }
   const T& back() const { return data_[size_ - 1]; }
   operator std::span<const T>() const { return {data_, size_}; }  // NOLINT: reads as a span anywhere
   std::vector<T> to_vector() const { return {begin(), end()}; }
@@ -103,10 +102,7 @@ class MappedArray {
     const std::shared_ptr<const void> keep = keeper_;  // the range stays readable while it is copied
     own(), own_.insert(own_.end(), first, last), sync();
   }
-  void assign(std::size_t n, T x) { clear_view(), own_.assign(n, x), sync(); }
   void reserve(std::size_t n) { own(), own_.reserve(n), sync(); }
-  void resize(std::size_t n) { own(), own_.resize(n), sync(); }
-  void clear() { clear_view(), own_.clear(), sync(); }
 
  private:
   void own() {
