@@ -4,6 +4,7 @@
 #include <tiny_gltf.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "mesh/json_nesting.h"
 #include "mesh/mesh_io.h"
 
 namespace filigree {
@@ -415,6 +417,51 @@ TEST_F(MeshIoTest, GltfFromMemoryRefusesExternalFiles) {
   // Embedded (data URI) buffers need no file.
   write_model(two_primitive_model(), path("embedded.gltf"));
   EXPECT_EQ(read_mesh_from_memory(read_bytes(path("embedded.gltf")), "gltf").face_count(), 4u);
+}
+
+// A GLB of one JSON chunk (padded with spaces, as the format asks) and no binary chunk.
+std::string glb_of_json(std::string json) {
+  while (json.size() % 4 != 0) json += ' ';
+  auto u32 = [](std::uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  return "glTF" + u32(2) + u32(static_cast<std::uint32_t>(20 + json.size())) + u32(static_cast<std::uint32_t>(json.size())) +
+         "JSON" + json;
+}
+
+// tinygltf converts JSON to its values recursively: deep nesting (30 KB of
+// brackets in `extras`) overflowed the stack of the thread reading it. The
+// depth is bounded before tinygltf sees the text: exactly kMaxJsonNesting
+// levels read, one more is refused, and 200,000 are refused, not a crash.
+TEST_F(MeshIoTest, GltfNestingIsBoundedBeforeParsing) {
+  write_model(two_primitive_model(), path("embedded.gltf"));
+  const std::string json = read_bytes(path("embedded.gltf"));
+  ASSERT_EQ(json.front(), '{');
+  // The top-level object is one level; `extras` adds `levels` arrays.
+  auto nested = [&](std::size_t levels) {
+    return "{\"extras\":" + std::string(levels, '[') + std::string(levels, ']') + "," + json.substr(1);
+  };
+  EXPECT_EQ(read_mesh_from_memory(nested(kMaxJsonNesting - 1), "gltf").face_count(), 4u);
+  EXPECT_EQ(read_mesh_from_memory(glb_of_json(nested(kMaxJsonNesting - 1)), "glb").face_count(), 4u);
+  for (const std::size_t levels : {kMaxJsonNesting, std::size_t{200000}}) {
+    for (const char* format : {"gltf", "glb"}) {
+      const std::string text = nested(levels);
+      try {
+        read_mesh_from_memory(format == std::string("glb") ? glb_of_json(text) : text, format);
+        ADD_FAILURE() << format << " nested " << levels << " deep was read";
+      } catch (const MeshIoError& e) {
+        EXPECT_NE(std::string(e.what()).find("nests deeper than 128 levels"), std::string::npos) << e.what();
+      }
+    }
+  }
+}
+
+TEST(JsonNesting, CountsBracketsOutsideStringsOnly) {
+  EXPECT_EQ(json_nesting("{}", 10), 1u);
+  EXPECT_EQ(json_nesting("[[{}],[]]", 10), 3u);
+  EXPECT_EQ(json_nesting(R"({"a":"[[[[","b":"\"[[[["})", 10), 1u);  // brackets in strings, an escaped quote
+  EXPECT_EQ(json_nesting(R"({"a":"\\",[[]]})", 10), 3u);            // an escaped backslash ends before the quote
+  EXPECT_EQ(json_nesting("]]]][[", 10), 2u);                         // stray closers never go below zero
+  EXPECT_EQ(json_nesting("[[[[", 3), 4u);                            // past the bound: bound + 1
+  EXPECT_EQ(json_nesting("[[[]]]", 3), 3u);                          // at the bound: its depth
 }
 
 // --- malformed files ----------------------------------------------------------

@@ -9,6 +9,7 @@
 #include <bit>
 #include <cerrno>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
 #include <limits>
@@ -20,6 +21,7 @@
 
 #include "mesh/gltf_accessor.h"
 #include "mesh/gltf_skin.h"
+#include "mesh/json_nesting.h"
 #include "mesh/mesh_io.h"
 
 namespace filigree {
@@ -250,6 +252,18 @@ class GltfReader {
   std::vector<SkinnedPrimitive> skinned_;
 };
 
+// The JSON a glTF file holds: all of it, or a GLB's first chunk (its length
+// at byte 12, its data from byte 20), clipped to the bytes there are. A GLB
+// too short for a header has no JSON to scan; tinygltf refuses it.
+std::string_view json_text(const std::string& bytes, bool binary) {
+  if (!binary) return bytes;
+  constexpr std::size_t kHeader = 20;
+  if (bytes.size() < kHeader) return {};
+  std::uint32_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, sizeof length);
+  return std::string_view(bytes).substr(kHeader, std::min<std::size_t>(length, bytes.size() - kHeader));
+}
+
 }  // namespace
 
 RiggedMesh read_gltf_rigged(const std::string& bytes, bool binary, const std::string& name_for_errors,
@@ -257,6 +271,9 @@ RiggedMesh read_gltf_rigged(const std::string& bytes, bool binary, const std::st
   if (bytes.size() > std::numeric_limits<unsigned int>::max()) {
     throw MeshIoError(name_for_errors + ": file too large for glTF (4 GiB limit)");
   }
+  if (json_nesting(json_text(bytes, binary), kMaxJsonNesting) > kMaxJsonNesting)
+    throw MeshIoError(name_for_errors + ": invalid " + (binary ? "GLB" : "glTF") + ": its JSON nests deeper than " +
+                      std::to_string(kMaxJsonNesting) + " levels");
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(&skip_image, nullptr);
   if (base_dir.empty()) loader.SetFsCallbacks({&no_file_exists, &keep_path, &no_read, &no_write, nullptr});
