@@ -51,6 +51,10 @@ void submit_pose(Session& session, std::uint64_t driver, const v1::DriveRequest&
                  {r.positions().data(), static_cast<std::size_t>(r.positions().size())});
 }
 
+grpc::Status no_such_session(const std::string& id) {
+  return {grpc::StatusCode::NOT_FOUND, "no session " + printable_session_id(id) + " for these credentials"};
+}
+
 grpc::ServerUnaryReactor* finish_unary(grpc::CallbackServerContext* context, const grpc::Status& status) {
   auto* reactor = context->DefaultReactor();
   reactor->Finish(status);
@@ -63,6 +67,9 @@ grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& c
                        Role needed, std::shared_ptr<Session>* session) {
   const std::string session_id = id.empty() ? metadata(context, "x-session-id") : id;
   if (session_id.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "no session id (field session_id or x-session-id metadata)"};
+  // Before any lookup: a call without a token learns nothing of the session.
+  const std::string token = metadata(context, "x-filigree-token");
+  if (token.empty()) return {grpc::StatusCode::UNAUTHENTICATED, "missing x-filigree-token metadata"};
   // A client that routes itself does not pull sessions to the replica it calls.
   const bool take_over = metadata(context, "x-filigree-route") != "direct";
   try {
@@ -78,11 +85,13 @@ grpc::Status authorize(SessionRegistry& registry, grpc::CallbackServerContext& c
   } catch (const SessionUnusable& e) {
     return {grpc::StatusCode::DATA_LOSS, e.what()};
   }
-  if (!*session) return {grpc::StatusCode::NOT_FOUND, "no session '" + session_id + "'"};
-  const std::string token = metadata(context, "x-filigree-token");
-  if (token.empty()) return {grpc::StatusCode::UNAUTHENTICATED, "missing x-filigree-token metadata"};
-  const Role role = (*session)->authorize(token);
-  if (role == Role::kNone) return {grpc::StatusCode::PERMISSION_DENIED, "the token is not valid for session " + session_id};
+  // "No such session" and "not yours" are one answer: it does not tell
+  // whether an id exists.
+  const Role role = *session ? (*session)->authorize(token) : Role::kNone;
+  if (role == Role::kNone) {
+    session->reset();
+    return no_such_session(session_id);
+  }
   if (needed == Role::kEditor && role != Role::kEditor)
     return {grpc::StatusCode::PERMISSION_DENIED, "a viewer token cannot change session " + session_id};
   return grpc::Status::OK;
@@ -185,9 +194,7 @@ grpc::Status FiligreeService::admit_upload(const ApiKey& key, std::shared_ptr<vo
   if (key.quota.sessions != 0) {
     // Uploads admitted but not yet sessions take a place too: concurrent
     // uploads of one key cannot all pass the same check.
-    const std::uint64_t held = registry_.holdings(key.name).sessions;
-    if (held >= key.quota.sessions) return sessions_quota_exhausted(key);
-    place = uploading_.take(key.name, key.quota.sessions - held);
+    place = uploading_.take(key.name, key.quota.sessions, 1, [&] { return registry_.holdings(key.name).sessions; });
     if (!place) return sessions_quota_exhausted(key);
   }
   if (!ledger_.admit_upload(key.name, key.quota.uploads_per_minute))
@@ -197,12 +204,15 @@ grpc::Status FiligreeService::admit_upload(const ApiKey& key, std::shared_ptr<vo
   return grpc::Status::OK;
 }
 
-grpc::Status FiligreeService::admit_vertices(const ApiKey& key, std::uint64_t vertices) {
+grpc::Status FiligreeService::reserve_vertices(const ApiKey& key, std::uint64_t vertices, std::shared_ptr<void>* reserved) {
+  reserved->reset();
   if (key.quota.vertices == 0) return grpc::Status::OK;
-  const std::uint64_t held = registry_.holdings(key.name).vertices;
-  if (held + vertices > key.quota.vertices)
+  std::uint64_t held = 0;
+  *reserved = vertices_.take(key.name, key.quota.vertices, vertices, [&] { return held = registry_.holdings(key.name).vertices; });
+  if (!*reserved)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "API key '" + key.name + "' may hold " + std::to_string(key.quota.vertices) +
-                                                      " vertices; its sessions hold " + std::to_string(held) + " and this mesh has " +
+                                                      " vertices; its sessions hold " + std::to_string(held) +
+                                                      ", with its other uploads in progress too many for this mesh of " +
                                                       std::to_string(vertices)};
   return grpc::Status::OK;
 }
@@ -314,6 +324,9 @@ void FiligreeService::expire_uploads() {
 }
 
 void FiligreeService::drain() {
+  // Preprocessing in progress stops at its next check: a pathological mesh
+  // cannot hold a shutdown (its upload, not yet a session, is refused).
+  stop_preprocessing_ = true;
   std::unique_lock lock(jobs_mutex_);
   draining_ = true;
   jobs_done_.wait(lock, [&] { return jobs_ == 0; });
@@ -325,6 +338,17 @@ namespace {
 
 // Nice value of preprocessing threads (sessions' frames run at 0).
 constexpr int kPreprocessingNice = 10;
+
+// Whether some triangle of `mesh` has an area (above rounding of its
+// coordinates): a mesh of only zero-area faces has nothing to deform.
+bool has_area(const TriMesh& mesh) {
+  const double size = bounding_box_diagonal(mesh.positions);
+  for (const Triangle& f : mesh.faces) {
+    const Vec3 a = mesh.positions[f[0]], b = mesh.positions[f[1]], c = mesh.positions[f[2]];
+    if ((b - a).cross(c - a).norm() > 1e-12 * size * size) return true;
+  }
+  return false;
+}
 
 std::string seconds(double s) {
   std::ostringstream out;
@@ -370,6 +394,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       begun_ = true;
       if (begin_.total_bytes() > service_.limits().max_mesh_bytes)
         return writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, too_large(begin_.total_bytes())});
+      if (const grpc::Status options = check_options(begin_.options()); !options.ok()) return writer_.finish(options);
       // A proposed id is checked now, not after seconds of preprocessing (create() checks it again).
       if (const grpc::Status id_status = check_proposed_id(begin_.session_id()); !id_status.ok())
         return writer_.finish(id_status);
@@ -384,7 +409,10 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   }
 
   void OnWriteDone(bool ok) override { writer_.on_write_done(ok); }
-  void OnCancel() override { writer_.finish(grpc::Status::CANCELLED); }
+  void OnCancel() override {
+    cancelled_ = true;  // before finish: a session made after this is not made, or closed again
+    writer_.finish(grpc::Status::CANCELLED);
+  }
   void OnDone() override {
     service_.untrack_upload(this);
     // gRPC may run OnDone on the job's own thread (Finish called from it).
@@ -398,13 +426,28 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
            std::to_string(service_.limits().max_mesh_bytes) + " bytes (--max-mesh-bytes)";
   }
 
+  // What the upload's options say, checked before any byte of the mesh is
+  // read: a wrong option is refused, never silently replaced by a default.
+  static grpc::Status check_options(const v1::SessionOptions& o) {
+    if (o.quantization_bits() != 0 && (o.quantization_bits() < 8 || o.quantization_bits() > 24))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "quantization_bits must be between 8 and 24"};
+    if (!(o.threshold() >= 0.0) || std::isinf(o.threshold()))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+    if (!v1::SkinningMethod_IsValid(o.skinning()))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "skinning method " + std::to_string(o.skinning()) + " is unknown"};
+    // 0 is "not set"; otherwise a share of the vertices.
+    if (!(o.base_ratio() >= 0.0 && o.base_ratio() <= 1.0))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "base_ratio must be a number in (0, 1], or 0 for the default"};
+    return grpc::Status::OK;
+  }
+
   grpc::Status check_proposed_id(const std::string& id) {
     if (id.empty()) return grpc::Status::OK;
     if (!is_session_id(id))
       return {grpc::StatusCode::INVALID_ARGUMENT, "a proposed session id is " + std::to_string(kSessionIdLength) +
-                                                      " lowercase hex digits, not '" + id + "'"};
+                                                      " lowercase hex digits, not " + printable_session_id(id)};
     try {
-      if (service_.registry().store().exists(id)) return {grpc::StatusCode::ALREADY_EXISTS, "session id " + id + " is taken"};
+      if (service_.registry().taken(id)) return {grpc::StatusCode::ALREADY_EXISTS, "the proposed session id is taken"};
     } catch (const StoreUnavailable& e) {
       return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
@@ -455,11 +498,17 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
                                                           std::to_string(service_.limits().max_vertices)};
       RepairReport repair;
       const TriMesh repaired = repair_mesh(input, {}, &repair);
+      if (!has_area(repaired))
+        return {grpc::StatusCode::INVALID_ARGUMENT, "the mesh has no triangle with an area: all " +
+                                                        std::to_string(input.face_count()) + " faces are degenerate"};
       // Sessions order vertices along a space-filling curve: frames then
       // compress to about half the size, and recovery reads memory in order.
       // SessionInfo.rest.uploaded_ids states the mapping to the upload.
+      std::shared_ptr<void> vertices_reserved;  // until the registry counts the session
       if (key_) {
-        if (const grpc::Status quota = service_.admit_vertices(*key_, repaired.vertex_count()); !quota.ok()) return quota;
+        if (const grpc::Status quota = service_.reserve_vertices(*key_, repaired.vertex_count(), &vertices_reserved);
+            !quota.ok())
+          return quota;
       }
       const std::vector<Index> order = locality_order(repaired.positions);
       const TriMesh mesh = permute_vertices(repaired, order);
@@ -471,13 +520,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       if (o.base_vertices() > 0) pre.base_vertices = o.base_vertices();
       if (o.base_ratio() > 0.0) pre.ratio = o.base_ratio();
       pre.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+      pre.stop = &service_.preprocessing_stop();
       pre.progress = [this](double f) { progress("simplifying", f); };
-      if (o.quantization_bits() != 0 && (o.quantization_bits() < 8 || o.quantization_bits() > 24))
-        return {grpc::StatusCode::INVALID_ARGUMENT, "quantization_bits must be between 8 and 24"};
-      if (!(o.threshold() >= 0.0) || std::isinf(o.threshold()))
-        return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-      if (!v1::SkinningMethod_IsValid(o.skinning()))
-        return {grpc::StatusCode::INVALID_ARGUMENT, "skinning method " + std::to_string(o.skinning()) + " is unknown"};
 
       std::string key;
       bool built = false;
@@ -491,9 +535,15 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
         for (std::size_t k = 0; k < base_uploaded.size(); ++k) base_uploaded[k] = uploaded_ids[h->base_vertices[k]];
         rig = serialize_rig(upload.rig->restricted_to(base_uploaded));
       }
+      // A client that gave up gets no session: nobody would hold its tokens.
+      if (cancelled_) return grpc::Status::CANCELLED;
       auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig),
                                                 key_ ? key_->name : std::string());
       pending_.reset();  // a session now: counted by the registry
+      if (cancelled_) {  // it gave up while the session was made
+        service_.registry().close(session->id());
+        return grpc::Status::CANCELLED;
+      }
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
       *created->mutable_info() = session->info();
@@ -505,6 +555,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       spdlog::info("event=upload_done session={} bytes={} vertices={} cached={}", session->id(), bytes_.size(),
                    mesh.vertex_count(), !built);
       return grpc::Status::OK;
+    } catch (const PreprocessingStopped&) {
+      return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down: upload again once it is back"};
     } catch (const BadSessionId& e) {
       return {e.taken ? grpc::StatusCode::ALREADY_EXISTS : grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const MeshIoError& e) {
@@ -531,6 +583,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   v1::CreateSessionRequest request_;
   v1::CreateSessionRequest::Begin begin_;
   bool begun_ = false;
+  std::atomic<bool> cancelled_{false};
   std::string bytes_;
   std::thread job_;
   std::mutex read_mutex_;  // OnReadDone against expiry (--upload-timeout)
@@ -1150,13 +1203,22 @@ grpc::ServerUnaryReactor* FiligreeService::CloseSession(grpc::CallbackServerCont
 grpc::ServerUnaryReactor* FiligreeService::LocateSession(grpc::CallbackServerContext* context,
                                                          const v1::LocateSessionRequest* request,
                                                          v1::SessionLocation* response) {
+  // Where a session lives is told only to whoever reaches it: a token of
+  // the session, or the API key that owns it. Anyone else hears what an
+  // unknown id hears.
+  const std::string& id = request->session_id();
+  std::string owner;
+  if (const std::shared_ptr<const ApiKeys> keys = api_keys())
+    if (const ApiKey* key = keys->find(metadata(*context, "x-filigree-api-key"))) owner = key->name;
   grpc::Status status;
   try {
-    const SessionLocation where = registry_.locate(request->session_id());
+    const SessionLocation where = registry_.reachable(id, metadata(*context, "x-filigree-token"), owner)
+                                      ? registry_.locate(id)
+                                      : SessionLocation{};
     if (!where.exists) {
-      status = {grpc::StatusCode::NOT_FOUND, "no session '" + request->session_id() + "'"};
+      status = no_such_session(id);
     } else {
-      response->set_session_id(request->session_id());
+      response->set_session_id(id);
       response->set_replica_id(where.replica_id);
       response->set_address(where.address);
       response->set_here(where.here);

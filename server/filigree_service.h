@@ -110,6 +110,8 @@ class FiligreeService final : public FiligreeServiceBase {
   // an upload is parsed and preprocessed.
   void acquire_preprocessing();
   void release_preprocessing();
+  // Set when the server starts draining: preprocessing stops (PreprocessOptions::stop).
+  const std::atomic<bool>& preprocessing_stop() const { return stop_preprocessing_; }
   // Calls waiting for a turn to load their session (limits().session_loads).
   std::size_t loads_waiting() const;
   // Whether a new upload fits under limits().max_memory_bytes: if the
@@ -138,8 +140,12 @@ class FiligreeService final : public FiligreeServiceBase {
   // key's uploads in progress (*pending holds this one's place until it is
   // released). RESOURCE_EXHAUSTED says which.
   grpc::Status admit_upload(const ApiKey& key, std::shared_ptr<void>* pending);
-  // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not).
-  grpc::Status admit_vertices(const ApiKey& key, std::uint64_t vertices);
+  // Whether `key` may hold `vertices` more (RESOURCE_EXHAUSTED if not),
+  // counting its sessions and the vertices other uploads of the key have
+  // reserved; if so, *reserved holds these until released (after the
+  // session is created, when the registry counts them). Check and
+  // reservation are one step: concurrent uploads cannot all pass.
+  grpc::Status reserve_vertices(const ApiKey& key, std::uint64_t vertices, std::shared_ptr<void>* reserved);
   // A stream on `session`: refused (RESOURCE_EXHAUSTED) when the session
   // serves limits().max_streams_per_session already or its owner's key has
   // its quota of streams open; else *slot holds the stream's place (and
@@ -177,8 +183,10 @@ class FiligreeService final : public FiligreeServiceBase {
   Turns preprocessing_;  // limits_.preprocessing_slots
   Turns loads_;          // limits_.session_loads, or one per core
   bool draining_ = false;
+  std::atomic<bool> stop_preprocessing_{false};
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key
+  SlotCounter vertices_;       // vertices of those uploads that passed the quota, by API key
   SlotCounter stream_places_;  // streams open, by session id
   struct Upload {
     std::chrono::steady_clock::time_point deadline;

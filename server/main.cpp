@@ -7,6 +7,7 @@
 #include <fstream>
 #include <optional>
 #include <thread>
+#include <vector>
 
 #include <unistd.h>
 
@@ -18,6 +19,7 @@
 #include <spdlog/spdlog.h>
 
 #include "server/api_keys.h"
+#include "server/bounded_status.h"
 #include "server/filigree_service.h"
 #include "server/http/http_server.h"
 #include "server/listen_address.h"
@@ -254,6 +256,9 @@ int main(int argc, char** argv) {
     // --max-streams-per-session it also bounds calls spread over sessions.
     if (max_streams_per_connection > 0)
       builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, max_streams_per_connection);
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+    interceptors.push_back(bounded_status_interceptors());
+    builder.experimental().SetInterceptorCreators(std::move(interceptors));
     builder.RegisterService(&service);
     std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
     if (!server || port == 0) {

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -192,6 +193,7 @@ Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> asse
   if (!compute_frame(*f, /*keep_version=*/true)) return;
   f->force_keyframe = true;
   f->chunk_parts = encoding_parts(encoder_.chunk_count(), 1, false);
+  f->encode_start = Clock::now();  // publish() reports the encode time from here
   encoder_.begin(true);
   for (std::size_t p = 0; p <= f->chunk_parts; ++p) {
     quantize_part_of(*f, p);
@@ -229,14 +231,27 @@ void Session::submit(const PoseOrigin& origin, std::span<const std::uint32_t> in
     if (indices[i] >= m)
       throw PoseError("pose index " + std::to_string(indices[i]) + " at position " + std::to_string(i) +
                       " is out of range: the base mesh has " + std::to_string(m) + " vertices");
-  for (std::size_t i = 0; i < positions.size(); ++i)
+  for (std::size_t i = 0; i < positions.size(); ++i) {
     if (!std::isfinite(positions[i])) throw PoseError("pose coordinate " + std::to_string(i) + " is not finite (NaN or Inf)");
+    check_reach(positions[i], "pose coordinate " + std::to_string(i));
+  }
   merge(origin, indices, positions, /*skinned=*/false);
+}
+
+void Session::check_reach(double coordinate, const std::string& what) const {
+  if (std::abs(coordinate) <= assets_->pose_reach) return;
+  std::ostringstream message;
+  message << what << " is " << coordinate << ", beyond this mesh's reach of ±" << assets_->pose_reach << " ("
+          << kPoseReachSizes << " times its size from where it lies)";
+  throw PoseError(message.str());
 }
 
 void Session::merge(const PoseOrigin& origin,
                     std::span<const std::uint32_t> indices, std::span<const float> positions, bool skinned) {
   const std::size_t count = indices.empty() ? positions.size() / 3 : indices.size();
+  // A unary change is answered when this returns: journaled now. A streamed
+  // pose is answered by its frame, journaled before it is published.
+  const bool journal_now = journal_ && (origin.driver == 0 || journal_.every_merge);
   std::uint64_t seq;
   SessionProgress progress;
   {
@@ -255,14 +270,22 @@ void Session::merge(const PoseOrigin& origin,
     v1::Change& change = changes_[origin.client_name];
     change.set_client_name(origin.client_name);
     change.set_pose_id(origin.pose_id);
-    change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(count));
+    std::vector<bool>& touched = touched_[origin.client_name];
+    touched.resize(record_.pose.size() / 3);
+    std::uint32_t newly = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+      const std::size_t v = indices.empty() ? i : indices[i];
+      newly += touched[v] ? 0 : 1;
+      touched[v] = true;
+    }
+    change.set_vertex_count(change.vertex_count() + newly);
     seq = ++journal_seq_;
-    if (journal_) progress = progress_with_change_locked();
+    if (journal_now) progress = progress_with_change_locked();
     pending_ = true;
     maybe_compute_locked();
     touch();
   }
-  journal(progress, seq);
+  if (journal_now) journal(progress, seq);
 }
 
 void Session::submit_joints(const PoseOrigin& origin, const v1::JointPose& joints) {
@@ -357,8 +380,8 @@ void Session::submit_skinned_locked(const PoseOrigin& origin) {
   for (std::size_t i = 0; i < m; ++i)
     for (int k = 0; k < 3; ++k) {
       const double c = skinned[i][k];
-      if (!(std::abs(c) <= std::numeric_limits<float>::max()))
-        throw PoseError("the joint pose moves base vertex " + std::to_string(i) + " out of float range");
+      if (!std::isfinite(c)) throw PoseError("the joint pose moves base vertex " + std::to_string(i) + " to a non-finite place");
+      check_reach(c, "the joint pose's base vertex " + std::to_string(i));
       skinned_[3 * i + k] = static_cast<float>(c);
     }
   merge(origin, {}, skinned_, /*skinned=*/true);
@@ -460,6 +483,7 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
       throw PoseError("handle vertex " + std::to_string(v) + " is out of range: the mesh has " +
                       std::to_string(assets_->hierarchy().vertex_count()) + " vertices");
     if (!target.allFinite()) throw PoseError("handle target of vertex " + std::to_string(v) + " is not finite");
+    for (int k = 0; k < 3; ++k) check_reach(target[k], "handle target of vertex " + std::to_string(v));
   }
   std::size_t count = 0;
   std::uint64_t seq;
@@ -608,7 +632,7 @@ void Session::journal(const SessionProgress& progress, std::uint64_t seq) {
   if (!journal_) return;
   std::lock_guard lock(journal_mutex_);
   if (seq <= journaled_seq_) return;  // a later snapshot, with this change, is stored
-  journal_(progress);
+  journal_.write(progress);
   journaled_seq_ = seq;
 }
 
@@ -778,6 +802,7 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
     f.pose_of_driver = latest_pose_of_driver_;
     f.force_keyframe = std::exchange(keyframe_requested_, false);
     f.changes.swap(changes_);
+    touched_.clear();
     threshold.swap(pending_threshold_);
     if (threshold) warm.swap(warm_);  // released once this frame has applied the threshold
     seq = journal_seq_;

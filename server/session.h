@@ -95,11 +95,20 @@ class FrameSink {
   virtual void close(bool session_closed, const std::string& why) = 0;
 };
 
-// Called with the session's progress before a change is acknowledged (a
-// SubmitPose answered, a frame published); throws to refuse it (the shared
-// store is unreachable, or another replica owns the session now). Empty: no
-// journal (one machine: the registry writes records periodically).
-using Journal = std::function<void(const SessionProgress&)>;
+// Where a session's changes are made durable before they are acknowledged.
+// `write` is called with the session's progress before a unary change is
+// answered (SubmitPose, handles, options) and before a frame is published;
+// it throws to refuse it (the store is unreachable or full, or another
+// replica owns the session now). Empty: no journal (memory only).
+struct Journal {
+  std::function<void(const SessionProgress&)> write;
+  // Also before each streamed pose is merged, not only with the frame that
+  // answers it: a shared store, where another replica may take the session
+  // over between the merge and the frame. One machine journals with the
+  // frame (a group commit of the poses it merges; DESIGN §3.3).
+  bool every_merge = true;
+  explicit operator bool() const { return static_cast<bool>(write); }
+};
 
 class Session {
  public:
@@ -274,6 +283,8 @@ class Session {
   // Skins the base with joint_pose_ and merges it (skeleton_mutex_ held).
   void submit_skinned_locked(const PoseOrigin& origin);
   // Merges a validated pose; `skinned` re-solves handles on top of it.
+  // Throws PoseError if a posed coordinate lies beyond SessionAssets::pose_reach.
+  void check_reach(double coordinate, const std::string& what) const;
   void merge(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions,
              bool skinned);
   // Builds and publishes the encoded frame.
@@ -332,6 +343,9 @@ class Session {
   std::unique_ptr<Deformer> warm_;
   std::unordered_map<std::uint64_t, std::uint64_t> latest_pose_of_driver_;
   std::map<std::string, v1::Change> changes_;  // since the last frame, by client
+  // The base vertices each client's changes_ entry counts: a vertex moved by
+  // several merged poses of one client counts once.
+  std::map<std::string, std::vector<bool>> touched_;
   struct HandleEntry {
     Vec3 target;
     std::string client;

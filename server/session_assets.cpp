@@ -34,6 +34,9 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   for (Index v : h.base_vertices) a->base.add_original_ids(v);
   a->info_wire = std::make_shared<const MeshWire>(a->base, rest_mesh_message(h));
   a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
+  double farthest = 0.0;
+  for (const Vec3& p : h.rest_positions) farthest = std::max(farthest, p.cwiseAbs().maxCoeff());
+  a->pose_reach = farthest + kPoseReachSizes * std::max(a->rest_diagonal, 1e-30);
   // Frames: a few in flight at once. Staging: two frames' chunks, enough for
   // one encoding while the next frame quantizes.
   a->frames = std::make_shared<BufferPool<Vec3>>(4);

@@ -27,6 +27,10 @@ class MeshWire;
 // original order, without uploaded_ids.
 v1::RestMesh rest_mesh_message(const Hierarchy& h);
 
+// A pose may move the base this many times the rest mesh's bounding-box
+// diagonal away from where the mesh lies (see SessionAssets::pose_reach).
+inline constexpr double kPoseReachSizes = 1e4;
+
 struct SessionAssets {
   std::shared_ptr<const DeformerModel> model;
   v1::BaseMesh base;
@@ -34,6 +38,11 @@ struct SessionAssets {
   // session adds its upload's ids when it answers.
   std::shared_ptr<const MeshWire> info_wire;
   double rest_diagonal = 1.0;
+  // How far from the origin a posed base coordinate may be: the rest mesh's
+  // farthest coordinate plus kPoseReachSizes times its size. Farther poses
+  // are refused: the deformation of a mesh posed beyond float's useful
+  // range fails in compute, after the pose was acknowledged.
+  double pose_reach = 0.0;
   // Vertices per frame chunk, the same for every session of the mesh (see
   // chunk_vertices_for in session_assets.cpp).
   std::uint32_t chunk_vertices = 0;

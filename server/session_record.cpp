@@ -1,11 +1,41 @@
 #include "server/session_record.h"
 
+#include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "filigree/internal/session_record.pb.h"
+#include "util/content_hash.h"
 
 namespace filigree::server {
 namespace {
+
+// Stored records and progress: "FGSR", the XXH3 hash of the rest (8 bytes,
+// little-endian), then the protobuf. A flipped byte is found on load, not
+// read as another pose or token. Bytes without the magic are records from
+// before it (a protobuf starts with a field tag, never 'F'), read unchecked.
+constexpr char kMagic[4] = {'F', 'G', 'S', 'R'};
+constexpr std::size_t kHeader = sizeof kMagic + sizeof(std::uint64_t);
+
+std::string sealed(const std::string& body) {
+  const std::uint64_t hash = hash_bytes(body.data(), body.size());
+  std::string out(kMagic, sizeof kMagic);
+  out.append(reinterpret_cast<const char*>(&hash), sizeof hash);
+  return out + body;
+}
+
+// The protobuf of stored bytes; throws std::runtime_error if a sealed one
+// does not match its hash.
+std::string_view unsealed(const std::string& bytes) {
+  if (bytes.size() < sizeof kMagic || std::memcmp(bytes.data(), kMagic, sizeof kMagic) != 0) return bytes;
+  if (bytes.size() < kHeader) throw std::runtime_error("truncated (" + std::to_string(bytes.size()) + " bytes)");
+  std::uint64_t stored = 0;
+  std::memcpy(&stored, bytes.data() + sizeof kMagic, sizeof stored);
+  const std::string_view body = std::string_view(bytes).substr(kHeader);
+  if (body.size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) throw std::runtime_error("over 2 GiB");
+  if (hash_bytes(body.data(), body.size()) != stored) throw std::runtime_error("corrupt (its checksum does not match)");
+  return body;
+}
 
 void put_handles(const std::vector<SessionHandle>& handles, bool pending, internal::SessionRecord& p) {
   for (const SessionHandle& h : handles) {
@@ -49,6 +79,12 @@ bool is_session_id(const std::string& id) {
   return id.size() == kSessionIdLength && id.find_first_not_of("0123456789abcdef") == std::string::npos;
 }
 
+std::string printable_session_id(const std::string& id) {
+  if (is_session_id(id)) return "'" + id + "'";
+  return "(a malformed id of " + std::to_string(id.size()) + " bytes; ids are " + std::to_string(kSessionIdLength) +
+         " lowercase hex digits)";
+}
+
 SessionProgress progress_of(const SessionRecord& r) {
   return {r.options, r.pose, r.version, r.handles, r.handles_pending, r.cut};
 }
@@ -77,12 +113,14 @@ std::string encode_session_record(const SessionRecord& r) {
   p.set_owner(r.owner);
   put_handles(r.handles, r.handles_pending, p);
   put_cut(r.cut, p);
-  return p.SerializeAsString();
+  return sealed(p.SerializeAsString());
 }
 
 SessionRecord decode_session_record(const std::string& bytes) {
   internal::SessionRecord p;
-  if (!p.ParseFromString(bytes)) throw std::runtime_error("not a session record (unparseable)");
+  const std::string_view body = unsealed(bytes);
+  if (!p.ParseFromArray(body.data(), static_cast<int>(body.size())))
+    throw std::runtime_error("not a session record (unparseable)");
   if (p.format_version() != 1)
     throw std::runtime_error("session record format " + std::to_string(p.format_version()) + " is not supported (1 is)");
   if (p.session_id().empty() || p.hierarchy_key().empty()) throw std::runtime_error("session record without id or hierarchy");
@@ -111,12 +149,14 @@ std::string encode_session_progress(const SessionProgress& progress) {
   p.set_version(progress.version);
   put_handles(progress.handles, progress.handles_pending, p);
   put_cut(progress.cut, p);
-  return p.SerializeAsString();
+  return sealed(p.SerializeAsString());
 }
 
 SessionProgress decode_session_progress(const std::string& bytes) {
   internal::SessionRecord p;
-  if (!p.ParseFromString(bytes) || p.format_version() != 1) throw std::runtime_error("unreadable session progress");
+  const std::string_view body = unsealed(bytes);
+  if (!p.ParseFromArray(body.data(), static_cast<int>(body.size())) || p.format_version() != 1)
+    throw std::runtime_error("unreadable session progress");
   // Progress written before handles were kept has none: the same as the
   // writer had (it dropped them on a restart too).
   return {p.options(), {p.pose().begin(), p.pose().end()}, p.version(), handles_of(p), p.handles_pending(), cut_of(p)};

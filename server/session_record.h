@@ -46,6 +46,9 @@ struct SessionRecord {
 // names and Redis keys, and what a client may propose for a new session.
 inline constexpr std::size_t kSessionIdLength = 20;
 bool is_session_id(const std::string& id);
+// `id` for a message: itself if it is a session id, else a bounded
+// description (a client's 1 MB "id" is not echoed back).
+std::string printable_session_id(const std::string& id);
 
 // What changes while a session runs, journaled on every accepted change when
 // replicas share state (the rest of the record is written once).

@@ -21,12 +21,21 @@ SessionRegistry::SessionRegistry(HierarchyCache& cache, SessionStore& store, Reg
 SessionRegistry::~SessionRegistry() = default;
 
 Journal SessionRegistry::journal_for(const std::string& id) {
-  if (!store_.shared()) return {};
-  return [this, id](const SessionProgress& p) {
-    if (!store_.save_progress(id, p))
-      throw StoreUnavailable("replica " + store_.replica_id() + " no longer holds the lease of session " + id +
-                             "; another replica serves it: reconnect");
-  };
+  if (!store_.persistent()) return {};
+  if (!store_.shared())
+    return {[this, id](const SessionProgress& p) {
+              if (!store_.save_progress(id, p)) throw StoreUnavailable("session " + id + " was closed");
+              std::lock_guard lock(mutex_);
+              if (const auto it = sessions_.find(id); it != sessions_.end())
+                it->second.persisted_version = std::max(it->second.persisted_version, p.version);
+            },
+            /*every_merge=*/false};
+  return {[this, id](const SessionProgress& p) {
+            if (!store_.save_progress(id, p))
+              throw StoreUnavailable("replica " + store_.replica_id() + " no longer holds the lease of session " + id +
+                                     "; another replica serves it: reconnect");
+          },
+          /*every_merge=*/true};
 }
 
 void SessionRegistry::confirm_lease(const std::string& id) {
@@ -40,24 +49,40 @@ std::shared_ptr<Session> SessionRegistry::insert(std::shared_ptr<Session> s) {
   std::lock_guard lock(mutex_);
   const auto now = Clock::now();
   const auto [it, inserted] = sessions_.emplace(s->id(), Entry{s, s->version(), now, now});
+  if (inserted) evicted_.erase(s->id());
   if (!s->owner().empty()) owned_[s->id()] = {s->owner(), s->vertex_count()};
   return it->second.session;
 }
 
+std::size_t SessionRegistry::counted_locked() const { return sessions_.size() + evicted_.size() + creating_.size(); }
+
 std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
                                                  const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
                                                  const std::string& proposed_id, std::string rig, std::string owner) {
-  {
-    std::lock_guard lock(mutex_);
-    if (sessions_.size() >= limits_.max_sessions)
-      throw TooManySessions("the server holds its maximum of " + std::to_string(limits_.max_sessions) + " sessions");
-  }
   if (!proposed_id.empty() && !is_session_id(proposed_id))
-    throw BadSessionId("a proposed session id is " + std::to_string(kSessionIdLength) + " lowercase hex digits, not '" +
-                           proposed_id + "'",
-                       false);
+    throw BadSessionId("a proposed session id is " + std::to_string(kSessionIdLength) + " lowercase hex digits", false);
   SessionRecord r;
   r.id = proposed_id.empty() ? random_token().substr(0, kSessionIdLength) : proposed_id;
+  {
+    // The id is reserved before anything is stored: a session of that id
+    // here (loaded, evicted, or being created) is never answered for, so a
+    // proposed id can name a new session only (a memory-only store keeps no
+    // record that would refuse it).
+    std::lock_guard lock(mutex_);
+    if (counted_locked() >= limits_.max_sessions)
+      throw TooManySessions("the server holds its maximum of " + std::to_string(limits_.max_sessions) +
+                            " sessions (--max-sessions; idle ones kept on disk count)");
+    if (sessions_.count(r.id) || evicted_.count(r.id) || !creating_.insert(r.id).second)
+      throw BadSessionId("the proposed session id is taken", true);
+  }
+  struct Unreserve {
+    SessionRegistry& registry;
+    const std::string id;
+    ~Unreserve() {
+      std::lock_guard lock(registry.mutex_);
+      registry.creating_.erase(id);
+    }
+  } unreserve{*this, r.id};
   r.hierarchy_key = hierarchy_key;
   r.options = options;
   r.editor_token = random_token();
@@ -65,11 +90,13 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.uploaded_ids = std::move(uploaded_ids);
   r.rig = std::move(rig);
   r.owner = std::move(owner);
-  if (!store_.create(r)) throw BadSessionId("session id " + r.id + " is taken", true);
+  if (!store_.create(r)) throw BadSessionId("the proposed session id is taken", true);
   Journal journal = journal_for(r.id);
   auto made = std::make_shared<Session>(std::move(r), assets_.get(h, scheduler_.threads()), scheduler_, std::move(journal));
   confirm_lease(made->id());
-  auto s = insert(std::move(made));
+  auto s = insert(made);
+  // Reserved above: nobody else can have inserted this id meanwhile.
+  if (s != made) throw std::logic_error("session id " + made->id() + " was inserted twice");
   spdlog::info("event=session_created session={} key={}", s->id(), hierarchy_key);
   return s;
 }
@@ -178,12 +205,42 @@ SessionLocation SessionRegistry::locate(const std::string& id) {
   return where;
 }
 
+bool SessionRegistry::reachable(const std::string& id, const std::string& token, const std::string& owner) {
+  auto grants = [&](const std::string& editor, const std::string& viewer, const std::string& owned_by) {
+    // Both tokens compared, in constant time, whatever the owner says.
+    const bool by_token = !token.empty() && (same_secret(token, editor) | same_secret(token, viewer));
+    return by_token || (!owner.empty() && owner == owned_by);
+  };
+  std::shared_ptr<Session> s;
+  {
+    std::lock_guard lock(mutex_);
+    if (const auto it = sessions_.find(id); it != sessions_.end()) s = it->second.session;
+  }
+  if (s) return s->authorize(token) != Role::kNone || (!owner.empty() && owner == s->owner());
+  if (!is_session_id(id) || !store_.exists(id)) return false;
+  try {
+    const std::optional<SessionRecord> r = store_.load(id);
+    return r && grants(r->editor_token, r->viewer_token, r->owner);
+  } catch (const SessionUnusable&) {
+    return false;  // nobody can use it; its owner learns why when joining
+  }
+}
+
+bool SessionRegistry::taken(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    if (sessions_.count(id) || evicted_.count(id) || creating_.count(id)) return true;
+  }
+  return store_.exists(id);
+}
+
 bool SessionRegistry::close(const std::string& id) {
   std::shared_ptr<Session> s = find(id);
   if (!s) return false;
   {
     std::lock_guard lock(mutex_);
     sessions_.erase(id);
+    evicted_.erase(id);
     owned_.erase(id);
   }
   s->close();
@@ -299,7 +356,13 @@ void SessionRegistry::evict(const std::string& id, const Session& s, const char*
   {
     std::lock_guard lock(mutex_);
     const auto it = sessions_.find(id);
-    if (it != sessions_.end() && it->second.session.get() == &s) sessions_.erase(it);
+    if (it != sessions_.end() && it->second.session.get() == &s) {
+      sessions_.erase(it);
+      // Its record stays on this machine and a request loads it again: it
+      // still counts against --max-sessions. (A shared store's other
+      // replicas may serve it next; a memory-only store kept nothing.)
+      if (!store_.shared() && store_.exists(id)) evicted_.insert(id);
+    }
   }
   if (store_.shared()) {
     try {

@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -60,7 +61,10 @@ class SessionRegistry {
 
   // A new session under `proposed_id` (20 lowercase hex digits, so that a
   // load balancer routing by x-session-id sends the upload where the session
-  // will live), or under a fresh id when it is empty.
+  // will live), or under a fresh id when it is empty. Throws BadSessionId
+  // (taken) if a session of that id exists anywhere this server knows of —
+  // loaded, evicted, being created, or in the store — and TooManySessions
+  // at --max-sessions (evicted sessions and creations in progress count).
   std::shared_ptr<Session> create(std::shared_ptr<const Hierarchy> h, const std::string& hierarchy_key,
                                   const v1::SessionOptions& options, std::vector<Index> uploaded_ids,
                                   const std::string& proposed_id = {}, std::string rig = {}, std::string owner = {});
@@ -75,6 +79,12 @@ class SessionRegistry {
   bool in_memory(const std::string& id) const;
   // Which replica serves the session, without loading it.
   SessionLocation locate(const std::string& id);
+  // Whether `token` (a session token) or `owner` (an API key's name; empty:
+  // none) reaches session `id`, without loading it. False for an unknown id.
+  // Throws StoreUnavailable if the shared store cannot be reached.
+  bool reachable(const std::string& id, const std::string& token, const std::string& owner);
+  // Whether a session of this id exists anywhere this server knows of.
+  bool taken(const std::string& id);
   // Closes the session's streams and deletes its record; false if unknown.
   bool close(const std::string& id);
   std::vector<std::shared_ptr<Session>> loaded() const;
@@ -135,6 +145,11 @@ class SessionRegistry {
   // moves to another replica.
   std::map<std::string, std::pair<std::string, std::uint64_t>> owned_;
   std::map<std::string, std::shared_ptr<std::mutex>> loading_;
+  // Sessions evicted from memory whose records this machine keeps (local
+  // store), and ids reserved by a create in progress: both count against
+  // --max-sessions, and neither id can be proposed for a new session.
+  std::set<std::string> evicted_, creating_;
+  std::size_t counted_locked() const;
 };
 
 }  // namespace filigree::server

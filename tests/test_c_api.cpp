@@ -443,7 +443,7 @@ TEST_F(CApiServer, UnknownSessionAndBadTokenGiveTheGrpcCodes) {
   EXPECT_NE(last_error().find("NOT_FOUND"), std::string::npos);
 
   upload();
-  EXPECT_EQ(filigree_join(client_, session_id_.c_str(), "not-a-token", &joined), FILIGREE_PERMISSION_DENIED);
+  EXPECT_EQ(filigree_join(client_, session_id_.c_str(), "not-a-token", &joined), FILIGREE_NOT_FOUND);
   EXPECT_FALSE(std::string(filigree_client_last_error(client_)).empty());
 
   // A joined session: the viewer token joins, but may not drive.

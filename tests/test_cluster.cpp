@@ -2,6 +2,7 @@
 // Redis, three filigree-server replicas sharing it, and nginx routing by
 // x-session-id with a consistent hash, all started and stopped here.
 
+#include <algorithm>
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -123,12 +124,12 @@ TEST(Cluster, SessionsSpreadOverReplicasAndEachSessionsCallsReachItsReplica) {
 
   std::map<std::string, std::set<std::string>> by_replica;
   for (const auto& s : sessions) {
-    const v1::SessionLocation first = lb.locate(s.session_id);
+    const v1::SessionLocation first = lb.locate(s.session_id, s.viewer_token);
     // Through nginx, a session's calls reach the replica that serves it.
     EXPECT_TRUE(first.here()) << s.session_id << " is served by " << first.replica_id();
     for (int k = 0; k < 4; ++k) {
       lb.state(s.session_id, s.viewer_token);
-      const v1::SessionLocation again = lb.locate(s.session_id);
+      const v1::SessionLocation again = lb.locate(s.session_id, s.viewer_token);
       EXPECT_EQ(again.replica_id(), first.replica_id());
       EXPECT_TRUE(again.here());
     }
@@ -144,7 +145,9 @@ TEST(Cluster, SessionsSpreadOverReplicasAndEachSessionsCallsReachItsReplica) {
     std::set<std::string> listed;
     for (const auto& e : direct.list()) listed.insert(e.session_id());
     EXPECT_EQ(listed, ids) << replica;
-    EXPECT_EQ(direct.locate(*ids.begin()).address(), cluster.address(i));
+    const auto one = std::find_if(sessions.begin(), sessions.end(), [&](const auto& s) { return s.session_id == *ids.begin(); });
+    ASSERT_NE(one, sessions.end());
+    EXPECT_EQ(direct.locate(one->session_id, one->viewer_token).address(), cluster.address(i));
   }
 }
 
@@ -189,7 +192,7 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "direct");
-  const v1::SessionLocation where = lb.locate(s.session_id);
+  const v1::SessionLocation where = lb.locate(s.session_id, s.viewer_token);
   const int owner = cluster.index_of(where.replica_id());
   ASSERT_GE(owner, 0);
   EXPECT_EQ(where.address(), cluster.address(owner));
@@ -212,7 +215,7 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   ASSERT_NE(it, trailers.end());
   EXPECT_EQ(std::string(it->second.data(), it->second.size()), cluster.address(owner));
   // The owner still serves it.
-  EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
+  EXPECT_EQ(lb.locate(s.session_id, s.viewer_token).replica_id(), where.replica_id());
 
   // An engine routing itself with the client library: locate, then call the owner directly.
   Client engine(where.address());
@@ -230,7 +233,7 @@ TEST(Cluster, DirectRoutingNamesTheOwnerInsteadOfTakingTheSessionOver) {
   } catch (const ClientError& e) {
     EXPECT_EQ(e.code(), grpc::StatusCode::UNAVAILABLE);
   }
-  EXPECT_EQ(lb.locate(s.session_id).replica_id(), where.replica_id());
+  EXPECT_EQ(lb.locate(s.session_id, s.viewer_token).replica_id(), where.replica_id());
 }
 
 TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
@@ -247,7 +250,7 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
   std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, 1);
   ASSERT_TRUE(f.has_value());
   const std::uint64_t version = f->version();
-  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  const int owner = cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id());
   const int other = (owner + 1) % kReplicas;
   auto watcher = lb.watch(s.session_id, s.viewer_token, version, no_reconnect);
 
@@ -257,7 +260,7 @@ TEST(Cluster, ASessionMovesToTheReplicaItsCallsReach) {
   state = state_when_served(cluster.address(other), s);
   EXPECT_EQ(state.version(), version);
   EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 1));
-  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id).replica_id(), "replica-" + std::to_string(other + 1));
+  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id, s.viewer_token).replica_id(), "replica-" + std::to_string(other + 1));
   // The old owner's streams end with UNAVAILABLE, saying the session moved.
   while (watcher->read()) {
   }
@@ -409,7 +412,7 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
   auto driver = lb.drive(s.session_id, s.editor_token, "engine");
   std::optional<v1::Frame> f = send_and_wait(*driver, s.mesh, 1);
   ASSERT_TRUE(f.has_value());
-  const std::string owner = lb.locate(s.session_id).replica_id();
+  const std::string owner = lb.locate(s.session_id, s.viewer_token).replica_id();
   const int other = (cluster.index_of(owner) + 1) % kReplicas;
 
   v1::GetStateRequest request;
@@ -428,7 +431,7 @@ TEST(Cluster, ABrowserOnAnotherReplicaReachesTheSessionWithoutMovingIt) {
       grpc_web_call(cluster.lb_http(), "GetState", s.session_id, s.viewer_token, request.SerializeAsString());
   EXPECT_NE(via_lb.find("grpc-status:0"), std::string::npos) << via_lb;
   // The session stayed where the engines' calls go; the engine's stream lives on.
-  EXPECT_EQ(lb.locate(s.session_id).replica_id(), owner);
+  EXPECT_EQ(lb.locate(s.session_id, s.viewer_token).replica_id(), owner);
   EXPECT_TRUE(send_and_wait(*driver, s.mesh, 2).has_value());
   driver->writes_done();
   EXPECT_TRUE(driver->finish().ok());
@@ -442,7 +445,7 @@ TEST(Cluster, AReplicaThatWasFrozenPastItsLeaseCannotOverwriteTheNewOwner) {
   Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "frozen");
-  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  const int owner = cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id());
   Client direct(cluster.address(owner));
   direct.set_routing(Routing::kDirect);
   Reconnect no_reconnect;  // this test looks at how the frozen replica's stream ends
@@ -461,7 +464,7 @@ TEST(Cluster, AReplicaThatWasFrozenPastItsLeaseCannotOverwriteTheNewOwner) {
   EXPECT_EQ(driver->finish().error_code(), grpc::StatusCode::UNAVAILABLE);
   const v1::SessionState state = state_when_served(cluster.address(other), s);
   EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 5));
-  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id).replica_id(), "replica-" + std::to_string(other + 1));
+  EXPECT_EQ(Client(cluster.address(other)).locate(s.session_id, s.viewer_token).replica_id(), "replica-" + std::to_string(other + 1));
 }
 
 TEST(Cluster, AStoppedReplicaHandsItsSessionsOverAtOnce) {
@@ -469,21 +472,21 @@ TEST(Cluster, AStoppedReplicaHandsItsSessionsOverAtOnce) {
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "stopping");
   ASSERT_TRUE(submit_pose(cluster.lb(), s, 3).ok());
-  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  const int owner = cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id());
   EXPECT_EQ(cluster.terminate(owner), 0);
   // SIGTERM released the lease: no replica holds it until the next call.
   server::RedisClient redis(cluster.redis_address(), std::chrono::milliseconds(2000));
   EXPECT_TRUE(redis.command({"GET", "filigree:lease:" + s.session_id}).nil());
   const v1::SessionState state = lb.state(s.session_id, s.viewer_token);  // no UNAVAILABLE to wait out
   EXPECT_EQ(std::vector<float>(state.pose().begin(), state.pose().end()), pose(s.mesh, 3));
-  EXPECT_NE(cluster.index_of(lb.locate(s.session_id).replica_id()), owner);
+  EXPECT_NE(cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id()), owner);
 }
 
 TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
   Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
   Client lb(cluster.lb());
   const SessionHandle s = lb.create_session(bunny(), "obj", {}, "failover");
-  const int owner = cluster.index_of(lb.locate(s.session_id).replica_id());
+  const int owner = cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id());
   ASSERT_GE(owner, 0);
   // Positions of a chunked frame, decoded after the keyframe it needs.
   const auto positions_of = [&](const v1::Frame& frame, const v1::Frame* keyframe) {
@@ -579,7 +582,7 @@ TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
   EXPECT_TRUE(checked_restore);
   EXPECT_GE(reconnects, 1);
 
-  const v1::SessionLocation now = lb.locate(s.session_id);
+  const v1::SessionLocation now = lb.locate(s.session_id, s.viewer_token);
   EXPECT_NE(cluster.index_of(now.replica_id()), owner) << "the dead replica still owns the session";
   const v1::SessionState final_state = lb.state(s.session_id, s.viewer_token);
   EXPECT_EQ(final_state.version(), acked_version);

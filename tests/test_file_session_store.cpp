@@ -106,6 +106,18 @@ TEST_F(FileSessionStoreTest, AWholeRecordSupersedesOlderProgress) {
   EXPECT_EQ(back->pose, r.pose);
 }
 
+// Records hold the session's tokens: only the server's user may read them.
+TEST_F(FileSessionStoreTest, RecordsAndProgressAreOwnerOnly) {
+  const SessionRecord r = created();
+  ASSERT_TRUE(store_->create(r));
+  ASSERT_TRUE(store_->save_progress(r.id, progress(3)));
+  for (const char* ext : {".session", ".progress"}) {
+    const auto perms = std::filesystem::status(file(ext)).permissions();
+    EXPECT_EQ(perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all), std::filesystem::perms::none)
+        << ext;
+  }
+}
+
 TEST_F(FileSessionStoreTest, CorruptProgressIsAClearErrorAndUnknownSessionsHaveNone) {
   const SessionRecord r = created();
   ASSERT_TRUE(store_->create(r));
@@ -114,7 +126,10 @@ TEST_F(FileSessionStoreTest, CorruptProgressIsAClearErrorAndUnknownSessionsHaveN
     store_->load(r.id);
     FAIL() << "a corrupt progress file loaded";
   } catch (const SessionUnusable& e) {
-    EXPECT_NE(std::string(e.what()).find(".progress is unreadable"), std::string::npos) << e.what();
+    // Which session, not where it is stored: the message reaches clients.
+    EXPECT_NE(std::string(e.what()).find("stored progress of session " + r.id + " is unreadable"), std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).find(dir_.string()), std::string::npos) << e.what();
   }
   // Progress of a session with no record is refused, and writes nothing.
   const std::string other = "fedcba9876543210fedc";

@@ -329,7 +329,7 @@ TEST_F(GrpcWebTest, ErrorsComeAsTrailerStatusCodes) {
   EXPECT_NE(no_token.grpc_message().find("x-filigree-token"), std::string::npos) << no_token.grpc_message();
 
   const Reply wrong = call("JoinSession", req, auth(id, "not-a-token"));
-  EXPECT_EQ(wrong.grpc_status(), 7);  // PERMISSION_DENIED
+  EXPECT_EQ(wrong.grpc_status(), 5);  // NOT_FOUND: a wrong token hears what an unknown id hears
 
   const Reply viewer_closes = call("CloseSession", v1::CloseSessionRequest(), auth(id, created.viewer_token()));
   EXPECT_EQ(viewer_closes.grpc_status(), 7);

@@ -433,6 +433,19 @@ TEST_F(HierarchyFileTest, ForgedFileWithValidChecksumFailsValidation) {
   msg = error_of(serialize_hierarchy(forged));
   EXPECT_NE(msg.find("barycentric"), std::string::npos) << msg;
 
+  // A removed vertex mapped into the first face past the base mesh's last:
+  // it would read past the end of the base faces. The last valid face loads.
+  const std::size_t base_faces = hierarchy_->base_faces.size();
+  const Index removed = hierarchy_->node_vertex[0];
+  forged = *hierarchy_;
+  forged.maps_face.edit()[removed] = static_cast<Index>(base_faces);
+  msg = error_of(serialize_hierarchy(forged));
+  EXPECT_NE(msg.find("vertex " + std::to_string(removed) + " is parameterised in a face outside the base mesh"),
+            std::string::npos)
+      << msg;
+  forged.maps_face.edit()[removed] = static_cast<Index>(base_faces - 1);
+  EXPECT_NO_THROW(deserialize_hierarchy(serialize_hierarchy(forged), "forged"));
+
   forged = *hierarchy_;
   forged.ring_weights.edit()[2] = 0;
   EXPECT_NE(error_of(serialize_hierarchy(forged)).find("zero ring weight"), std::string::npos);

@@ -383,7 +383,16 @@ TEST_F(ServiceTest, TokensAreChecked) {
   jr.set_session_id(id);
   v1::SessionInfo info;
   EXPECT_EQ(stub_->JoinSession(context(id, "").get(), jr, &info).error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  EXPECT_EQ(stub_->JoinSession(context(id, "not-a-token").get(), jr, &info).error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  // A wrong token hears what an unknown id hears, word for word but the id.
+  const grpc::Status wrong = stub_->JoinSession(context(id, "not-a-token").get(), jr, &info);
+  EXPECT_EQ(wrong.error_code(), grpc::StatusCode::NOT_FOUND);
+  v1::JoinSessionRequest unknown_request;
+  unknown_request.set_session_id("0123456789abcdef0123");
+  const grpc::Status unknown = stub_->JoinSession(context("", "not-a-token").get(), unknown_request, &info);
+  EXPECT_EQ(unknown.error_code(), grpc::StatusCode::NOT_FOUND);
+  std::string said = wrong.error_message();
+  said.replace(said.find(id), id.size(), "0123456789abcdef0123");
+  EXPECT_EQ(said, unknown.error_message());
   EXPECT_TRUE(stub_->JoinSession(context(id, c.created.viewer_token()).get(), jr, &info).ok());
   EXPECT_EQ(info.base().original_ids_size(), 150);
 

@@ -105,9 +105,29 @@ TEST(SessionRecordTest, AnEmptyCutIsNotWritten) {
   SessionRecord r = sample();
   r.cut = {};
   internal::SessionRecord p;
-  ASSERT_TRUE(p.ParseFromString(encode_session_record(r)));
+  ASSERT_TRUE(p.ParseFromString(encode_session_record(r).substr(12)));  // after "FGSR" and the checksum
   EXPECT_FALSE(p.has_cut());
   EXPECT_TRUE(decode_session_record(encode_session_record(r)).cut.empty());
+}
+
+// Stored bytes carry a checksum: any flipped byte of a record or a progress
+// is refused as corrupt, not read as another pose, version or token.
+TEST(SessionRecordTest, EveryFlippedByteIsCaught) {
+  const std::string record = encode_session_record(sample());
+  ASSERT_EQ(record.substr(0, 4), "FGSR");
+  EXPECT_EQ(decode_session_record(record).editor_token, sample().editor_token);
+  for (std::size_t at = 0; at < record.size(); ++at) {
+    std::string flipped = record;
+    flipped[at] = static_cast<char>(flipped[at] ^ 0x10);
+    EXPECT_THROW(decode_session_record(flipped), std::runtime_error) << "byte " << at;
+  }
+  const std::string progress = encode_session_progress(progress_of(sample()));
+  for (std::size_t at = 4; at < progress.size(); ++at) {
+    std::string flipped = progress;
+    flipped[at] = static_cast<char>(flipped[at] ^ 0x01);
+    EXPECT_THROW(decode_session_progress(flipped), std::runtime_error) << "byte " << at;
+  }
+  EXPECT_THROW(decode_session_record(record.substr(0, 10)), std::runtime_error);
 }
 
 }  // namespace

@@ -342,9 +342,9 @@ void play(const PlayArgs& a) {
   if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
 }
 
-void locate(const std::string& server, const std::string& session) {
-  Client client(server, channel_credentials());
-  const v1::SessionLocation where = client.locate(session);
+void locate(const SessionArgs& a) {
+  Client client(a.server, channel_credentials());
+  const v1::SessionLocation where = client.locate(a.session, session_token(a));
   std::printf("session_id: %s\nreplica_id: %s\naddress: %s\nhere: %s\n", where.session_id().c_str(),
               where.replica_id().empty() ? "-" : where.replica_id().c_str(),
               where.address().empty() ? "-" : where.address().c_str(), where.here() ? "yes" : "no");
@@ -429,11 +429,13 @@ void add_service_commands(CLI::App& app) {
   pc->callback([pl] { play(*pl); });
 
   auto server = std::make_shared<std::string>(kDefaultServer);
-  auto located = std::make_shared<std::pair<std::string, std::string>>(kDefaultServer, "");
-  CLI::App* loc = app.add_subcommand("locate", "Which replica serves a session (replicas sharing Redis)");
-  loc->add_option("--server", located->first, "Server address HOST:PORT (any replica, or the load balancer)");
-  loc->add_option("--session", located->second, "Session id")->required();
-  loc->callback([located] { locate(located->first, located->second); });
+  auto located = std::make_shared<SessionArgs>();
+  CLI::App* loc = app.add_subcommand("locate", "Which replica serves a session (replicas sharing Redis); "
+                                                "needs a token of the session (FILIGREE_TOKEN or --token-file)");
+  loc->add_option("--server", located->server, "Server address HOST:PORT (any replica, or the load balancer)");
+  loc->add_option("--session", located->session, "Session id")->required();
+  loc->add_option("--token-file", located->token_file, "File holding a token of the session (default: $FILIGREE_TOKEN)");
+  loc->callback([located] { locate(*located); });
 
   CLI::App* ls = app.add_subcommand("sessions", "List the server's sessions");
   ls->add_option("--server", *server, "Server address HOST:PORT");

@@ -176,10 +176,16 @@ std::vector<v1::ListSessionsResponse::Entry> Client::list() {
   return {response.sessions().begin(), response.sessions().end()};
 }
 
-v1::SessionLocation Client::locate(const std::string& session_id) {
+v1::SessionLocation Client::locate(const std::string& session_id, const std::string& token) {
   v1::LocateSessionRequest request;
   request.set_session_id(session_id);
-  return call(*stub_, &v1::Filigree::Stub::LocateSession, session_id, {}, request, routing_, call_timeout_);
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token, routing_);
+  if (!api_key_.empty()) context.AddMetadata("x-filigree-api-key", api_key_);
+  context.set_deadline(std::chrono::system_clock::now() + call_timeout_);
+  v1::SessionLocation response;
+  throw_if_error(stub_->LocateSession(&context, request, &response));
+  return response;
 }
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,

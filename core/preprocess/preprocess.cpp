@@ -67,13 +67,20 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
       i = j;
     }
   }
+  const auto check_stop = [&] {
+    if (options.stop && options.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
+  };
+  check_stop();
   const std::vector<double> curvature = mean_curvature(mesh, laplacian, boundary);
+  check_stop();
   const std::vector<double> saliency = mesh_saliency(mesh, curvature, options.threads);
+  check_stop();
 
   SimplifyOptions so = options.simplify;
   so.target_vertices = target;
   so.threads = options.threads;
   so.progress = options.progress;
+  so.stop = options.stop;
   simplify(mesh, curvature, saliency, so, h);
 
   h.build.requested_base_vertices = target;

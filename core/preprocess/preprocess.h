@@ -19,6 +19,9 @@ struct PreprocessOptions {
   std::optional<double> ratio;
   int threads = 1;
   std::function<void(double)> progress;  // fraction in [0, 1]
+  // When set and true, preprocess() throws PreprocessingStopped at its next
+  // check (between stages, and before every candidate removal).
+  const std::atomic<bool>* stop = nullptr;
   SimplifyOptions simplify;              // target, threads and progress are set from the above
 };
 

@@ -113,6 +113,7 @@ class Simplifier {
     std::size_t next_report = 0;
     Plan p;
     while (remaining > target && !heap.empty()) {
+      if (opt_.stop && opt_.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
       const Entry e = heap.top();
       heap.pop();
       const Index v = e.v;

@@ -3,7 +3,9 @@
 // MAPS parameterisation and each node's ring coordinates as it goes
 // (thesis §3.1.1–3.1.2, DESIGN §2.1 steps 1–5).
 
+#include <atomic>
 #include <functional>
+#include <stdexcept>
 #include <vector>
 
 #include "mesh/tri_mesh.h"
@@ -30,6 +32,15 @@ struct SimplifyOptions {
   int threads = 1;
   // Called with the fraction done in [0, 1], at most ~200 times.
   std::function<void(double)> progress;
+  // When set and true, the simplification stops with PreprocessingStopped
+  // (checked before every candidate removal: a server shutting down does not
+  // wait for a pathological mesh). Must outlive the call.
+  const std::atomic<bool>* stop = nullptr;
+};
+
+// Preprocessing was stopped through SimplifyOptions::stop (PreprocessOptions::stop).
+struct PreprocessingStopped : std::runtime_error {
+  PreprocessingStopped() : std::runtime_error("preprocessing was stopped") {}
 };
 
 // Simplifies `mesh` and fills `out`'s faces, nodes, base mesh and MAPS

@@ -1,7 +1,14 @@
 #include "server/state/file_session_store.h"
 
+#include <cerrno>
+#include <cstring>
 #include <fstream>
 #include <mutex>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <spdlog/spdlog.h>
 #include <optional>
 #include <sstream>
 
@@ -23,15 +30,42 @@ std::filesystem::path progress_file(const std::filesystem::path& record_file) {
   return p.replace_extension(".progress");
 }
 
-// Write then rename: a crash leaves the old file, never half a new one.
-void write_atomically(const std::filesystem::path& file, const std::string& bytes) {
+// Write, flush to the disk, then rename and flush the folder: a crash (of
+// the process or the machine) leaves the old file or the new one, never half
+// of one, and once this returns the new one is what a restart reads. Owner
+// only (0600): records hold the session's tokens. Errors name the file's
+// kind, not its path (they reach clients).
+void write_durably(const std::filesystem::path& file, const std::string& bytes) {
   const auto tmp = std::filesystem::path(file.string() + ".partial");
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out.write(bytes.data(), static_cast<std::streamsize>(bytes.size())))
-      throw StoreUnavailable("cannot write " + tmp.string());
+  const auto fail = [&](const char* what) {
+    throw StoreUnavailable(std::string("the session store cannot ") + what + ": " + std::strerror(errno));
+  };
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+  if (fd < 0) fail("create a file");
+  for (std::size_t at = 0; at < bytes.size();) {
+    const ssize_t n = ::write(fd, bytes.data() + at, bytes.size() - at);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int error = errno;
+      ::close(fd);
+      errno = error;
+      fail("write a file");
+    }
+    at += static_cast<std::size_t>(n);
   }
-  std::filesystem::rename(tmp, file);
+  if (::fsync(fd) != 0) {
+    const int error = errno;
+    ::close(fd);
+    errno = error;
+    fail("flush a file to disk");
+  }
+  ::close(fd);
+  if (::rename(tmp.c_str(), file.c_str()) != 0) fail("rename a file");
+  const int dir = ::open(file.parent_path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir < 0) fail("open its folder");
+  const int synced = ::fsync(dir);
+  ::close(dir);
+  if (synced != 0) fail("flush its folder to disk");
 }
 
 std::optional<std::string> read_file(const std::filesystem::path& file) {
@@ -53,7 +87,7 @@ bool FileSessionStore::save(const SessionRecord& r) {
   const auto file = file_of(r.id);
   if (file.empty()) return true;  // memory only
   std::lock_guard lock(write_mutex_);
-  write_atomically(file, encode_session_record(r));
+  write_durably(file, encode_session_record(r));
   // The record holds everything now; progress older than it is ignored on
   // load anyway, so a crash before this removal loses nothing.
   std::filesystem::remove(progress_file(file));
@@ -68,7 +102,7 @@ bool FileSessionStore::save_progress(const std::string& id, const SessionProgres
   // file, whichever comes first.
   std::lock_guard lock(write_mutex_);
   if (!std::filesystem::exists(file)) return false;
-  write_atomically(progress_file(file), bytes);
+  write_durably(progress_file(file), bytes);
   return true;
 }
 
@@ -81,7 +115,9 @@ std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
   try {
     r = decode_session_record(*bytes);
   } catch (const std::exception& e) {
-    throw SessionUnusable("the record " + file.string() + " is unreadable: " + e.what());
+    // The path is for the operator's log; the client hears which session.
+    spdlog::error("event=record_unreadable file=\"{}\" error=\"{}\"", file.string(), e.what());
+    throw SessionUnusable("the stored record of session " + id + " is unreadable: " + e.what());
   }
   const auto progress = progress_file(file);
   if (const std::optional<std::string> bytes = read_file(progress)) {
@@ -89,7 +125,8 @@ std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
     try {
       p = decode_session_progress(*bytes);
     } catch (const std::exception& e) {
-      throw SessionUnusable("the progress " + progress.string() + " is unreadable: " + e.what());
+      spdlog::error("event=record_unreadable file=\"{}\" error=\"{}\"", progress.string(), e.what());
+      throw SessionUnusable("the stored progress of session " + id + " is unreadable: " + e.what());
     }
     if (p.version >= r.version) apply_progress(p, r);
   }

@@ -1,7 +1,7 @@
 #pragma once
 // Session records as files under <data-dir>/sessions/ (one machine): this
-// process owns every session, so claims always succeed and nothing is
-// journaled per change (the registry writes progress periodically).
+// process owns every session, so claims always succeed. Every write is
+// flushed to disk before it returns (the session journal: DESIGN §3.3).
 // <id>.session holds the whole record as created (or last saved whole);
 // <id>.progress what changed since (SessionProgress), written alone so that a
 // busy session does not rewrite what never changes (the upload's ids: a
@@ -21,6 +21,7 @@ class FileSessionStore final : public SessionStore {
   explicit FileSessionStore(std::filesystem::path dir);
 
   bool shared() const override { return false; }
+  bool persistent() const override { return !dir_.empty(); }
   bool create(const SessionRecord& r) override;
   bool save(const SessionRecord& r) override;
   bool save_progress(const std::string& id, const SessionProgress& p) override;

@@ -52,6 +52,8 @@ class SessionStore {
   // Shared between replicas: every accepted change is journaled before it is
   // acknowledged, and sessions are owned through leases.
   virtual bool shared() const = 0;
+  // Keeps sessions across restarts (false: memory only, nothing to journal).
+  virtual bool persistent() const { return true; }
   // This replica's id and advertised address (empty for a local store).
   virtual std::string replica_id() const { return {}; }
 

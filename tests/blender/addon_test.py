@@ -235,7 +235,7 @@ elif mode == "join":
     wm.filigree_server, wm.filigree_name = address, "bob"
     wm.filigree_session_id, wm.filigree_role = state["session"], live_link.VIEWER
     wm.filigree_token = "not-a-token"
-    expect_reported(bpy.ops.filigree.join, "Filigree: PERMISSION_DENIED")
+    expect_reported(bpy.ops.filigree.join, "Filigree: NOT_FOUND")
     check(not live_link.LINKS, "no link after a refused join")
     wm.filigree_token = state["viewer_token"]
     check(bpy.ops.filigree.join() == {"FINISHED"}, "join")

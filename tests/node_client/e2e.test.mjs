@@ -769,10 +769,10 @@ describe('filigree-server from a grpc-js client', { timeout: 5 * TEST_TIMEOUT_MS
       metadata({ 'x-session-id': created.info.session_id })), grpc.status.UNAUTHENTICATED);
   });
 
-  it('refuses a wrong token (PERMISSION_DENIED)', { timeout: TEST_TIMEOUT_MS }, async () => {
+  it('refuses a wrong token as it refuses an unknown session (NOT_FOUND)', { timeout: TEST_TIMEOUT_MS }, async () => {
     needSession();
     await expectCode(unary(client, 'JoinSession', { session_id: created.info.session_id },
-      sessionMd('not-a-token')), grpc.status.PERMISSION_DENIED);
+      sessionMd('not-a-token')), grpc.status.NOT_FOUND);
   });
 
   it('answers NOT_FOUND for an unknown session', { timeout: TEST_TIMEOUT_MS }, async () => {

@@ -189,3 +189,46 @@ def test_sessions_evicted_from_memory_still_count_against_their_key():
     finally:
         server.stop()
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def test_vertices_quota_at_its_boundary_counts_what_the_key_holds_and_reserves():
+    # bunny_small has 1839 vertices after repair: a quota of exactly that
+    # holds one session, one vertex less holds none, and a second session
+    # would cross it. Four concurrent uploads under a quota for one and a
+    # half: exactly one passes (check and reservation are one step, with
+    # four preprocessing slots they overlap).
+    tmp = Path(tempfile.mkdtemp(prefix="filigree_keyfile_"))
+    keys = {"exact": make_key("exact", "--vertices", "1839"), "under": make_key("under", "--vertices", "1838"),
+            "racing": make_key("racing", "--vertices", "2758")}
+    (tmp / "keys").write_text("".join(line + "\n" for _, line in keys.values()))
+    server = KeyedServer(tmp / "keys", "--preprocessing-slots", "4")
+    try:
+        with client(server, keys["exact"][0]) as exact:
+            held = exact.create_session(MESH, options=OPTIONS)
+            assert held.vertex_count == 1839
+            with pytest.raises(filigree.ResourceExhausted, match="its sessions hold 1839"):
+                exact.create_session(MESH, options=OPTIONS)
+        with client(server, keys["under"][0]) as under, pytest.raises(filigree.ResourceExhausted, match="1838 vertices"):
+            under.create_session(MESH, options=OPTIONS)
+        outcomes: list[str] = []
+        lock = threading.Lock()
+
+        def upload() -> None:
+            with client(server, keys["racing"][0]) as racing:
+                try:
+                    racing.create_session(MESH, options=OPTIONS)
+                    outcome = "created"
+                except filigree.ResourceExhausted:
+                    outcome = "refused"
+            with lock:
+                outcomes.append(outcome)
+
+        threads = [threading.Thread(target=upload) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(120)
+        assert sorted(outcomes) == ["created", "refused", "refused", "refused"]
+    finally:
+        server.stop()
+        shutil.rmtree(tmp, ignore_errors=True)

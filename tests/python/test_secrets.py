@@ -31,7 +31,7 @@ def test_tokens_never_reach_the_log():
                 session = client.create_session(DATA / "bunny_small.obj",
                                                 options=filigree.SessionOptions(base_vertices=150))
                 secrets = [session.editor_token, session.viewer_token]
-                with pytest.raises(filigree.PermissionDenied):
+                with pytest.raises(filigree.NotFound):
                     client.join(session.id, session.viewer_token[::-1])  # a wrong token, refused
                 with client.join(session.id, session.viewer_token) as viewer, viewer.watch() as watcher:
                     with session.drive("secrets") as driver:

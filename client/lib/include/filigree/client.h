@@ -94,9 +94,11 @@ class Client {
   void close(const std::string& session_id, const std::string& token);
   // The server's sessions (no token needed; with replicas, this replica's).
   std::vector<v1::ListSessionsResponse::Entry> list();
-  // Which replica serves the session, and its address (no token needed):
-  // for engines that route themselves instead of through a load balancer.
-  v1::SessionLocation locate(const std::string& session_id);
+  // Which replica serves the session, and its address: for engines that
+  // route themselves instead of through a load balancer. Needs a token of
+  // the session (or this client's API key owning it); anyone else is told
+  // NOT_FOUND, as for an unknown id.
+  v1::SessionLocation locate(const std::string& session_id, const std::string& token);
 
   // Opens a Drive stream (editor token). `client_name` is shown to others in
   // Frame.changes. The stream's failures show in send()/read()/finish().

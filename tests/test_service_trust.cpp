@@ -1,0 +1,366 @@
+// What a hostile client can make filigree-server do, end to end over gRPC
+// against the contract alone: inputs that crashed it (a deeply nested glTF),
+// ids that handed over another's session, answers that told whether a
+// session exists, poses acknowledged that never made a frame, options
+// silently ignored, and error messages that echoed megabytes back.
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <openssl/sha.h>
+
+#include "filigree/v1/filigree.grpc.pb.h"
+#include "support/server_process.h"
+#include "support/test_meshes.h"
+
+namespace filigree {
+namespace {
+
+using test::ServerProcess;
+
+const std::string kBunny = test::shipped_path("bunny_small.obj");
+constexpr std::size_t kStatusBound = 512;  // bytes of grpc-message at most (server/bounded_status.h)
+
+struct Created {
+  grpc::Status status;
+  v1::CreateSessionResponse::Created created;
+  const std::string& id() const { return created.info().session_id(); }
+};
+
+// An upload whose Begin `shape` may change (a proposed id, options), with
+// an API key if given.
+Created upload(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
+               const std::function<void(v1::CreateSessionRequest::Begin&)>& shape = {}, const std::string& api_key = {}) {
+  grpc::ClientContext ctx;
+  if (!api_key.empty()) ctx.AddMetadata("x-filigree-api-key", api_key);
+  auto stream = stub.CreateSession(&ctx);
+  v1::CreateSessionRequest message;
+  message.mutable_begin()->set_format(format);
+  message.mutable_begin()->set_total_bytes(bytes.size());
+  message.mutable_begin()->mutable_options()->set_base_vertices(150);
+  if (shape) shape(*message.mutable_begin());
+  stream->Write(message);
+  message.set_chunk(bytes);
+  stream->Write(message);
+  stream->WritesDone();
+  Created out;
+  v1::CreateSessionResponse r;
+  while (stream->Read(&r))
+    if (r.has_created()) out.created = r.created();
+  out.status = stream->Finish();
+  return out;
+}
+
+std::unique_ptr<grpc::ClientContext> with(const std::string& token, const std::string& api_key = {}) {
+  auto c = std::make_unique<grpc::ClientContext>();
+  if (!token.empty()) c->AddMetadata("x-filigree-token", token);
+  if (!api_key.empty()) c->AddMetadata("x-filigree-api-key", api_key);
+  return c;
+}
+
+grpc::Status join(v1::Filigree::Stub& stub, const std::string& id, const std::string& token) {
+  v1::JoinSessionRequest r;
+  r.set_session_id(id);
+  v1::SessionInfo info;
+  return stub.JoinSession(with(token).get(), r, &info);
+}
+
+grpc::Status locate(v1::Filigree::Stub& stub, const std::string& id, const std::string& token,
+                    const std::string& api_key = {}) {
+  v1::LocateSessionRequest r;
+  r.set_session_id(id);
+  v1::SessionLocation where;
+  return stub.LocateSession(with(token, api_key).get(), r, &where);
+}
+
+std::vector<std::string> listed(v1::Filigree::Stub& stub, const std::string& api_key) {
+  v1::ListSessionsResponse list;
+  EXPECT_TRUE(stub.ListSessions(with({}, api_key).get(), {}, &list).ok());
+  std::vector<std::string> ids;
+  for (const auto& e : list.sessions()) ids.push_back(e.session_id());
+  return ids;
+}
+
+// A server with no --data-dir (the default: sessions in memory only).
+struct MemoryServer {
+  explicit MemoryServer(std::vector<std::string> args = {}) : process(FILIGREE_SERVER_BINARY, args) {
+    channel = grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
+    stub = v1::Filigree::NewStub(channel);
+  }
+  ServerProcess process;
+  std::shared_ptr<grpc::Channel> channel;
+  std::unique_ptr<v1::Filigree::Stub> stub;
+};
+
+std::string hex_sha256(const std::string& key) {
+  unsigned char digest[SHA256_DIGEST_LENGTH];
+  SHA256(reinterpret_cast<const unsigned char*>(key.data()), key.size(), digest);
+  std::string out;
+  char byte[3];
+  for (unsigned char d : digest) {
+    std::snprintf(byte, sizeof byte, "%02x", d);
+    out += byte;
+  }
+  return out;
+}
+
+class TrustTest : public ::testing::Test {
+ protected:
+  std::filesystem::path temp(const std::string& name) const {
+    return std::filesystem::path(::testing::TempDir()) /
+           ("filigree_trust_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name() + "_" + name);
+  }
+};
+
+// tinygltf's recursive JSON conversion overflowed the preprocessing
+// thread's stack on 15,000 nested arrays (30 KB): every session went down.
+TEST_F(TrustTest, ADeeplyNestedGltfIsRefusedAndTheServerLivesOn) {
+  MemoryServer server;
+  const Created before = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(before.status.ok()) << before.status.error_message();
+  for (const std::size_t levels : {std::size_t{15000}, std::size_t{200000}}) {
+    const std::string gltf = R"({"asset":{"version":"2.0"},"extras":)" + std::string(levels, '[') +
+                             std::string(levels, ']') + "}";
+    const Created nested = upload(*server.stub, gltf, "gltf");
+    EXPECT_EQ(nested.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << levels;
+    EXPECT_NE(nested.status.error_message().find("nests deeper than"), std::string::npos) << nested.status.error_message();
+  }
+  EXPECT_TRUE(join(*server.stub, before.id(), before.created.viewer_token()).ok()) << "the earlier session is gone";
+}
+
+// Without --data-dir a proposed id of an existing session answered with that
+// session's tokens. A proposed id names a new session only.
+TEST_F(TrustTest, AProposedIdOfAnExistingSessionIsRefusedAndRevealsNoToken) {
+  MemoryServer server;
+  const Created victim = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(victim.status.ok()) << victim.status.error_message();
+  const Created attacker = upload(*server.stub, test::file_bytes(kBunny), "obj",
+                                  [&](v1::CreateSessionRequest::Begin& b) { b.set_session_id(victim.id()); });
+  EXPECT_EQ(attacker.status.error_code(), grpc::StatusCode::ALREADY_EXISTS) << attacker.status.error_message();
+  EXPECT_TRUE(attacker.created.editor_token().empty());
+  EXPECT_EQ(attacker.status.error_message().find(victim.created.editor_token()), std::string::npos);
+  // A fresh proposed id is honoured.
+  const std::string fresh = "00112233445566778899";
+  const Created proposed = upload(*server.stub, test::file_bytes(kBunny), "obj",
+                                  [&](v1::CreateSessionRequest::Begin& b) { b.set_session_id(fresh); });
+  ASSERT_TRUE(proposed.status.ok()) << proposed.status.error_message();
+  EXPECT_EQ(proposed.id(), fresh);
+  EXPECT_NE(proposed.created.editor_token(), victim.created.editor_token());
+  EXPECT_TRUE(join(*server.stub, victim.id(), victim.created.editor_token()).ok());
+}
+
+// Sessions belong to the key that made them: other keys neither see nor
+// reach them, and "not yours" is "no such session".
+TEST_F(TrustTest, AnotherKeysSessionIsInvisibleAndUnreachable) {
+  const std::string alice = "fgk_alice_0123456789abcdef0123456789abcdef01234567";
+  const std::string bob = "fgk_bob_0123456789abcdef0123456789abcdef0123456789ab";
+  const std::filesystem::path keys = temp("keys");
+  std::ofstream(keys) << "alice " << hex_sha256(alice) << "\nbob " << hex_sha256(bob) << "\n";
+  MemoryServer server({"--api-keys", keys.string()});
+  const Created mine = upload(*server.stub, test::file_bytes(kBunny), "obj", {}, alice);
+  ASSERT_TRUE(mine.status.ok()) << mine.status.error_message();
+
+  const Created taken = upload(*server.stub, test::file_bytes(kBunny), "obj",
+                               [&](v1::CreateSessionRequest::Begin& b) { b.set_session_id(mine.id()); }, bob);
+  EXPECT_EQ(taken.status.error_code(), grpc::StatusCode::ALREADY_EXISTS) << taken.status.error_message();
+  EXPECT_TRUE(taken.created.editor_token().empty());
+
+  EXPECT_EQ(listed(*server.stub, alice), std::vector<std::string>{mine.id()});
+  EXPECT_TRUE(listed(*server.stub, bob).empty());
+
+  const std::string unknown = "0123456789abcdef0123";
+  const grpc::Status bobs = locate(*server.stub, mine.id(), "", bob);
+  const grpc::Status nobodys = locate(*server.stub, unknown, "", bob);
+  EXPECT_EQ(bobs.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(nobodys.error_code(), grpc::StatusCode::NOT_FOUND);
+  std::string said = bobs.error_message();
+  said.replace(said.find(mine.id()), mine.id().size(), unknown);
+  EXPECT_EQ(said, nobodys.error_message()) << "the answer tells a session exists";
+  EXPECT_TRUE(locate(*server.stub, mine.id(), "", alice).ok());
+  EXPECT_TRUE(locate(*server.stub, mine.id(), mine.created.viewer_token()).ok());  // the token is a capability
+  std::filesystem::remove(keys);
+}
+
+// LocateSession told anyone whether an id exists; it needs credentials now.
+TEST_F(TrustTest, LocatingNeedsATokenOfTheSession) {
+  MemoryServer server;
+  const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok());
+  EXPECT_EQ(locate(*server.stub, s.id(), "").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(locate(*server.stub, s.id(), "not-a-token").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_TRUE(locate(*server.stub, s.id(), s.created.editor_token()).ok());
+}
+
+// Finite but huge coordinates were acknowledged and never made a frame; one
+// such vertex stalled every later partial pose.
+TEST_F(TrustTest, APoseBeyondTheMeshsReachIsRefusedAndLaterPosesAreAnswered) {
+  MemoryServer server;
+  const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok());
+  for (const float huge : {1e30f, -3.4e38f, 1e9f}) {
+    v1::DriveRequest pose;
+    pose.set_session_id(s.id());
+    pose.add_indices(3);
+    pose.add_positions(0.0f), pose.add_positions(huge), pose.add_positions(0.0f);
+    v1::SubmitPoseResponse accepted;
+    const grpc::Status status = server.stub->SubmitPose(with(s.created.editor_token()).get(), pose, &accepted);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << huge;
+    EXPECT_NE(status.error_message().find("beyond this mesh's reach"), std::string::npos) << status.error_message();
+  }
+  // A far but sane pose (ten mesh sizes away) is answered with its frame.
+  v1::WatchRequest wr;
+  wr.set_session_id(s.id());
+  auto watch_ctx = with(s.created.viewer_token());
+  auto watch = server.stub->Watch(watch_ctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));
+  v1::DriveRequest pose;
+  pose.set_session_id(s.id());
+  pose.add_indices(3);
+  pose.add_positions(0.0f), pose.add_positions(10.0f), pose.add_positions(0.0f);
+  v1::SubmitPoseResponse accepted;
+  ASSERT_TRUE(server.stub->SubmitPose(with(s.created.editor_token()).get(), pose, &accepted).ok());
+  do {
+    ASSERT_TRUE(watch->Read(&f)) << "no frame answered the pose";
+  } while (f.version() < accepted.accepted_at_version());
+  watch_ctx->TryCancel();
+  watch->Finish();
+}
+
+// A 1 MB session id came back in NOT_FOUND and a bad data URI in a 140 KB
+// message: over gRPC's default 8 KB metadata limit, the client heard
+// RESOURCE_EXHAUSTED instead, and the channel's next call could fail.
+TEST_F(TrustTest, ErrorMessagesAreBoundedAndTheChannelKeepsWorking) {
+  MemoryServer server;
+  const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok());
+  const std::string long_id(1 << 20, 'a');
+  const grpc::Status unknown = join(*server.stub, long_id, "some-token");
+  EXPECT_EQ(unknown.error_code(), grpc::StatusCode::NOT_FOUND) << unknown.error_message().substr(0, 200);
+  EXPECT_LE(unknown.error_message().size(), kStatusBound);
+  EXPECT_NE(unknown.error_message().find("malformed id of 1048576 bytes"), std::string::npos) << unknown.error_message();
+
+  const std::string bad_uri = std::string(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"data:)") +
+                              std::string(140000, '%') + R"("}]})";
+  const Created refused = upload(*server.stub, bad_uri, "gltf");
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << refused.status.error_message().substr(0, 200);
+  EXPECT_LE(refused.status.error_message().size(), kStatusBound);
+  EXPECT_TRUE(join(*server.stub, s.id(), s.created.viewer_token()).ok()) << "the channel's next call failed";
+}
+
+// base_ratio NaN or −1 was silently ignored; a mesh of degenerate faces only
+// became a session.
+TEST_F(TrustTest, InvalidOptionsAndMeshesWithoutATriangleAreRefused) {
+  MemoryServer server;
+  for (const double ratio : {std::nan(""), -1.0, 1.5, std::numeric_limits<double>::infinity()}) {
+    const Created c = upload(*server.stub, test::file_bytes(kBunny), "obj",
+                             [&](v1::CreateSessionRequest::Begin& b) { b.mutable_options()->set_base_ratio(ratio); });
+    EXPECT_EQ(c.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << ratio;
+    EXPECT_NE(c.status.error_message().find("base_ratio"), std::string::npos) << c.status.error_message();
+  }
+  const Created half = upload(*server.stub, test::file_bytes(kBunny), "obj", [](v1::CreateSessionRequest::Begin& b) {
+    b.mutable_options()->set_base_vertices(0);
+    b.mutable_options()->set_base_ratio(0.5);
+  });
+  EXPECT_TRUE(half.status.ok()) << half.status.error_message();
+
+  // Every face has a repeated corner or three collinear corners.
+  const std::string flat = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\nf 2 3 3\n";
+  const Created degenerate = upload(*server.stub, flat, "obj");
+  EXPECT_EQ(degenerate.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(degenerate.status.error_message().find("no triangle with an area"), std::string::npos)
+      << degenerate.status.error_message();
+  EXPECT_TRUE(degenerate.created.editor_token().empty());
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+// With --data-dir, SIGKILL while driving lost acknowledged poses (records
+// were written on a timer) and the version went back, so frames after the
+// restart reused versions a watcher had seen for other content. Every frame
+// is journaled before it is published now.
+TEST_F(TrustTest, ASigkillLosesNoAcknowledgedPoseAndVersionsNeverRepeat) {
+  const std::filesystem::path data = temp("data");
+  std::filesystem::remove_all(data);
+  auto server = std::make_unique<ServerProcess>(FILIGREE_SERVER_BINARY, std::vector<std::string>{"--data-dir", data.string()});
+  auto stub = v1::Filigree::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  const Created s = upload(*stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok()) << s.status.error_message();
+
+  // Forty poses sent at once, each moving base vertex 3 a little further;
+  // the server is killed the moment the frame of the last one arrives.
+  constexpr std::uint64_t kPoses = 40;
+  auto x_of = [](std::uint64_t pose) { return 0.01f * static_cast<float>(pose); };
+  std::uint64_t acknowledged = 0, seen_version = 0;
+  {
+    auto ctx = with(s.created.editor_token());
+    auto drive = stub->Drive(ctx.get());
+    for (std::uint64_t i = 1; i <= kPoses; ++i) {
+      v1::DriveRequest pose;
+      pose.set_session_id(s.id());
+      pose.set_pose_id(i);
+      pose.add_indices(3);
+      pose.add_positions(x_of(i)), pose.add_positions(0.5f), pose.add_positions(0.5f);
+      ASSERT_TRUE(drive->Write(pose));
+    }
+    v1::Frame f;
+    while (acknowledged < kPoses && drive->Read(&f)) {
+      acknowledged = std::max(acknowledged, f.pose_id());
+      seen_version = std::max(seen_version, f.version());
+    }
+    ASSERT_EQ(acknowledged, kPoses);
+    server->kill_now();
+    ctx->TryCancel();
+    drive->Finish();
+  }
+
+  server = std::make_unique<ServerProcess>(FILIGREE_SERVER_BINARY, std::vector<std::string>{"--data-dir", data.string()});
+  stub = v1::Filigree::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  v1::GetStateRequest request;
+  request.set_session_id(s.id());
+  v1::SessionState state;
+  ASSERT_TRUE(stub->GetState(with(s.created.viewer_token()).get(), request, &state).ok());
+  EXPECT_GE(state.version(), seen_version) << "the version went back";
+  ASSERT_GE(state.pose_size(), 12);
+  EXPECT_EQ(state.pose(9), x_of(kPoses)) << "the acknowledged pose was lost";
+
+  // The next frame's version was never given out before the kill.
+  v1::WatchRequest wr;
+  wr.set_session_id(s.id());
+  auto watch_ctx = with(s.created.viewer_token());
+  auto watch = stub->Watch(watch_ctx.get(), wr);
+  v1::Frame f;
+  ASSERT_TRUE(watch->Read(&f));
+  EXPECT_GE(f.version(), seen_version);
+  v1::DriveRequest next;
+  next.set_session_id(s.id());
+  next.add_indices(5);
+  next.add_positions(0.25f), next.add_positions(0.25f), next.add_positions(0.25f);
+  v1::SubmitPoseResponse accepted;
+  ASSERT_TRUE(stub->SubmitPose(with(s.created.editor_token()).get(), next, &accepted).ok());
+  do {
+    ASSERT_TRUE(watch->Read(&f)) << "no frame answered the pose";
+  } while (f.version() <= accepted.accepted_at_version());
+  EXPECT_GT(f.version(), seen_version);
+  watch_ctx->TryCancel();
+  watch->Finish();
+  server.reset();
+  std::filesystem::remove_all(data);
+}
+
+}  // namespace
+}  // namespace filigree
