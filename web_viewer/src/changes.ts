@@ -20,8 +20,10 @@ export function changeLines(frame: Frame): ChangeLine[] {
   }));
 }
 
+// The list is rebuilt at most once per animation frame, however many frames arrive.
 export class ChangeLog {
   private lines: ChangeLine[] = [];
+  private scheduled = false;
 
   constructor(private readonly list: HTMLOListElement) {}
 
@@ -29,6 +31,15 @@ export class ChangeLog {
     const added = changeLines(frame);
     if (added.length === 0) return;
     this.lines = [...added, ...this.lines].slice(0, KEPT);
+    if (this.scheduled) return;
+    this.scheduled = true;
+    requestAnimationFrame(() => {
+      this.scheduled = false;
+      this.render();
+    });
+  }
+
+  private render(): void {
     this.list.replaceChildren(...this.lines.map((line) => {
       const item = document.createElement('li');
       const version = document.createElement('span');

@@ -17,7 +17,8 @@ export interface HandleTarget { vertex: number; x: number; y: number; z: number 
 export class SessionClient {
   private readonly client: Client<typeof Filigree>;
 
-  constructor(readonly serverUrl: string, readonly sessionId: string, token: string) {
+  // `fetch`: another fetch (the session worker counts the bytes of the join).
+  constructor(readonly serverUrl: string, readonly sessionId: string, token: string, fetch?: typeof globalThis.fetch) {
     // Every call carries the token, and the session id so that a load
     // balancer can route by session (DESIGN §4).
     const credentials: Interceptor = (next) => (request) => {
@@ -25,7 +26,9 @@ export class SessionClient {
       request.header.set('x-session-id', sessionId);
       return next(request);
     };
-    const transport = createGrpcWebTransport({ baseUrl: serverUrl, useBinaryFormat: true, interceptors: [credentials] });
+    const transport = createGrpcWebTransport({
+      baseUrl: serverUrl, useBinaryFormat: true, interceptors: [credentials], ...(fetch ? { fetch } : {}),
+    });
     this.client = createClient(Filigree, transport);
   }
 
@@ -38,8 +41,10 @@ export class SessionClient {
   // Chunked (frame.ts): each keyframe comes before the frames relative to it,
   // so afterVersion 0 is how to get the current keyframe again. A server
   // without that format sends single frames, which the page reads too.
-  watch(afterVersion: bigint, signal: AbortSignal): AsyncIterable<Frame> {
-    return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED }, { signal });
+  // `onHeader`: the server answered (the stream is open), before any frame.
+  watch(afterVersion: bigint, signal: AbortSignal, onHeader?: () => void): AsyncIterable<Frame> {
+    return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED },
+      { signal, ...(onHeader ? { onHeader } : {}) });
   }
 
   // Plays one of the session's clips on the server (editor token): its
@@ -61,9 +66,25 @@ export class SessionClient {
 
   // A full pose (3·m floats in base order); resolves with the version the
   // pose was accepted at: the frame that includes it has a larger one.
-  async submitPose(poseId: bigint, positions: number[], clientName: string): Promise<bigint> {
-    const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName });
+  // `indices`: a partial pose, positions[3k..] for base vertex indices[k].
+  async submitPose(poseId: bigint, positions: number[], clientName: string, indices: number[] = []): Promise<bigint> {
+    const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName, indices });
     return response.acceptedAtVersion;
+  }
+
+  // Whether the token is the session's editor token. The server has no call
+  // that says so; SubmitPose checks the token before the pose, and a pose of
+  // one coordinate is never valid (a base vertex takes 3), so an editor gets
+  // INVALID_ARGUMENT and nothing changes, a viewer PERMISSION_DENIED.
+  async canEdit(): Promise<boolean> {
+    try {
+      await this.client.submitPose({ sessionId: this.sessionId, poseId: 0n, positions: [0], clientName: 'role-probe' });
+    } catch (error) {
+      if (isCode(error, Code.InvalidArgument)) return true;
+      if (isCode(error, Code.PermissionDenied) || isCode(error, Code.Unauthenticated)) return false;
+      throw error;
+    }
+    throw new Error('the server accepted a pose of one coordinate');
   }
 
   // Replaces this client's handles (empty: none); resolves with the version
@@ -102,7 +123,8 @@ export function describeError(error: unknown, sessionId: string, serverUrl: stri
     case Code.PermissionDenied:
       return `The token was refused for session ${sessionId}: it is wrong, or this needs the editor token.${detail}`;
     case Code.NotFound:
-      return `Session ${sessionId} does not exist on ${serverUrl} (unknown or closed).${detail}`;
+      // The server gives one answer for "no such session" and "not yours" (DESIGN §3.2).
+      return `Session ${sessionId} does not exist on ${serverUrl} (unknown or closed), or the token is not one of its tokens.${detail}`;
     case Code.Unavailable:
       return `The server ${serverUrl} is unavailable (unreachable, or shutting down).${detail}`;
     case Code.InvalidArgument:

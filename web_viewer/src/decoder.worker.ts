@@ -1,45 +1,260 @@
-// Decodes frame buffers off the main thread, so that rendering and orbiting
-// stay smooth while a large frame decodes. Stateless: the keyframe state is
-// the page's (KeyedDeltas, main.ts), so the chunks of one frame can go to
-// several of these workers at once. Protocol: DecodeRequest in, DecodeReply
-// out, matched by id; buffers are transferred, not copied.
+// The session worker: everything heavy the page does with a session, off the
+// main thread (DESIGN §3.6). It joins the session (so the main thread never
+// parses the mesh: tens of MB on a 1M-vertex session), builds the first
+// normals and the framing, and then, frame by frame, decodes the Draco
+// buffers, applies them to the keyframe state (KeyedDeltas) and the rest
+// mesh, computes vertex normals and, while that overlay is on, the stretch
+// colours. Finished buffers go to the page by transfer, two sets taking turns
+// (pipeline-protocol.ts, Buffers); the page only uploads and draws them.
+//
+// One frame at a time: the page sends the next frame when this one is done,
+// skipping to the newest (its FrameMailbox), so the worker never queues.
 import createDecoderModule from 'draco3d/draco_decoder_nodejs.js';
 import wasmUrl from 'draco3d/draco_decoder.wasm?url';
 
-import { decodeDeltas, type DracoDecoderModule } from './frame';
+import { ConnectError } from '@connectrpc/connect';
 
-// One Draco buffer: Frame.deltas (count = the frame's vertices) or a
-// DeltaChunk's (count = its present vertices); `what` names it in errors.
-export interface DecodeItem { bytes: Uint8Array; count: number; what: string }
-export interface DecodeRequest { id: number; items: DecodeItem[] }
-export type DecodeReply =
-  | { id: number; values: Float32Array[]; decodeMs: number }
-  | { id: number; error: string };
+import { SessionClient } from './client';
+import {
+  applyDeltaRanges, applyDeltas, decodeChunk, decodeDeltas, FrameError, isKeyframe, KeyedDeltas, largestDelta,
+  type DracoDecoderModule,
+} from './frame';
+import { frameMesh, vertexNormals } from './geometry';
+import type { Buffers, CallError, ChunkedFrameMessage, FromWorker, SingleFrameMessage, ToWorker } from './pipeline-protocol';
+import { STRETCH_RED, stretchColor, TriangleStretch } from './stretch';
 
-// Loaded once, on the first message's way in; a failure is reported per request.
-let draco: Promise<DracoDecoderModule> | undefined;
-function loadDraco(): Promise<DracoDecoderModule> {
-  draco ??= fetch(wasmUrl)
-    .then((response) => {
-      if (!response.ok) throw new Error(`cannot load the Draco decoder (${wasmUrl}: HTTP ${response.status})`);
-      return response.arrayBuffer();
-    })
-    .then((wasmBinary) => createDecoderModule({ wasmBinary }) as Promise<DracoDecoderModule>);
-  return draco;
+// Loaded at once: the first frame should not wait for it.
+const draco: Promise<DracoDecoderModule> = fetch(wasmUrl)
+  .then((response) => {
+    if (!response.ok) throw new Error(`cannot load the Draco decoder (${wasmUrl}: HTTP ${response.status})`);
+    return response.arrayBuffer();
+  })
+  .then((wasmBinary) => createDecoderModule({ wasmBinary }) as Promise<DracoDecoderModule>);
+// A load failure is reported with the first frame, not as an unhandled rejection.
+draco.catch(() => {});
+
+const post = (message: FromWorker, transfer: Transferable[] = []) => self.postMessage(message, { transfer });
+
+// The session's mesh and the deformation state.
+let rest = new Float32Array(0);
+let faces = new Uint32Array(0);
+let keyed = new KeyedDeltas(0);
+// rest + the latest deltas: what the next buffers start from.
+let positions = new Float32Array(0);
+// False after a single-format frame: the next chunked one rewrites every vertex.
+let positionsFollowKeyed = true;
+const spare: Buffers[] = [];     // buffer sets handed back by the page
+let stretchOn = false;
+let stretch: TriangleStretch | null = null;
+let stretchValues = new Float32Array(0);
+let vertexStretch = new Float32Array(0);
+let stretchMax = 0;
+
+// ------------------------------------------------------------------ join
+
+// A fetch that reports how many bytes of the answer have arrived.
+function countingFetch(report: (loaded: number, total: number | null) => void): typeof fetch {
+  // Typed loosely: @types/node and the DOM declare fetch twice, with Request types that do not match.
+  return (async (input: string, init?: RequestInit) => {
+    const response = await fetch(input, init);
+    if (!response.body) return response;
+    const length = Number(response.headers.get('content-length'));
+    const total = Number.isFinite(length) && length > 0 ? length : null;
+    let loaded = 0;
+    let lastReport = 0;
+    const counted = response.body.pipeThrough(new TransformStream<Uint8Array, Uint8Array>({
+      transform(chunk, controller) {
+        loaded += chunk.byteLength;
+        const now = performance.now();
+        if (now - lastReport > 100) {
+          lastReport = now;
+          report(loaded, total);
+        }
+        controller.enqueue(chunk);
+      },
+    }));
+    return new Response(counted, { status: response.status, statusText: response.statusText, headers: response.headers });
+  }) as unknown as typeof fetch;
 }
 
-// Typed through the DOM lib (the project compiles against one lib set);
-// postMessage with a transfer list has the same shape in a worker.
-self.onmessage = async (event: MessageEvent<DecodeRequest>) => {
-  const { id, items } = event.data;
-  let reply: DecodeReply;
-  try {
-    const module = await loadDraco();
-    const start = performance.now();
-    const values = items.map((item) => decodeDeltas(module, item.bytes, item.count, item.what));
-    reply = { id, values, decodeMs: performance.now() - start };
-  } catch (error) {
-    reply = { id, error: error instanceof Error ? error.message : String(error) };
+function callError(error: unknown): CallError {
+  if (error instanceof ConnectError) {
+    return { code: error.code, rawMessage: error.rawMessage, message: error.message, fetchFailed: error.cause instanceof TypeError };
   }
-  self.postMessage(reply, { transfer: 'values' in reply ? reply.values.map((v) => v.buffer) : [] });
+  return { code: null, rawMessage: '', message: error instanceof Error ? error.message : String(error), fetchFailed: false };
+}
+
+async function join(serverUrl: string, sessionId: string, token: string): Promise<void> {
+  const started = performance.now();
+  const client = new SessionClient(serverUrl, sessionId, token,
+    countingFetch((loaded, total) => post({ type: 'progress', stage: 'download', loaded, total })));
+  let info;
+  try {
+    info = await client.join();
+  } catch (error) {
+    post({ type: 'joinFailed', error: callError(error) });
+    return;
+  }
+  const joined = performance.now();
+  post({ type: 'progress', stage: 'build', loaded: 0, total: null });
+  const restMesh = info.rest!;
+  const n = restMesh.vertexCount;
+  rest = Float32Array.from(restMesh.positions);
+  faces = Uint32Array.from(restMesh.faces);
+  restMesh.positions = [];
+  restMesh.faces = [];
+  restMesh.uploadedIds = [];
+  keyed = new KeyedDeltas(n);
+  positions = rest.slice();
+  const normals = new Float32Array(3 * n);
+  vertexNormals(rest, faces, normals);
+  const framing = frameMesh(rest, normals);
+  // The second set, for the first frame.
+  spare.push({ positions: new Float32Array(3 * n), normals: new Float32Array(3 * n), colors: null });
+  const base = info.base!;
+  const basePositions = Float32Array.from(base.positions);
+  const baseFaces = Uint32Array.from(base.faces);
+  const originalIds = Uint32Array.from(base.originalIds);
+  base.positions = [];
+  base.faces = [];
+  base.originalIds = [];
+  const facesForPage = faces.slice();
+  post({
+    type: 'joined', info, faces: facesForPage, buffers: { positions: rest.slice(), normals, colors: null }, framing,
+    basePositions, baseFaces, originalIds, joinMs: joined - started, buildMs: performance.now() - joined,
+  }, [facesForPage.buffer, normals.buffer, basePositions.buffer, baseFaces.buffer, originalIds.buffer]);
+}
+
+// ------------------------------------------------------------------ frames
+
+function takeBuffers(): Buffers {
+  const n3 = rest.length;
+  const set = spare.pop() ?? { positions: new Float32Array(n3), normals: new Float32Array(n3), colors: null };
+  if (stretchOn && (set.colors === null || set.colors.length !== n3)) set.colors = new Float32Array(n3);
+  if (!stretchOn) set.colors = null;
+  return set;
+}
+
+async function applyFrame(id: number, chunked?: ChunkedFrameMessage, single?: SingleFrameMessage): Promise<void> {
+  const frame = chunked ?? single!;
+  let decodeMs = 0;
+  let applyMs = 0;
+  let kind: 'single' | 'keyframe' | 'sparse';
+  let displacement: number;
+  try {
+    if (frame.vertexCount !== rest.length / 3) {
+      throw new FrameError(`a frame of ${frame.vertexCount} vertices for a mesh of ${rest.length / 3}`);
+    }
+    const module = await draco;
+    if (chunked) {
+      const present = keyed.check(chunked);  // before decoding: a frame that cannot apply costs nothing
+      const t0 = performance.now();
+      const values = chunked.chunks.map((chunk, c) => (chunk.deltas.length === 0
+        ? new Float32Array(3 * present[c]) : decodeChunk(module, chunk, present[c], c)));
+      const t1 = performance.now();
+      const changed = keyed.apply(chunked, values);
+      if (positionsFollowKeyed) applyDeltaRanges(rest, keyed.deltas, positions, changed);
+      else applyDeltas(rest, keyed.deltas, positions);
+      positionsFollowKeyed = true;
+      displacement = largestDelta(keyed.deltas);
+      decodeMs = t1 - t0;
+      applyMs = performance.now() - t1;
+      kind = isKeyframe(chunked) ? 'keyframe' : 'sparse';
+    } else {
+      const s = single!;
+      const t0 = performance.now();
+      const deltas = decodeDeltas(module, s.deltas, s.vertexCount);
+      const t1 = performance.now();
+      applyDeltas(rest, deltas, positions);
+      positionsFollowKeyed = false;
+      displacement = largestDelta(deltas);
+      decodeMs = t1 - t0;
+      applyMs = performance.now() - t1;
+      kind = 'single';
+    }
+  } catch (error) {
+    const message = error instanceof Error ? error.message : String(error);
+    // The frames after a keyframe that failed, or after one that never came, cannot be read.
+    const resync = chunked !== undefined && (isKeyframe(chunked) || chunked.keyframeVersion !== keyed.keyframeVersion);
+    post({ type: 'frameFailed', id, version: frame.version, message, resync });
+    return;
+  }
+  const out = takeBuffers();
+  out.positions.set(positions);
+  const t2 = performance.now();
+  vertexNormals(positions, faces, out.normals);
+  const t3 = performance.now();
+  if (out.colors) stretchColors(out.colors);
+  const stretchMs = performance.now() - t3;
+  const transfer: Transferable[] = [out.positions.buffer, out.normals.buffer];
+  if (out.colors) transfer.push(out.colors.buffer);
+  post({
+    type: 'applied', id, version: frame.version, buffers: out, kind, decodeMs, applyMs, normalsMs: t3 - t2, stretchMs,
+    displacement, stretchMax: out.colors ? stretchMax : 0,
+  }, transfer);
+}
+
+// ------------------------------------------------------------------ stretch
+
+// The ramp of stretch.ts in linear RGB (what a colour attribute holds), 256 steps.
+const RAMP = (() => {
+  const linear = (c: number) => (c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4);
+  const table = new Float32Array(3 * 256);
+  for (let i = 0; i < 256; ++i) {
+    const rgb = stretchColor(1 + (i / 255) * STRETCH_RED);
+    for (let k = 0; k < 3; ++k) table[3 * i + k] = linear(rgb[k]);
+  }
+  return table;
+})();
+
+// Per vertex, the largest |L2 − 1| of the triangles around it, as a colour.
+function stretchColors(out: Float32Array): void {
+  if (stretch === null) {
+    stretch = new TriangleStretch(rest, faces);
+    stretchValues = new Float32Array(stretch.triangleCount);
+    vertexStretch = new Float32Array(rest.length / 3);
+  }
+  stretch.l2(positions, stretchValues);
+  vertexStretch.fill(0);
+  let max = 0;
+  for (let f = 0; f < stretchValues.length; ++f) {
+    const d = Math.abs(stretchValues[f] - 1);
+    if (d > max) max = d;
+    for (let k = 0; k < 3; ++k) {
+      const v = faces[3 * f + k];
+      if (d > vertexStretch[v]) vertexStretch[v] = d;
+    }
+  }
+  stretchMax = max;
+  for (let v = 0; v < vertexStretch.length; ++v) {
+    const step = 3 * Math.min(255, Math.round((vertexStretch[v] / STRETCH_RED) * 255));
+    out[3 * v] = RAMP[step];
+    out[3 * v + 1] = RAMP[step + 1];
+    out[3 * v + 2] = RAMP[step + 2];
+  }
+}
+
+// ------------------------------------------------------------------ messages
+
+self.onmessage = (event: MessageEvent<ToWorker>) => {
+  const message = event.data;
+  switch (message.type) {
+    case 'join':
+      void join(message.serverUrl, message.sessionId, message.token);
+      break;
+    case 'frame':
+      void applyFrame(message.id, message.chunked, message.single);
+      break;
+    case 'recycle':
+      if (message.buffers.positions.length === rest.length) spare.push(message.buffers);
+      break;
+    case 'stretch':
+      stretchOn = message.on;
+      if (stretchOn && rest.length > 0) {
+        const colors = new Float32Array(rest.length);
+        stretchColors(colors);
+        post({ type: 'colors', colors, stretchMax }, [colors.buffer]);
+      }
+      break;
+  }
 };

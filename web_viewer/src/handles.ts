@@ -1,14 +1,31 @@
-// Handle editing (editor token): a press on the mesh makes the nearest corner
-// of the triangle under the pointer a handle (a sphere at its target), and
-// dragging moves the target in the plane facing the camera. Every change sends
-// all of this page's handles with SetHandles, one call in flight (newest
-// wins); the server solves the base pose and the frame comes back on Watch.
-// A right-click on a handle drops it. Presses on the background orbit as usual.
+// Editing by dragging the mesh (editor token), in one of two modes.
+//
+// Pull (the default, proportional editing as in DCC tools): a press on the
+// mesh takes the nearest corner of the triangle under the pointer, and
+// dragging moves the base vertices around it by the drag times a smooth
+// falloff of their distance (geometry.ts, falloff), 1 at the pressed point
+// and 0 at the radius of influence and beyond: the neighbourhood follows, the
+// far side stays in place. Each step sends the partial pose of those base
+// vertices with SubmitPose, one call in flight (newest wins).
+//
+// Handles: the pressed vertex becomes a handle (a sphere at its target);
+// every change sends all of this page's handles with SetHandles, and the
+// server solves the base pose (as-rigid-as-possible: the whole mesh follows
+// one handle). A right-click on a handle drops it.
+//
+// In both, the target moves in the plane facing the camera, and presses on
+// the background orbit as usual. The frames come back on Watch.
 import * as THREE from 'three';
 
 import { Code, isCode, type HandleTarget, type SessionClient } from './client';
+import { falloff } from './geometry';
 import { LatestSender } from './latest-sender';
 import type { MeshView } from './scene';
+
+export type EditMode = 'pull' | 'handles';
+
+// A partial pose: base vertex indices and 3 coordinates each.
+interface PartialPose { indices: number[]; positions: number[] }
 
 export const EDITOR_NEEDED = 'Handles need the editor token; this page was opened with another token ' +
   '(orbit, zoom and the overlays still work).';
@@ -19,6 +36,8 @@ export interface HandleEvents {
   // After every change: this page's handles, and everyone's after the last answer.
   counts(own: number, inSession: number | null): void;
   describe(error: unknown): string;
+  // An edit was sent; call the result with the version it was accepted at.
+  sent(): (acceptedAt: bigint) => void;
 }
 
 // The corner of the hit triangle nearest to the hit point.
@@ -40,32 +59,69 @@ export class HandleEditor {
   private readonly idle = new THREE.MeshBasicMaterial({ color: 0x39d0ff, depthTest: false });
   private readonly active = new THREE.MeshBasicMaterial({ color: 0xffe14d, depthTest: false });
   private readonly sender = new LatestSender<HandleTarget[]>((handles) => this.send(handles));
+  private readonly poses = new LatestSender<PartialPose>((pose) => this.sendPose(pose));
   private drag: { vertex: number; pointerId: number; plane: THREE.Plane } | null = null;
+  // The pull in progress: where the pressed point started, and the base
+  // vertices it moves with their start positions and weights.
+  private pull: {
+    pointerId: number; plane: THREE.Plane; start: THREE.Vector3; indices: number[]; from: Float32Array; weights: Float32Array;
+  } | null = null;
+  private readonly cursor: THREE.Mesh;       // the pressed point while pulling
+  private readonly influence: THREE.Mesh;    // the radius of influence around it
   private refused = false;  // the server refused this page's token for editing
+  private nextPoseId = 1n;
+  mode: EditMode = 'pull';
+  radius: number;           // of influence, world units
   inSession: number | null = null;
-  answered = 0;             // SetHandles calls answered OK
+  answered = 0;             // SetHandles or SubmitPose calls answered OK
   acceptedAt = 0n;          // the version the last of them was accepted at
+  pulledVertices = 0;       // base vertices the last pull moved
 
+  // `originalIds[i]`: the detailed-mesh vertex base vertex i is.
   constructor(private readonly view: MeshView, private readonly client: SessionClient,
-              readonly clientName: string, private readonly events: HandleEvents) {
+              readonly clientName: string, private readonly originalIds: Uint32Array, private readonly events: HandleEvents) {
     this.sphere = new THREE.SphereGeometry(view.radius * 0.02, 16, 12);
+    this.radius = view.radius * 0.35;
     this.group.renderOrder = 2;
     view.add(this.group);
+    this.cursor = new THREE.Mesh(this.sphere, this.active);
+    this.influence = new THREE.Mesh(new THREE.SphereGeometry(1, 32, 16),
+      new THREE.MeshBasicMaterial({ color: 0xffe14d, transparent: true, opacity: 0.12, depthWrite: false }));
+    this.cursor.visible = this.influence.visible = false;
+    this.cursor.renderOrder = this.influence.renderOrder = 2;
+    view.add(this.cursor);
+    view.add(this.influence);
     // Capture phase on the container: runs before the orbit controls' own
     // listener on the canvas, which never sees a press that starts a drag.
-    view.canvas.parentElement!.addEventListener('pointerdown', (e) => this.down(e), { capture: true });
-    view.canvas.addEventListener('pointermove', (e) => this.move(e));
-    view.canvas.addEventListener('pointerup', (e) => this.up(e));
-    view.canvas.addEventListener('pointercancel', (e) => this.up(e));
+    view.canvas.parentElement!.addEventListener('pointerdown', this.onDown, { capture: true });
+    view.canvas.addEventListener('pointermove', this.onMove);
+    view.canvas.addEventListener('pointerup', this.onUp);
+    view.canvas.addEventListener('pointercancel', this.onUp);
+  }
+
+  private readonly onDown = (e: PointerEvent) => this.down(e);
+  private readonly onMove = (e: PointerEvent) => this.move(e);
+  private readonly onUp = (e: PointerEvent) => this.up(e);
+
+  // No editing on this page any more (a viewer token): presses orbit.
+  detach(): void {
+    this.endDrag();
+    this.endPull();
+    this.view.canvas.parentElement!.removeEventListener('pointerdown', this.onDown, { capture: true });
+    this.view.canvas.removeEventListener('pointermove', this.onMove);
+    this.view.canvas.removeEventListener('pointerup', this.onUp);
+    this.view.canvas.removeEventListener('pointercancel', this.onUp);
+    this.group.clear();
+    this.spheres.clear();
   }
 
   get count(): number {
     return this.spheres.size;
   }
 
-  // A SetHandles call is running or waiting.
+  // A SetHandles or SubmitPose call is running or waiting.
   get sending(): boolean {
-    return !this.sender.idle;
+    return !this.sender.idle || !this.poses.idle;
   }
 
   // The page point → the vertex a press there would take (null: none).
@@ -93,6 +149,10 @@ export class HandleEditor {
       return;
     }
     if (event.button !== 0) return;
+    if (this.mode === 'pull') {
+      this.startPull(event);
+      return;
+    }
     let vertex = this.handleAt(event.clientX, event.clientY);
     if (vertex === null) {
       const hit = this.view.pick(event.clientX, event.clientY);
@@ -113,7 +173,101 @@ export class HandleEditor {
     this.changed();
   }
 
+  private startPull(event: PointerEvent): void {
+    if (this.pull) return;
+    const hit = this.view.pick(event.clientX, event.clientY);
+    const vertex = hit && nearestCorner(hit, this.view.positions);
+    if (vertex === null) return;  // the background: an orbit
+    if (this.refused) {
+      this.events.status(EDITOR_NEEDED, true);
+      return;
+    }
+    stop(event);
+    const p = this.view.positions;
+    const start = new THREE.Vector3().fromArray(p, 3 * vertex);
+    const indices: number[] = [];
+    const from: number[] = [];
+    const weights: number[] = [];
+    const r2 = this.radius * this.radius;
+    for (let i = 0; i < this.originalIds.length; ++i) {
+      const o = 3 * this.originalIds[i];
+      const d2 = (p[o] - start.x) ** 2 + (p[o + 1] - start.y) ** 2 + (p[o + 2] - start.z) ** 2;
+      if (d2 >= r2) continue;
+      const w = falloff(Math.sqrt(d2), this.radius);
+      if (w <= 0) continue;
+      indices.push(i);
+      from.push(p[o], p[o + 1], p[o + 2]);
+      weights.push(w);
+    }
+    if (indices.length === 0) {
+      this.events.status('No base vertex within the radius of influence: make it larger.', true);
+      return;
+    }
+    this.pull = {
+      pointerId: event.pointerId, plane: this.view.facingPlane(start), start, indices,
+      from: Float32Array.from(from), weights: Float32Array.from(weights),
+    };
+    this.pulledVertices = indices.length;
+    this.cursor.position.copy(start);
+    this.influence.position.copy(start);
+    this.influence.scale.setScalar(this.radius);
+    this.cursor.visible = this.influence.visible = true;
+    this.view.setOrbitEnabled(false);
+    this.view.canvas.setPointerCapture(event.pointerId);
+    this.view.invalidate();
+    this.events.status(`Pulling ${indices.length} base ${indices.length === 1 ? 'vertex' : 'vertices'}.`);
+  }
+
+  private movePull(event: PointerEvent): void {
+    const pull = this.pull!;
+    const point = this.view.rayAt(event.clientX, event.clientY).ray.intersectPlane(pull.plane, new THREE.Vector3());
+    if (!point) return;
+    this.cursor.position.copy(point);
+    this.view.invalidate();
+    const d = point.sub(pull.start);
+    const positions = new Array<number>(3 * pull.indices.length);
+    for (let k = 0; k < pull.indices.length; ++k) {
+      const w = pull.weights[k];
+      positions[3 * k] = pull.from[3 * k] + w * d.x;
+      positions[3 * k + 1] = pull.from[3 * k + 1] + w * d.y;
+      positions[3 * k + 2] = pull.from[3 * k + 2] + w * d.z;
+    }
+    this.poses.push({ indices: pull.indices, positions });
+  }
+
+  private endPull(): void {
+    const pull = this.pull;
+    if (!pull) return;
+    if (this.view.canvas.hasPointerCapture(pull.pointerId)) this.view.canvas.releasePointerCapture(pull.pointerId);
+    this.pull = null;
+    this.cursor.visible = this.influence.visible = false;
+    this.view.setOrbitEnabled(true);
+    this.view.invalidate();
+  }
+
+  private async sendPose(pose: PartialPose): Promise<void> {
+    const accepted = this.events.sent();
+    try {
+      const at = await this.client.submitPose(this.nextPoseId++, pose.positions, this.clientName, pose.indices);
+      accepted(at);
+      this.acceptedAt = at;
+      ++this.answered;
+    } catch (error) {
+      if (isCode(error, Code.PermissionDenied)) {
+        this.refused = true;
+        this.endPull();
+        this.events.status(EDITOR_NEEDED, true);
+      } else {
+        this.events.status(this.events.describe(error), true);
+      }
+    }
+  }
+
   private move(event: PointerEvent): void {
+    if (this.pull && event.pointerId === this.pull.pointerId) {
+      this.movePull(event);
+      return;
+    }
     if (!this.drag || event.pointerId !== this.drag.pointerId) return;
     const point = this.view.rayAt(event.clientX, event.clientY).ray.intersectPlane(this.drag.plane, new THREE.Vector3());
     if (!point) return;  // the plane is edge-on
@@ -122,6 +276,7 @@ export class HandleEditor {
   }
 
   private up(event: PointerEvent): void {
+    if (this.pull && event.pointerId === this.pull.pointerId) this.endPull();
     if (this.drag && event.pointerId === this.drag.pointerId) this.endDrag();
   }
 
@@ -163,8 +318,10 @@ export class HandleEditor {
   }
 
   private async send(handles: HandleTarget[]): Promise<void> {
+    const accepted = this.events.sent();
     try {
       const answer = await this.client.setHandles(this.clientName, handles);
+      accepted(answer.acceptedAtVersion);
       this.inSession = answer.handlesInSession;
       this.acceptedAt = answer.acceptedAtVersion;
       ++this.answered;

@@ -40,6 +40,27 @@ export interface TestHook {
   nearestVertexToCamera(): number;
   // The vertex a press at the page point would take as a handle (null: none).
   vertexAt(x: number, y: number): number | null;
+  // Where vertex i is now (world space; null before the mesh exists).
+  vertexPosition(i: number): number[] | null;
+  // The drawn mesh's bounding rectangle as fractions of the canvas (null before the mesh exists).
+  screenExtent(): { width: number; height: number; left: number; top: number } | null;
+  // The camera's view direction and up (world space).
+  viewDirection(): { look: number[]; up: number[] } | null;
+  // The panel's statistics (stats.ts, StatsSnapshot; versions as numbers).
+  statsSnapshot(): Record<string, unknown> | null;
+  loadStage: 'download' | 'build' | 'done' | '';
+  joinMs: number;           // JoinSession in the worker, to the last byte
+  buildMs: number;          // the first normals and the framing, in the worker
+  upAxis: 'y' | 'z' | '';   // as the page framed the mesh
+  fits: number;             // Fit button or F key presses
+  canEdit: boolean | null;  // the token is the editor's (null: not known yet)
+  editMode: 'pull' | 'handles' | '';
+  pulledVertices: number;   // base vertices the last pull moved
+  editToDrawnMs: number | null;  // own edit → the frame including it drawn
+  reconnects: number;       // Watch streams opened again after one was lost
+  lastLoss: string;         // why the last stream was lost
+  newestVersion: number;    // of the frames arrived
+  drawnVersion: number;     // of the last frame drawn
 }
 
 declare global {
@@ -52,4 +73,7 @@ export const hook: TestHook = window.__filigree = {
   displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
   overlaysVersion: 0, cutTriangles: 0, stretchMax: 0, clips: [], clipState: 'idle', clipFrames: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
+  vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
+  loadStage: '', joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
+  editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
 };

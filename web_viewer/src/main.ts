@@ -1,22 +1,26 @@
 // The viewer page: join the session named in the address, show its mesh,
 // follow its frames, and the panel around it.
-import type * as THREE from 'three';
-
+//
+// The main thread does little per frame (DESIGN §3.6): the session worker
+// (decoder.worker.ts through pipeline.ts) joins, decodes, applies deltas and
+// computes normals and stretch colours; this thread reads the Watch stream,
+// hands frames on (the newest first), swaps finished buffers into the
+// geometry and draws on requestAnimationFrame when something changed.
 import { ChangeLog } from './changes';
-import { Code, describeError, isCode, SessionClient, type Frame, type Overlays, type SessionInfo } from './client';
-import { DeltaDecoder } from './decoder';
-import { applyDeltaRanges, applyDeltas, FrameError, isChunked, isKeyframe, KeyedDeltas, largestDelta } from './frame';
-import { HandleEditor } from './handles';
+import { Code, describeError, isCode, SessionClient, type Overlays, type SessionInfo } from './client';
+import { isChunked } from './frame';
+import { HandleEditor, type EditMode } from './handles';
 import { FRAME_EVENT, hook } from './hook';
-import { FrameMailbox } from './mailbox';
 import { CutWireframe } from './overlay-cut';
 import { OverlayFeed } from './overlay-feed';
 import { RegionsOverlay } from './overlay-regions';
 import { StretchOverlay } from './overlay-stretch';
 import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
-import { readParams, type ViewerParams } from './params';
+import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
+import { FramePipeline, type Applied, type Arrival, type Failed, type Joined } from './pipeline';
 import { pollPresence } from './presence';
+import { isFinal, lossReason, retryDelay } from './reconnect';
 import { MeshView } from './scene';
 import { StatsTracker, statsRows } from './stats';
 
@@ -24,70 +28,189 @@ import { StatsTracker, statsRows } from './stats';
 // change lists): unique per page, so that two pages' handles do not replace
 // each other.
 const CLIENT_NAME = `web-${Array.from(crypto.getRandomValues(new Uint8Array(3)), (b) => b.toString(16).padStart(2, '0')).join('')}`;
-const RECONNECT_MIN_MS = 500;
-const RECONNECT_MAX_MS = 10_000;
+const RESYNC_MAX_MS = 10_000;
 
-// A frame and the Watch stream it came on (streams are numbered from 1).
-interface Arrival { frame: Frame; stream: number }
+const megabytes = (bytes: number) => `${(bytes / 1e6).toFixed(1)} MB`;
 
 // One session on this page: its mesh, its frame stream, its controls.
 class Viewer {
   private readonly client: SessionClient;
-  private readonly decoder = new DeltaDecoder();
+  private readonly pipeline: FramePipeline;
   private readonly stats = new StatsTracker();
   private readonly changes = new ChangeLog(byId<HTMLOListElement>('changes'));
   private view!: MeshView;
-  private rest!: Float32Array;
-  private baseRest: number[] = [];
   private overlays: Overlay[] = [];
   private readonly shown = new Set<Overlay>();
   private cut!: CutWireframe;
   private regions!: RegionsOverlay;
   private stretch!: StretchOverlay;
   private feed!: OverlayFeed;
-  private handles!: HandleEditor;
+  private handles: HandleEditor | null = null;
   private lastVersion = 0n;
-  // The frames not yet applied: the newest one, and the keyframe it needs.
-  private readonly mailbox = new FrameMailbox<Arrival>(({ frame }) => isChunked(frame) && isKeyframe(frame));
-  private applying = false;
-  private keyed!: KeyedDeltas;  // the chunked stream's keyframe and current deltas
-  // view.positions = rest + keyed.deltas. False after a single-format frame:
-  // the next chunked one then rewrites every vertex, not only what it changed.
-  private positionsFollowKeyed = true;
   private stream = { number: 0, abort: new AbortController() };  // the current Watch
+  private streamOpen = false;
   private resyncAsked = false;
   private resyncDelayMs = 0;
+  private attempt = 0;                    // reconnect attempts since the stream was last open
+  private downSince: number | null = null;
   private nextPoseId = 1n;
+  private pendingPageMs = 0;              // this thread's time for frames since the last applied one
+  private appliedVersion: bigint | null = null;  // swapped in, drawn at the next animation frame
 
   constructor(private readonly params: ViewerParams) {
     this.client = new SessionClient(params.serverUrl, params.sessionId, params.token);
+    this.pipeline = new FramePipeline({
+      progress: (stage, loaded, total) => this.loading(stage, loaded, total),
+      applied: (result, arrival) => this.applied(result, arrival),
+      failed: (result, arrival) => this.failed(result, arrival),
+      skipped: (count) => {
+        hook.framesSkipped += count;
+        this.stats.frameSkipped(count);
+      },
+      colors: (colors, stretchMax) => {
+        if (!this.shown.has(this.stretch)) return;
+        this.stretch.setColors(colors, stretchMax);
+        hook.stretchMax = stretchMax;
+        this.view.invalidate();
+      },
+    });
   }
 
   async start(): Promise<void> {
     hook.state = 'joining';
     hook.sessionId = this.params.sessionId;
     setStatus(`Joining session ${this.params.sessionId}…`);
-    let info: SessionInfo;
+    this.loading('download', 0, null);
+    let joined: Joined;
     try {
-      info = await this.client.join();
+      joined = await this.pipeline.join(this.params.serverUrl, this.params.sessionId, this.params.token);
     } catch (error) {
+      byId('loading').hidden = true;
       fail(describeError(error, this.params.sessionId, this.params.serverUrl));
       return;
     }
-    this.show(info);
+    this.show(joined);
+    byId('loading').hidden = true;
+    hook.loadStage = 'done';
+    void this.findRole();
     await this.follow();
   }
 
-  private show(info: SessionInfo): void {
-    const rest = info.rest!;
-    this.rest = Float32Array.from(rest.positions);
-    this.keyed = new KeyedDeltas(rest.vertexCount);
-    const faces = Uint32Array.from(rest.faces);
-    this.view = new MeshView(byId('view'), this.rest, faces);
-    const base = info.base!;
-    this.baseRest = base.positions;
-    this.setupOverlays(base.positions, base.faces, Uint32Array.from(base.originalIds), faces);
-    this.handles = new HandleEditor(this.view, this.client, CLIENT_NAME, {
+  // Progress while the session's mesh arrives and is built, over the canvas.
+  private loading(stage: 'download' | 'build', loaded: number, total: number | null): void {
+    hook.loadStage = stage;
+    byId('loading').hidden = false;
+    const bar = byId<HTMLProgressElement>('loading-progress');
+    if (stage === 'download') {
+      byId('loading-text').textContent = loaded === 0 ? 'Asking for the session…'
+        : `Downloading the mesh: ${megabytes(loaded)}${total ? ` of ${megabytes(total)}` : ''}…`;
+      if (total) {
+        bar.max = total;
+        bar.value = loaded;
+      } else {
+        bar.removeAttribute('value');  // indeterminate
+      }
+    } else {
+      byId('loading-text').textContent = 'Building the mesh (normals, framing)…';
+      bar.removeAttribute('value');
+    }
+  }
+
+  private show(joined: Joined): void {
+    const { info, buffers, faces, framing } = joined;
+    const vertexCount = info.rest!.vertexCount;
+    this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing);
+    this.view.onDrawn = (drawMs, at) => {
+      this.stats.frameDrawn(this.appliedVersion, drawMs, at);
+      if (this.appliedVersion !== null) hook.drawnVersion = Number(this.appliedVersion);
+    };
+    this.setupOverlays(joined);
+
+    hook.clientName = CLIENT_NAME;
+    hook.vertexCount = vertexCount;
+    hook.baseVertexCount = joined.originalIds.length;
+    hook.upAxis = framing.upAxis;
+    hook.joinMs = joined.joinMs;
+    hook.buildMs = joined.buildMs;
+    Object.defineProperties(hook, {
+      framesRendered: { get: () => this.view.framesRendered, enumerable: true },
+      roundTripMs: { get: () => this.stats.snapshot(performance.now()).roundTripMs, enumerable: true },
+      editToDrawnMs: { get: () => this.stats.snapshot(performance.now()).editToDrawnMs, enumerable: true },
+      handlesAnswered: { get: () => this.handles?.answered ?? 0, enumerable: true },
+      handlesAcceptedAt: { get: () => Number(this.handles?.acceptedAt ?? 0n), enumerable: true },
+      handlesSending: { get: () => this.handles?.sending ?? false, enumerable: true },
+      pulledVertices: { get: () => this.handles?.pulledVertices ?? 0, enumerable: true },
+    });
+    hook.capture = () => this.view.capture();
+    hook.screenPointOfVertex = (i) => this.view.vertexOnScreen(i);
+    hook.nearestVertexToCamera = () => this.view.nearestVertexToCamera();
+    hook.vertexAt = (x, y) => this.handles?.vertexAt(x, y) ?? null;
+    hook.vertexPosition = (i) => Array.from(this.view.positions.subarray(3 * i, 3 * i + 3));
+    hook.screenExtent = () => this.view.screenExtent();
+    hook.viewDirection = () => this.view.viewDirection();
+    hook.statsSnapshot = () => {
+      const s = this.stats.snapshot(performance.now());
+      return { ...s, frame: null, drawnVersion: s.drawnVersion === null ? null : Number(s.drawnVersion) };
+    };
+    showSession(info, this.params.serverUrl, CLIENT_NAME);
+    this.setupEditing(joined);
+    this.setupOptions(info);
+    this.setupClips(info);
+    this.setupViewControls();
+    byId('round-trip').addEventListener('click', () => void this.timeRoundTrip(joined));
+    window.setInterval(() => showStats(statsRows(this.stats.snapshot(performance.now()))), 250);
+    byId('live').hidden = false;
+  }
+
+  // Fit (button, F), the panel (button, P; a drawer on narrow screens, Escape closes it).
+  private setupViewControls(): void {
+    const fit = () => {
+      this.view.fit();
+      ++hook.fits;
+    };
+    byId('fit').addEventListener('click', fit);
+    const toggle = byId<HTMLButtonElement>('panel-toggle');
+    const narrow = window.matchMedia('(max-width: 700px)');
+    const panelShown = () => (narrow.matches ? document.body.classList.contains('panel-open')
+      : !document.body.classList.contains('panel-collapsed'));
+    const sync = () => toggle.setAttribute('aria-expanded', String(panelShown()));
+    const setPanel = (show: boolean) => {
+      if (narrow.matches) document.body.classList.toggle('panel-open', show);
+      else document.body.classList.toggle('panel-collapsed', !show);
+      sync();
+    };
+    toggle.addEventListener('click', () => setPanel(!panelShown()));
+    narrow.addEventListener('change', sync);
+    sync();
+    window.addEventListener('keydown', (event) => {
+      if (event.ctrlKey || event.metaKey || event.altKey) return;
+      const target = event.target as HTMLElement;
+      if (target.closest('input, select, textarea')) return;  // typing
+      if (event.key === 'f' || event.key === 'F') fit();
+      else if (event.key === 'p' || event.key === 'P') setPanel(!panelShown());
+      else if (event.key === 'Escape' && narrow.matches) setPanel(false);
+    });
+  }
+
+  // Editor controls only for the editor token: a viewer page shows none.
+  private async findRole(): Promise<void> {
+    let editor: boolean;
+    try {
+      editor = await this.client.canEdit();
+    } catch {
+      editor = true;  // unknown (the server did not answer): the controls stay, the server still refuses
+    }
+    hook.canEdit = editor;
+    if (!editor) {
+      document.body.classList.add('read-only');
+      byId('read-only-note').hidden = false;
+      this.handles?.detach();
+      this.handles = null;
+    }
+  }
+
+  private setupEditing(joined: Joined): void {
+    this.handles = new HandleEditor(this.view, this.client, CLIENT_NAME, joined.originalIds, {
       status: (text, bad) => setNote('handles-status', text, bad),
       counts: (own, everyone) => {
         hook.handleCount = own;
@@ -96,39 +219,34 @@ class Viewer {
           (everyone === null ? '.' : `; ${everyone} in the session.`);
       },
       describe: (error) => this.describe(error),
+      sent: () => this.stats.poseSent(performance.now()),
     });
-    byId('clear-handles').addEventListener('click', () => this.handles.clear());
-
-    hook.clientName = CLIENT_NAME;
-    hook.vertexCount = rest.vertexCount;
-    hook.baseVertexCount = base.positions.length / 3;
-    Object.defineProperties(hook, {
-      framesRendered: { get: () => this.view.framesRendered, enumerable: true },
-      roundTripMs: { get: () => this.stats.snapshot(performance.now()).roundTripMs, enumerable: true },
-      handlesAnswered: { get: () => this.handles.answered, enumerable: true },
-      handlesAcceptedAt: { get: () => Number(this.handles.acceptedAt), enumerable: true },
-      handlesSending: { get: () => this.handles.sending, enumerable: true },
-    });
-    hook.capture = () => this.view.capture();
-    hook.screenPointOfVertex = (i) => this.view.vertexOnScreen(i);
-    hook.nearestVertexToCamera = () => this.view.nearestVertexToCamera();
-    hook.vertexAt = (x, y) => this.handles.vertexAt(x, y);
-    showSession(info, this.params.serverUrl, CLIENT_NAME);
-    this.setupOptions(info);
-    this.setupClips(info);
-    byId('round-trip').addEventListener('click', () => void this.timeRoundTrip());
-    window.setInterval(() => showStats(statsRows(this.stats.snapshot(performance.now()))), 250);
-    byId('live').hidden = false;
+    byId('clear-handles').addEventListener('click', () => this.handles?.clear());
+    const mode = byId<HTMLSelectElement>('edit-mode');
+    const radius = byId<HTMLInputElement>('pull-radius');
+    const radiusValue = byId('pull-radius-value');
+    const apply = () => {
+      if (!this.handles) return;
+      this.handles.mode = mode.value as EditMode;
+      // The slider is a percentage of the mesh's bounding radius.
+      this.handles.radius = (radius.valueAsNumber / 100) * this.view.radius;
+      radiusValue.textContent = `${radius.value} % of the mesh`;
+      byId('pull-radius-label').hidden = mode.value !== 'pull';
+      hook.editMode = this.handles.mode;
+    };
+    mode.addEventListener('change', apply);
+    radius.addEventListener('input', apply);
+    apply();
   }
 
-  // The base wireframe and the stretch map come from the frames; the cut and
-  // the regions from GetOverlays, polled while one of them is shown.
-  private setupOverlays(basePositions: number[], baseFaces: number[], originalIds: Uint32Array, faces: Uint32Array): void {
-    const wireframe = new BaseWireframe(basePositions, baseFaces, originalIds);
-    this.cut = new CutWireframe(this.view.positions);
+  // The base wireframe comes from the frames, the stretch map from the
+  // worker; the cut and the regions from GetOverlays, polled while one of them is shown.
+  private setupOverlays(joined: Joined): void {
+    const wireframe = new BaseWireframe(joined.basePositions, joined.baseFaces, joined.originalIds);
+    const position = this.view.geometry.getAttribute('position') as import('three').BufferAttribute;
+    this.cut = new CutWireframe(position);
     this.regions = new RegionsOverlay(this.view.geometry);
-    this.stretch = new StretchOverlay(this.rest, faces, this.view.positions,
-      this.view.geometry.getAttribute('normal') as THREE.BufferAttribute);
+    this.stretch = new StretchOverlay(this.view.geometry, (on) => this.pipeline.setStretch(on));
     for (const overlay of [this.regions, this.stretch, this.cut, wireframe]) this.view.add(overlay.object);
     this.overlays = [wireframe, this.cut, this.regions, this.stretch];
     this.feed = new OverlayFeed(() => this.client.getOverlays(), (overlays) => this.showServerOverlays(overlays),
@@ -137,7 +255,8 @@ class Viewer {
       if (visible) this.shown.add(overlay);
       else this.shown.delete(overlay);
       this.feed.setWanted([...this.shown].some((o) => o.fromServer));
-      hook.stretchMax = this.shown.has(this.stretch) ? this.stretch.maxDeviation : 0;
+      if (!this.shown.has(this.stretch)) hook.stretchMax = 0;
+      if (overlay === wireframe && visible) wireframe.update(this.view.positions);
       this.view.invalidate();
     });
   }
@@ -157,142 +276,154 @@ class Viewer {
     return describeError(error, this.params.sessionId, this.params.serverUrl);
   }
 
-  // Watch until the session closes; reconnect (from the last version seen)
-  // while the server is unavailable, stop on any other error. After a lost
-  // keyframe (resync) the stream is reopened from version 0: the server sends
-  // the current frame again, its keyframe first.
+  // Follows the session until it is gone or the token is refused. A stream
+  // that breaks or ends without being asked to (a server restart, a cut
+  // connection) is opened again with backoff (reconnect.ts), from the last
+  // version seen: the server then sends the current frame, its keyframe
+  // first. After a lost keyframe (resync) the stream is reopened from
+  // version 0 at once: the server sends the current frame again, keyframe first.
   private async follow(): Promise<void> {
-    let backoff = RECONNECT_MIN_MS;
     for (;;) {
       const stream = { number: this.stream.number + 1, abort: new AbortController() };
       this.stream = stream;
+      this.streamOpen = false;
       const afterVersion = this.resyncAsked ? 0n : this.lastVersion;
       this.resyncAsked = false;
+      let ended: unknown = null;
       try {
-        hook.state = 'live';
-        setStatus('Live.');
-        for await (const frame of this.client.watch(afterVersion, stream.abort.signal)) {
-          backoff = RECONNECT_MIN_MS;
+        if (this.attempt > 0) setStatus(`Reconnecting (attempt ${this.attempt})…`);
+        for await (const frame of this.client.watch(afterVersion, stream.abort.signal, () => this.opened())) {
+          this.opened();
           this.onFrame({ frame, stream: stream.number });
         }
-        hook.state = 'closed';
-        setStatus('The session was closed.');
-        return;
       } catch (error) {
-        if (stream.abort.signal.aborted) {
-          // resync(): again at once the first time, then backing off, in
-          // case the server's keyframe itself cannot be decoded here.
-          ++hook.resyncs;
-          const delay = this.resyncDelayMs;
-          this.resyncDelayMs = Math.min(Math.max(2 * delay, RECONNECT_MIN_MS), RECONNECT_MAX_MS);
-          setStatus('Asking the server for a keyframe again…');
-          if (delay > 0) await new Promise((resolve) => window.setTimeout(resolve, delay));
-          continue;
-        }
-        if (!isCode(error, Code.Unavailable)) {
-          fail(describeError(error, this.params.sessionId, this.params.serverUrl));
-          return;
-        }
-        hook.state = 'reconnecting';
-        setStatus(`Server unavailable, reconnecting in ${(backoff / 1000).toFixed(1)} s…`);
-        await new Promise((resolve) => window.setTimeout(resolve, backoff));
-        backoff = Math.min(2 * backoff, RECONNECT_MAX_MS);
+        ended = error;
       }
+      if (stream.abort.signal.aborted) {
+        // resync(): again at once the first time, then backing off, in
+        // case the server's keyframe itself cannot be decoded here.
+        ++hook.resyncs;
+        const delay = this.resyncDelayMs;
+        this.resyncDelayMs = Math.min(Math.max(2 * delay, 500), RESYNC_MAX_MS);
+        setStatus('Asking the server for a keyframe again…');
+        if (delay > 0) await new Promise((resolve) => window.setTimeout(resolve, delay));
+        continue;
+      }
+      if (ended !== null && isFinal(ended)) {
+        if (isCode(ended, Code.NotFound) && this.lastVersion > 0n) {
+          hook.state = 'closed';
+          setStatus('The session was closed.');
+          showError(this.describe(ended));
+        } else {
+          fail(this.describe(ended));
+        }
+        return;
+      }
+      await this.backOff(ended);
     }
+  }
+
+  // The stream is open (the server answered): live again.
+  private opened(): void {
+    if (this.streamOpen) return;
+    this.streamOpen = true;
+    if (this.attempt > 0) ++hook.reconnects;
+    this.attempt = 0;
+    this.downSince = null;
+    hook.state = 'live';
+    setStatus('Live.');
+  }
+
+  // Waits before the next attempt, saying why and for how long; "Retry now" and the browser going online cut it short.
+  private async backOff(ended: unknown): Promise<void> {
+    const now = performance.now();
+    this.downSince ??= now;
+    ++this.attempt;
+    const delay = retryDelay(this.attempt, now - this.downSince);
+    hook.state = 'reconnecting';
+    hook.lastLoss = lossReason(ended);
+    const status = byId('status');
+    const retry = document.createElement('button');
+    retry.type = 'button';
+    retry.id = 'retry-now';
+    retry.textContent = 'Retry now';
+    status.replaceChildren(`Connection lost (${hook.lastLoss}). Reconnecting in ${(delay / 1000).toFixed(1)} s ` +
+      `(attempt ${this.attempt})…`, retry);
+    await new Promise<void>((resolve) => {
+      const done = () => {
+        window.clearTimeout(timer);
+        window.removeEventListener('online', done);
+        resolve();
+      };
+      const timer = window.setTimeout(done, delay);
+      window.addEventListener('online', done);
+      retry.addEventListener('click', done);
+    });
   }
 
   // The keyframe the next frames are relative to was lost (it could not be
   // decoded, or never came): reopen the Watch, unless a newer keyframe waits.
   private resync(): void {
-    if (this.resyncAsked || this.mailbox.hasKeyframe) return;
+    if (this.resyncAsked || this.pipeline.hasKeyframe) return;
     this.resyncAsked = true;
-    this.mailbox.clear();  // relative to the lost keyframe, all of them
+    this.pipeline.clear();  // relative to the lost keyframe, all of them
     this.stream.abort.abort();
   }
 
-  // Reads the stream as fast as it delivers: a frame that arrives while
-  // another is being decoded replaces the one waiting (FrameMailbox: a
-  // keyframe waits until applied), so a slow page skips frames instead of
-  // falling behind.
+  // Reads the stream as fast as it delivers and hands each frame on: a frame
+  // that arrives while the worker is busy replaces the one waiting, so a slow
+  // page skips frames instead of falling behind.
   private onFrame(arrival: Arrival): void {
+    const start = performance.now();
     const { frame } = arrival;
-    this.stats.frameArrived(frame, performance.now());
+    this.stats.frameArrived(frame, start);
     ++hook.framesReceived;
-    this.lastVersion = frame.version;
+    if (frame.version > this.lastVersion) this.lastVersion = frame.version;
+    hook.newestVersion = Number(this.lastVersion);
     this.changes.add(frame);
     this.feed.frameArrived();
     if (hook.framesReceived === 1) {
       // From the first frame on, the count includes this page's own Watch.
       pollPresence(() => this.client.entry(), (text) => { byId('presence').textContent = text; }, (e) => this.describe(e));
     }
-    for (let superseded = this.mailbox.put(arrival); superseded > 0; --superseded) {
-      ++hook.framesSkipped;
-      this.stats.frameSkipped();
-    }
-    if (!this.applying) void this.applyWaiting();
+    this.pipeline.put(arrival);
+    this.pendingPageMs += performance.now() - start;
   }
 
-  private async applyWaiting(): Promise<void> {
-    this.applying = true;
-    for (let next = this.mailbox.take(); next !== null; next = this.mailbox.take()) await this.apply(next);
-    this.applying = false;
-  }
-
-  private async apply({ frame, stream }: Arrival): Promise<void> {
-    const chunked = isChunked(frame);
-    try {
-      if (frame.vertexCount !== hook.vertexCount) {
-        throw new FrameError(`a frame of ${frame.vertexCount} vertices for a mesh of ${hook.vertexCount}`);
+  private applied(result: Applied, arrival: Arrival): void {
+    const start = performance.now();
+    const { frame } = arrival;
+    const old = this.view.setBuffers(result.buffers.positions, result.buffers.normals);
+    let oldColors: Float32Array | null = null;
+    if (result.buffers.colors !== null) {
+      if (this.shown.has(this.stretch)) {
+        oldColors = this.stretch.setColors(result.buffers.colors, result.stretchMax);
+        hook.stretchMax = result.stretchMax;
+      } else {
+        oldColors = result.buffers.colors;
       }
-      if (chunked) await this.applyChunked(frame);
-      else await this.applySingle(frame);
-    } catch (error) {
-      // One bad frame is reported; the next good one repairs the view (a
-      // sparse frame is whole against its keyframe), unless the next ones
-      // need the keyframe that failed or never came: then it is asked again.
-      showError(`Frame ${frame.version} could not be shown: ${error instanceof Error ? error.message : error}`);
-      if (chunked && stream === this.stream.number &&
-        (isKeyframe(frame) || frame.keyframeVersion !== this.keyed.keyframeVersion)) this.resync();
-      return;
     }
-    this.view.positionsChanged();
-    for (const overlay of this.overlays) overlay.update(this.view.positions);
-    if (this.shown.has(this.stretch)) hook.stretchMax = this.stretch.maxDeviation;
+    this.pipeline.recycle({ ...old, colors: oldColors });
+    for (const overlay of this.overlays) if (overlay.id === 'base' && this.shown.has(overlay)) overlay.update(this.view.positions);
+    this.appliedVersion = frame.version;
+    this.resyncDelayMs = 0;
     hook.version = Number(frame.version);
-    hook.frameKind = !chunked ? 'single' : isKeyframe(frame) ? 'keyframe' : 'sparse';
-    if (hook.frameKind === 'sparse') ++hook.framesSparse;
+    hook.displacement = result.displacement;
+    hook.frameKind = result.kind;
+    if (result.kind === 'sparse') ++hook.framesSparse;
     ++hook.framesApplied;
+    const pageMs = this.pendingPageMs + performance.now() - start;
+    this.pendingPageMs = 0;
+    this.stats.frameApplied(result, pageMs, performance.now());
     window.dispatchEvent(new Event(FRAME_EVENT));
   }
 
-  // FRAME_FORMAT_SINGLE (a server without chunked frames): one buffer of every vertex.
-  private async applySingle(frame: Frame): Promise<void> {
-    if (frame.deltas.length === 0) {
-      this.view.positions.set(this.rest);  // every delta is 0: the rest mesh
-      hook.displacement = 0;
-    } else {
-      const { deltas, decodeMs } = await this.decoder.decode(frame.deltas, frame.vertexCount);
-      applyDeltas(this.rest, deltas, this.view.positions);
-      this.stats.frameDecoded(decodeMs);
-      hook.displacement = Math.max(Math.abs(frame.deltaMin), Math.abs(frame.deltaMin + frame.deltaRange));
-    }
-    this.positionsFollowKeyed = false;
-  }
-
-  // FRAME_FORMAT_CHUNKED: the chunks decode in the workers; the keyframe
-  // state is here, and only the vertex ranges that changed are rewritten.
-  private async applyChunked(frame: Frame): Promise<void> {
-    const present = this.keyed.check(frame);  // before decoding: a frame that cannot apply costs nothing
-    const { values, decodeMs } = await this.decoder.decodeChunks(frame.chunks, present);
-    const changed = this.keyed.apply(frame, values);
-    if (this.positionsFollowKeyed) applyDeltaRanges(this.rest, this.keyed.deltas, this.view.positions, changed);
-    else applyDeltas(this.rest, this.keyed.deltas, this.view.positions);
-    this.positionsFollowKeyed = true;
-    this.resyncDelayMs = 0;
-    this.stats.frameDecoded(decodeMs);
-    // Of the decoded deltas: a sparse frame's quantization ranges say nothing
-    // of the vertices it leaves out. One pass, cheaper than the normals' after it.
-    hook.displacement = largestDelta(this.keyed.deltas);
+  private failed(result: Failed, arrival: Arrival): void {
+    // One bad frame is reported; the next good one repairs the view (a
+    // sparse frame is whole against its keyframe), unless the next ones
+    // need the keyframe that failed or never came: then it is asked again.
+    showError(`Frame ${result.version} could not be shown: ${result.message}`);
+    if (result.resync && isChunked(arrival.frame) && arrival.stream === this.stream.number) this.resync();
   }
 
   // Clips of a skinned upload: played by the server (PlayClip); the frames
@@ -336,7 +467,7 @@ class Viewer {
           hook.clipState = 'error';
           setNote('clip-status', isCode(error, Code.PermissionDenied)
             ? 'Playing a clip needs the editor token; this page was opened with another token.'
-            : describeError(error, this.params.sessionId, this.params.serverUrl), true);
+            : this.describe(error), true);
         }
       } finally {
         if (playing === controller) playing = null;
@@ -364,32 +495,32 @@ class Viewer {
       } catch (error) {
         setNote('options-status', isCode(error, Code.PermissionDenied)
           ? 'Changing the threshold needs the editor token; this page was opened with another token.'
-          : describeError(error, this.params.sessionId, this.params.serverUrl), true);
+          : this.describe(error), true);
       }
     });
   }
 
   // Submits the current merged pose unchanged (so nothing moves) and times
-  // the frame that includes it: SubmitPose → first frame of a larger version.
-  private async timeRoundTrip(): Promise<void> {
+  // the frame that includes it: SubmitPose → first frame of a larger version, arrived and drawn.
+  private async timeRoundTrip(joined: Joined): Promise<void> {
     try {
       const state = await this.client.getState();
       // Before anything was driven the merged pose may be empty: the rest base.
-      const pose = state.pose.length > 0 ? state.pose : this.baseRest;
+      const pose = state.pose.length > 0 ? state.pose : Array.from(joined.basePositions);
       setNote('round-trip-status', 'Waiting for the frame…');
       const accepted = this.stats.poseSent(performance.now());
       accepted(await this.client.submitPose(this.nextPoseId++, pose, CLIENT_NAME));
-      setNote('round-trip-status', 'Pose accepted; the time shows under “own pose → frame”.');
+      setNote('round-trip-status', 'Pose accepted; the times show under “own edit → frame” and “→ drawn”.');
     } catch (error) {
       setNote('round-trip-status', isCode(error, Code.PermissionDenied)
         ? 'Submitting a pose needs the editor token; this page was opened with another token.'
-        : describeError(error, this.params.sessionId, this.params.serverUrl), true);
+        : this.describe(error), true);
     }
   }
 }
 
 function main(): void {
-  const result = readParams(window.location.search, window.location.origin);
+  const result = readParams(window.location.search, window.location.origin, window.location.hash);
   if (result.kind === 'usage') {
     hook.state = 'usage';
     setStatus('No session named.');
@@ -401,6 +532,9 @@ function main(): void {
     byId('usage').hidden = false;
     return;
   }
+  // A token in the query is moved to the fragment: reloads and bookmarks then keep it off the wire.
+  const moved = tokenOutOfQuery(window.location.href);
+  if (moved !== null) window.history.replaceState(null, '', moved);
   new Viewer(result.params).start().catch((error: unknown) => {
     fail(error instanceof Error ? `${error.name}: ${error.message}` : String(error));
   });

@@ -12,8 +12,8 @@ export class CutWireframe implements Overlay {
   readonly object: THREE.LineSegments;
   private faces: ArrayLike<number> = [];
 
-  // `live` is the mesh's position array (original order), rewritten by every frame.
-  constructor(private readonly live: Float32Array) {
+  // `live` is the mesh's position attribute (original order), which every frame replaces the array of.
+  constructor(private readonly live: THREE.BufferAttribute) {
     // Depth-tested (the mesh is pushed back a little, scene.ts): only the
     // visible side's edges, else tens of thousands of lines overlap.
     const material = new THREE.LineBasicMaterial({ color: 0x7fe3ff, transparent: true, opacity: 0.7 });
@@ -25,12 +25,9 @@ export class CutWireframe implements Overlay {
 
   setVisible(visible: boolean): void {
     this.object.visible = visible;
-    if (visible) this.update();
   }
 
-  update(): void {
-    if (this.object.visible) this.object.geometry.getAttribute('position').needsUpdate = true;
-  }
+  update(): void {}  // the shared position attribute moves it
 
   // A new cut: a new geometry (the edge count changes), the old one freed.
   setFaces(faces: ArrayLike<number>): void {
@@ -38,6 +35,8 @@ export class CutWireframe implements Overlay {
     this.faces = faces;
     const old = this.object.geometry;
     this.object.geometry = this.geometry(faces);
+    // Disposing a geometry frees its attributes' GPU buffers: not the shared one.
+    old.deleteAttribute('position');
     old.dispose();
   }
 
@@ -47,8 +46,8 @@ export class CutWireframe implements Overlay {
 
   private geometry(faces: ArrayLike<number>): THREE.BufferGeometry {
     const geometry = new THREE.BufferGeometry();
-    // Its own attribute over the live array: disposing it never frees the mesh's buffer.
-    geometry.setAttribute('position', new THREE.BufferAttribute(this.live, 3).setUsage(THREE.DynamicDrawUsage));
+    // The mesh's own attribute: one upload per frame serves both.
+    geometry.setAttribute('position', this.live);
     geometry.setIndex(new THREE.BufferAttribute(uniqueEdges(faces), 1));
     return geometry;
   }

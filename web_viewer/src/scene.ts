@@ -1,33 +1,43 @@
 // The three.js side: the detailed mesh (one geometry for the whole session,
-// updated in place per frame), lights that bring out surface detail, and an
-// orbit camera framing the rest mesh; picking and screen projection for
-// handle editing (handles.ts).
+// its position and normal arrays swapped for each finished frame of the
+// session worker), lights that bring out surface detail, and an orbit camera
+// that frames the mesh from its front (geometry.ts, frameMesh) on load, on
+// "f" and on the Fit button; picking and screen projection for editing.
+// Draws on requestAnimationFrame only when something changed, and times the
+// draw apart from the page's own JavaScript (SwiftShader runs the vertex stage
+// on the CPU, inside the draw call).
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+
+import { fitDistance, type Framing } from './geometry';
+
+const FOV = 40;
 
 export class MeshView {
   readonly scene = new THREE.Scene();
   readonly geometry = new THREE.BufferGeometry();
-  // The live positions: frames write rest + delta here (frame.ts, applyDeltas).
-  readonly positions: Float32Array;
   readonly mesh: THREE.Mesh;
   readonly radius: number;  // of the rest mesh's bounding sphere
   private readonly renderer: THREE.WebGLRenderer;
   private readonly camera: THREE.PerspectiveCamera;
   private readonly controls: OrbitControls;
+  private readonly positionAttribute: THREE.BufferAttribute;
+  private readonly normalAttribute: THREE.BufferAttribute;
   private dirty = true;
   framesRendered = 0;
+  // Called after each draw with the version drawn, the draw's duration (the
+  // uploads and the draw call) and its end time.
+  onDrawn: (drawMs: number, at: number) => void = () => {};
 
-  constructor(private readonly container: HTMLElement, rest: Float32Array, faces: Uint32Array) {
-    this.positions = rest.slice();
-    const position = new THREE.BufferAttribute(this.positions, 3);
-    // Rewritten by every frame: tells WebGL to expect frequent uploads.
-    position.setUsage(THREE.DynamicDrawUsage);
-    this.geometry.setAttribute('position', position);
+  constructor(private readonly container: HTMLElement, positions: Float32Array, normals: Float32Array,
+              faces: Uint32Array, private readonly framing: Framing) {
+    this.positionAttribute = new THREE.BufferAttribute(positions, 3).setUsage(THREE.DynamicDrawUsage);
+    this.normalAttribute = new THREE.BufferAttribute(normals, 3).setUsage(THREE.DynamicDrawUsage);
+    this.geometry.setAttribute('position', this.positionAttribute);
+    this.geometry.setAttribute('normal', this.normalAttribute);
     this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
-    this.geometry.computeVertexNormals();
-    (this.geometry.getAttribute('normal') as THREE.BufferAttribute).setUsage(THREE.DynamicDrawUsage);
-    this.geometry.computeBoundingSphere();
+    const [cx, cy, cz] = framing.center;
+    this.geometry.boundingSphere = new THREE.Sphere(new THREE.Vector3(cx, cy, cz), framing.radius);
 
     // Pushed back a little in depth: lines on the surface (the cut mesh) stay in front of it.
     const material = new THREE.MeshStandardMaterial({
@@ -42,19 +52,26 @@ export class MeshView {
 
     this.renderer = new THREE.WebGLRenderer({ antialias: true });
     this.renderer.setPixelRatio(window.devicePixelRatio);
+    this.renderer.domElement.tabIndex = 0;
+    this.renderer.domElement.setAttribute('aria-label', 'The session\'s mesh: drag to orbit, wheel to zoom, F to fit');
     container.appendChild(this.renderer.domElement);
 
-    const sphere = this.geometry.boundingSphere!;
-    const radius = this.radius = Math.max(sphere.radius, 1e-6);
-    this.camera = new THREE.PerspectiveCamera(40, 1, radius / 100, radius * 100);
+    this.radius = framing.radius;
+    this.camera = new THREE.PerspectiveCamera(FOV, 1, framing.radius / 100, framing.radius * 100);
+    // OrbitControls reads camera.up once, when it is made: up first.
+    this.camera.up.set(...framing.up);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
-    this.controls.addEventListener('change', () => this.invalidate());
-    this.frame(sphere.center, radius);
+    this.controls.addEventListener('change', () => {
+      this.updateClipping();
+      this.invalidate();
+    });
 
     // A sky/ground hemisphere for the overall shape, plus a key light that
     // rides with the camera at a grazing angle: fine relief stays visible
     // from every viewpoint.
-    this.scene.add(new THREE.HemisphereLight(0xf4f1ea, 0x2a2622, 0.8));
+    const hemisphere = new THREE.HemisphereLight(0xf4f1ea, 0x2a2622, 0.8);
+    hemisphere.position.set(...framing.up);
+    this.scene.add(hemisphere);
     const key = new THREE.DirectionalLight(0xffffff, 2.4);
     // Both ends in camera space: the light comes from the upper right at
     // about 55° to the view direction, whatever the orbit.
@@ -65,23 +82,53 @@ export class MeshView {
 
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
+    this.fit();
     this.renderer.setAnimationLoop(() => this.render());
   }
 
-  // Puts the whole sphere in view, looking along −z.
-  private frame(center: THREE.Vector3, radius: number): void {
-    const distance = radius / Math.sin(THREE.MathUtils.degToRad(this.camera.fov / 2)) * 1.1;
-    this.camera.position.copy(center).add(new THREE.Vector3(0, 0, distance));
-    this.controls.target.copy(center);
-    this.controls.update();
+  // The live positions (rest + the drawn frame's deltas): replaced, not
+  // rewritten, by every frame (setBuffers).
+  get positions(): Float32Array {
+    return this.positionAttribute.array as Float32Array;
   }
 
-  // After the positions array was rewritten: upload it and fix the shading.
-  positionsChanged(): void {
-    this.geometry.getAttribute('position').needsUpdate = true;
-    // Reuses the existing normal attribute (same count), no allocation.
-    this.geometry.computeVertexNormals();
+  get normals(): Float32Array {
+    return this.normalAttribute.array as Float32Array;
+  }
+
+  // The mesh whole and from its front, orbiting about its centre.
+  fit(): void {
+    const f = this.framing;
+    const distance = fitDistance(f, this.camera.fov, this.camera.aspect);
+    const [cx, cy, cz] = f.center;
+    this.controls.target.set(cx, cy, cz);
+    this.camera.up.set(...f.up);
+    this.camera.position.set(cx + distance * f.front[0], cy + distance * f.front[1], cz + distance * f.front[2]);
+    this.camera.lookAt(this.controls.target);
+    this.controls.update();
+    this.updateClipping();
     this.invalidate();
+  }
+
+  // Near and far planes from the mesh's size and the camera's distance to it.
+  private updateClipping(): void {
+    const distance = this.camera.position.distanceTo(this.controls.target);
+    const r = this.radius;
+    this.camera.near = Math.max(r / 1000, (distance - 2 * r) * 0.5, distance / 1000);
+    this.camera.far = distance + 4 * r;
+    this.camera.updateProjectionMatrix();
+  }
+
+  // A finished frame: draw from these arrays from now on; returns the arrays
+  // they replace (no longer needed: the draw uploads from the new ones).
+  setBuffers(positions: Float32Array, normals: Float32Array): { positions: Float32Array; normals: Float32Array } {
+    const old = { positions: this.positions, normals: this.normals };
+    this.positionAttribute.array = positions;
+    this.normalAttribute.array = normals;
+    this.positionAttribute.needsUpdate = true;
+    this.normalAttribute.needsUpdate = true;
+    this.invalidate();
+    return old;
   }
 
   add(object: THREE.Object3D): void {
@@ -150,6 +197,34 @@ export class MeshView {
     return best;
   }
 
+  // The bounding rectangle of the mesh as drawn, as fractions of the canvas
+  // (projected vertices; for the tests of the framing).
+  screenExtent(): { width: number; height: number; left: number; top: number } {
+    const p = this.positions;
+    const v = new THREE.Vector3();
+    let [x0, y0, x1, y1] = [Infinity, Infinity, -Infinity, -Infinity];
+    const step = Math.max(1, Math.floor(p.length / 3 / 20000));
+    for (let i = 0; i < p.length / 3; i += step) {
+      v.fromArray(p, 3 * i).project(this.camera);
+      x0 = Math.min(x0, v.x); x1 = Math.max(x1, v.x); y0 = Math.min(y0, v.y); y1 = Math.max(y1, v.y);
+    }
+    return { width: (x1 - x0) / 2, height: (y1 - y0) / 2, left: (x0 + 1) / 2, top: (1 - y1) / 2 };
+  }
+
+  // Which way the camera looks, and its up (world space).
+  viewDirection(): { look: [number, number, number]; up: [number, number, number] } {
+    const d = this.camera.getWorldDirection(new THREE.Vector3());
+    const up = new THREE.Vector3(0, 1, 0).applyQuaternion(this.camera.quaternion);
+    return { look: [d.x, d.y, d.z], up: [up.x, up.y, up.z] };
+  }
+
+  // Drawing resolution: lower while the page cannot keep up.
+  setPixelRatio(ratio: number): void {
+    if (this.renderer.getPixelRatio() === ratio) return;
+    this.renderer.setPixelRatio(ratio);
+    this.resize();
+  }
+
   private resize(): void {
     const { clientWidth: width, clientHeight: height } = this.container;
     if (width === 0 || height === 0) return;
@@ -163,8 +238,11 @@ export class MeshView {
   private render(): void {
     if (!this.dirty) return;
     this.dirty = false;
+    const start = performance.now();
     this.renderer.render(this.scene, this.camera);
+    const end = performance.now();
     ++this.framesRendered;
+    this.onDrawn(end - start, end);
   }
 
   // The current image as a PNG data URL. Renders first, in the same task:

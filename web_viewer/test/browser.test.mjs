@@ -97,7 +97,8 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     return page;
   }
 
-  const viewerUrl = (token, extra = '') => `?session=${session.session_id}&token=${token}${extra}`;
+  // Tokens in the fragment, where they belong (never sent to a server).
+  const viewerUrl = (token, extra = '') => `?session=${session.session_id}${extra}#token=${token}`;
 
   const waitFor = (page, fn, arg) => page.waitForFunction(fn, arg, { timeout: WAIT_MS });
 
@@ -131,7 +132,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const page = await open('');
     await waitFor(page, () => window.__filigree?.state === 'usage');
     assert.ok(await page.isVisible('#usage'));
-    assert.match(await page.textContent('#usage'), /\?session=SESSION_ID&token=TOKEN/);
+    assert.match(await page.textContent('#usage'), /\?session=SESSION_ID#token=TOKEN/);
     await page.context().close();
   });
 
@@ -139,7 +140,8 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const page = await open(viewerUrl('not-a-token'));
     await waitFor(page, () => window.__filigree?.state === 'error');
     assert.ok(await page.isVisible('#error'));
-    assert.match(await page.textContent('#error'), /token was refused for session/);
+    // The server answers a wrong token as it answers an unknown session (DESIGN §3.2).
+    assert.match(await page.textContent('#error'), /token was refused for session|does not exist .*or the token is not one of its tokens/);
     await page.context().close();
   });
 
@@ -204,6 +206,17 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
       `frames received ${done.framesReceived - joined.framesReceived}, skipped ${done.framesSkipped}; last one ${done.frameKind}`);
     assert.match(await page.textContent('#changes'), /browser-test-bend: pose \d+, \d+ base vertices/);
     assert.match(await page.textContent('#stats'), /bytes\/frame\s*\d+ \(/);
+    assert.match(await page.textContent('#stats'), /frames\/s\s*\d+\.\d arrived, \d+\.\d applied, \d+\.\d drawn/);
+    assert.equal(done.drawnVersion, done.version, 'the last frame applied is drawn');
+    await page.context().close();
+  });
+
+  it('moves a token from the query into the fragment', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const page = await open(`?session=${session.session_id}&token=${session.viewer_token}`);
+    await waitFor(page, () => window.__filigree?.state === 'live');
+    const url = new URL(page.url());
+    assert.equal(url.searchParams.get('token'), null);
+    assert.equal(new URLSearchParams(url.hash.slice(1)).get('token'), session.viewer_token);
     await page.context().close();
   });
 
@@ -212,7 +225,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const rigged = join(dataDir, 'bunny_rigged.glb');
     await cli(['rig', MESH, '-o', rigged, '--joints', '4']);
     const skinned = await upload(grpcAddress, rigged, 'browser-test-rig');
-    const page = await open(`?session=${skinned.session_id}&token=${skinned.editor_token}`);
+    const page = await open(`?session=${skinned.session_id}#token=${skinned.editor_token}`);
     await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
     assert.deepEqual((await hookState(page)).clips, ['bend', 'twist']);
     assert.equal(await page.isVisible('#clips-section'), true);
@@ -229,22 +242,30 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     assert.ok(clipFrames >= 2, `clip stream frames: ${clipFrames}`);
     assert.match(await page.textContent('#clip-status'), /^Played bend \(\d+ frames\)\.$/);
     t.diagnostic(`clip 'bend': ${clipFrames} frames, ${(100 * moved).toFixed(1)}% of the pixels moved at the peak`);
-    // A viewer token may not play.
-    const viewer = await open(`?session=${skinned.session_id}&token=${skinned.viewer_token}`);
-    await waitFor(viewer, () => window.__filigree?.state === 'live');
-    await viewer.click('#clip-play');
-    await waitFor(viewer, () => /editor token/.test(document.querySelector('#clip-status').textContent));
+    // A viewer token may not play: no clip controls at all.
+    const viewer = await open(`?session=${skinned.session_id}#token=${skinned.viewer_token}`);
+    await waitFor(viewer, () => window.__filigree?.state === 'live' && window.__filigree.canEdit === false);
+    assert.equal(await viewer.isVisible('#clip-play'), false);
     await viewer.context().close();
     await page.context().close();
   });
 
-  it('refuses a threshold change with the viewer token, readably', { timeout: TEST_TIMEOUT_MS }, async () => {
-    const page = await open(viewerUrl(session.viewer_token));
-    await waitFor(page, () => window.__filigree?.state === 'live');
-    await page.fill('#threshold', '2');
-    await page.click('#options button[type=submit]');
-    await waitFor(page, () => /editor token/.test(document.querySelector('#options-status').textContent));
-    await page.context().close();
+  it('shows no editor controls with the viewer token, and all of them with the editor token', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const controls = ['#threshold', '#options button[type=submit]', '#round-trip', '#edit-mode', '#clear-handles'];
+    const viewer = await open(viewerUrl(session.viewer_token));
+    const editor = await open(viewerUrl(session.editor_token));
+    await waitFor(viewer, () => window.__filigree?.state === 'live' && window.__filigree.canEdit === false);
+    await waitFor(editor, () => window.__filigree?.state === 'live' && window.__filigree.canEdit === true);
+    for (const control of controls) {
+      assert.equal(await viewer.isVisible(control), false, `${control} is hidden from a viewer`);
+      assert.equal(await editor.isVisible(control), true, `${control} is shown to an editor`);
+    }
+    assert.equal(await viewer.isVisible('#read-only-note'), true);
+    assert.equal(await editor.isVisible('#read-only-note'), false);
+    // The overlays stay: watching is what a viewer does.
+    assert.equal(await viewer.isVisible('#overlay-regions'), true);
+    await viewer.context().close();
+    await editor.context().close();
   });
 
   it('changes the threshold and times an own pose with the editor token', { timeout: TEST_TIMEOUT_MS }, async (t) => {
@@ -271,7 +292,8 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     const editor = await open(viewerUrl(session.editor_token));
     const watcher = await open(viewerUrl(session.viewer_token));
     await waitFor(editor, live);
-    await waitFor(watcher, live);
+    await waitFor(watcher, () => window.__filigree?.state === 'live' && window.__filigree.canEdit === false);
+    await editor.selectOption('#edit-mode', 'handles');
     const start = await hookState(editor);
 
     // A real press, drag and release on the vertex nearest to the camera.
@@ -301,11 +323,20 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await waitFor(watcher, (name) => document.querySelector('#changes').textContent.includes(`${name}: moved handles`),
       dragged.clientName);
 
-    // Pressing on the mesh with a viewer token says why nothing happens.
+    // Pressing on the mesh with a viewer token edits nothing: it orbits.
     const watcherAt = await watcher.evaluate(() => window.__filigree.screenPointOfVertex(window.__filigree.nearestVertexToCamera()));
-    await watcher.mouse.click(watcherAt.x, watcherAt.y);
-    await waitFor(watcher, () => /editor token/.test(document.querySelector('#handles-status').textContent));
-    assert.equal((await hookState(watcher)).handleCount, 0);
+    const lookBefore = (await watcher.evaluate(() => window.__filigree.viewDirection())).look;
+    await watcher.mouse.move(watcherAt.x, watcherAt.y);
+    await watcher.mouse.down();
+    await watcher.mouse.move(watcherAt.x + 60, watcherAt.y, { steps: 4 });
+    await watcher.mouse.up();
+    await waitFor(watcher, (before) => {
+      const look = window.__filigree.viewDirection().look;
+      return look[0] * before[0] + look[1] * before[1] + look[2] * before[2] < 0.999;
+    }, lookBefore);
+    const watched = await hookState(watcher);
+    assert.equal(watched.handleCount, 0);
+    assert.equal(watched.handlesAnswered, 0);
 
     // Clearing sends an empty set: no handles left in the session.
     await editor.click('#clear-handles');
@@ -315,6 +346,50 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
       `${dragged.framesSparse} sparse frames applied; watcher at v${seen.version}`);
     await editor.context().close();
     await watcher.context().close();
+  });
+
+  it('pulls the neighbourhood of a dragged point with the editor token, and leaves the far side in place', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    const page = await open(viewerUrl(session.editor_token));
+    await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1
+      && window.__filigree.canEdit === true);
+    const start = await hookState(page);
+    assert.equal(start.editMode, 'pull', 'pulling is the default');
+    // The vertex nearest to the camera, and the one farthest from it.
+    const { v, far, before } = await page.evaluate(() => {
+      const h = window.__filigree;
+      const v = h.nearestVertexToCamera();
+      const p = h.vertexPosition(v);
+      let far = v;
+      let best = 0;
+      for (let i = 0; i < h.vertexCount; ++i) {
+        const q = h.vertexPosition(i);
+        const d = Math.hypot(q[0] - p[0], q[1] - p[1], q[2] - p[2]);
+        if (d > best) [far, best] = [i, d];
+      }
+      return { v, far, before: [p, h.vertexPosition(far)] };
+    });
+    const at = await page.evaluate((i) => window.__filigree.screenPointOfVertex(i), v);
+    await page.mouse.move(at.x, at.y);
+    await page.mouse.down();
+    await page.mouse.move(at.x + 70, at.y - 40, { steps: 8 });
+    await page.mouse.up();
+    // Every pose answered and the frame that includes the last one drawn.
+    await waitFor(page, () => window.__filigree.handlesAnswered >= 1 && !window.__filigree.handlesSending
+      && window.__filigree.drawnVersion > window.__filigree.handlesAcceptedAt);
+    const after = await page.evaluate(([a, b]) => [window.__filigree.vertexPosition(a), window.__filigree.vertexPosition(b)], [v, far]);
+    const distance = (p, q) => Math.hypot(p[0] - q[0], p[1] - q[1], p[2] - q[2]);
+    const pulled = distance(before[0], after[0]);
+    const farMoved = distance(before[1], after[1]);
+    const done = await hookState(page);
+    assert.ok(pulled > 0.02 * meshDiagonal, `the pulled point moved ${pulled} (diagonal ${meshDiagonal})`);
+    assert.ok(farMoved < 0.05 * pulled, `the far side stayed: it moved ${farMoved}, the pulled point ${pulled}`);
+    assert.ok(done.pulledVertices > 0 && done.pulledVertices < done.baseVertexCount,
+      `a neighbourhood moved: ${done.pulledVertices} of ${done.baseVertexCount} base vertices`);
+    assert.equal(done.handleCount, 0, 'pulling leaves no handle');
+    assert.ok(done.editToDrawnMs > 0, 'the panel times the edit to the frame drawn');
+    t.diagnostic(`pulled ${done.pulledVertices} of ${done.baseVertexCount} base vertices: the point moved ` +
+      `${pulled.toFixed(4)}, the far side ${farMoved.toExponential(2)}; edit → drawn ${done.editToDrawnMs.toFixed(1)} ms`);
+    await page.context().close();
   });
 
   it('shows the regions, which the threshold turns on and off', { timeout: TEST_TIMEOUT_MS }, async (t) => {

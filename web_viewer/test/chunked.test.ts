@@ -5,7 +5,6 @@ import { create } from '@bufbuild/protobuf';
 import draco3d from 'draco3d';
 import { beforeAll, describe, expect, it } from 'vitest';
 
-import { balance } from '../src/decoder';
 import {
   applyDeltaRanges, applyDeltas, decodeAndApply, decodeDeltas, framesOfState, FrameError, isChunked, isKeyframe,
   KeyedDeltas, largestDelta, presentCounts, unionOfRanges, type ChunkedFrameData, type DeltaChunkData,
@@ -314,13 +313,5 @@ describe('FrameMailbox', () => {
     m.put({ v: 6, key: false });
     m.clear();
     expect(m.take()).toBeNull();
-  });
-});
-
-describe('balance', () => {
-  it('spreads chunks over workers, heaviest first, and uses no more workers than chunks', () => {
-    expect(balance([10, 1, 8, 3, 7], 2)).toEqual([[0, 3, 1], [2, 4]]);
-    expect(balance([5], 4)).toEqual([[0]]);
-    expect(balance([], 4)).toEqual([]);
   });
 });

@@ -35,8 +35,9 @@ export function checkTools() {
 // Starts filigree-server with gRPC-Web and the viewer; `addresses` resolves
 // with both once it has printed `listening on H:P` and `http on H:P`.
 // `extraArgs`: more options (--tls-cert/--tls-key: HTTPS on the same port).
-export function startServer(dataDir, extraArgs = []) {
-  const child = spawn(SERVER, ['--listen', '127.0.0.1:0', '--http', '127.0.0.1:0', '--web-root', WEB_ROOT,
+// `at`: { grpc, http } addresses to listen on (default: free ports).
+export function startServer(dataDir, extraArgs = [], at = { grpc: '127.0.0.1:0', http: '127.0.0.1:0' }) {
+  const child = spawn(SERVER, ['--listen', at.grpc, '--http', at.http, '--web-root', WEB_ROOT,
     '--data-dir', dataDir, '--log-level', 'warn', ...extraArgs], { stdio: ['ignore', 'pipe', 'pipe'] });
   let stderr = '';
   child.stderr.on('data', (d) => { stderr += d; });
@@ -82,6 +83,65 @@ export function cli(args, timeoutMs = 60_000) {
       else done(stdout);
     });
   });
+}
+
+// Resolves once `filigree health` says the server at `grpcAddress` serves;
+// rejects after `timeoutMs`. Each check waits for its answer (up to 1 s):
+// this waits on the condition, not a guessed time.
+export async function waitForHealth(grpcAddress, timeoutMs) {
+  const deadline = Date.now() + timeoutMs;
+  for (;;) {
+    try {
+      await cli(['health', '--server', grpcAddress, '--timeout', '1'], 5000);
+      return;
+    } catch (error) {
+      if (Date.now() > deadline) throw new Error(`${grpcAddress} not healthy within ${timeoutMs} ms: ${error.message}`);
+      // A refused connection answers at once: a short pause keeps this from spinning.
+      await new Promise((done) => setTimeout(done, 50));
+    }
+  }
+}
+
+// Writes an ellipsoid with semi-axes `axes` ([x, y, z]) as an OBJ, sampled
+// densest around the horizontal direction `front` (a unit axis, ±x/±y/±z, not
+// along `up`): most of its vertex normals face that way. `up` ('y' or 'z') is
+// the polar axis.
+export function writeEllipsoidObj(path, axes, up, front, rings = 24, segments = 48) {
+  const [ax, ay, az] = axes;
+  // An orthonormal frame: u (the polar axis), f (front), s = u × f.
+  const u = up === 'z' ? [0, 0, 1] : [0, 1, 0];
+  const f = front;
+  const s = [u[1] * f[2] - u[2] * f[1], u[2] * f[0] - u[0] * f[2], u[0] * f[1] - u[1] * f[0]];
+  const lines = [];
+  const point = (theta, phi) => {
+    // Unit sphere in the (f, s, u) frame, then scaled per world axis.
+    const c = [Math.sin(theta) * Math.cos(phi), Math.sin(theta) * Math.sin(phi), Math.cos(theta)];
+    const w = [0, 1, 2].map((k) => c[0] * f[k] + c[1] * s[k] + c[2] * u[k]);
+    return [w[0] * ax, w[1] * ay, w[2] * az];
+  };
+  lines.push(`v ${point(0, 0).join(' ')}`);
+  for (let r = 1; r < rings; ++r) {
+    for (let k = 0; k < segments; ++k) {
+      const t = 2 * (k / segments) - 1;                 // −1 … 1, 0 at the front
+      const phi = Math.PI * t * (0.3 + 0.7 * t * t);     // 3× denser at the front than on average
+      lines.push(`v ${point((Math.PI * r) / rings, phi).join(' ')}`);
+    }
+  }
+  lines.push(`v ${point(Math.PI, 0).join(' ')}`);
+  const top = 1;
+  const bottom = 2 + (rings - 1) * segments;
+  const at = (r, k) => 2 + (r - 1) * segments + (k % segments);
+  // Outward winding (counter-clockwise seen from outside) in the right-handed (f, s, u) frame.
+  const face = (a, b, c) => lines.push(`f ${a} ${b} ${c}`);
+  for (let k = 0; k < segments; ++k) {
+    face(top, at(1, k), at(1, k + 1));
+    for (let r = 1; r < rings - 1; ++r) {
+      face(at(r, k), at(r + 1, k), at(r + 1, k + 1));
+      face(at(r, k), at(r + 1, k + 1), at(r, k + 1));
+    }
+    face(at(rings - 1, k), bottom, at(rings - 1, k + 1));
+  }
+  writeFileSync(path, `${lines.join('\n')}\n`);
 }
 
 // Uploads a mesh; resolves with { session_id, editor_token, viewer_token, … }.

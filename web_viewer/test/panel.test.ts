@@ -6,7 +6,7 @@ import { describe, expect, it } from 'vitest';
 import { changeLines } from '../src/changes';
 import { FrameSchema, FrameStatsSchema } from '../src/gen/filigree/v1/filigree_pb';
 import { gatherVertices, uniqueEdges } from '../src/overlays';
-import { readParams } from '../src/params';
+import { readParams, tokenOutOfQuery } from '../src/params';
 import { StatsTracker, statsRows } from '../src/stats';
 
 const frame = (version: number, extra: object = {}) =>
@@ -27,6 +27,54 @@ describe('readParams', () => {
     expect(readParams('', origin)).toEqual({ kind: 'usage' });
     expect(readParams('?session=abc', origin)).toMatchObject({ kind: 'error', message: expect.stringMatching(/token/) });
     expect(readParams('?session=a&token=t&server=ftp://x', origin)).toMatchObject({ kind: 'error' });
+  });
+});
+
+describe('tokens in the fragment', () => {
+  const origin = 'http://127.0.0.1:8080';
+  it('reads the token from the fragment, preferring it to the query', () => {
+    expect(readParams('?session=abc', origin, '#token=t2')).toMatchObject({ kind: 'ok', params: { token: 't2' } });
+    expect(readParams('?session=abc&token=t1', origin, '#token=t2')).toMatchObject({ kind: 'ok', params: { token: 't2' } });
+    expect(readParams('', origin, '#session=abc&token=t3')).toMatchObject({ kind: 'ok', params: { sessionId: 'abc', token: 't3' } });
+  });
+
+  it('moves a token from the query into the fragment', () => {
+    expect(tokenOutOfQuery('http://h:1/?session=abc&token=t1')).toBe('http://h:1/?session=abc#token=t1');
+    expect(tokenOutOfQuery('http://h:1/?session=abc&token=t1#token=t2')).toBe('http://h:1/?session=abc#token=t2');
+    expect(tokenOutOfQuery('http://h:1/?session=abc#token=t2')).toBeNull();
+  });
+});
+
+describe('StatsTracker: what was drawn', () => {
+  const times = { decodeMs: 1, applyMs: 1, normalsMs: 1, stretchMs: 0 };
+  it('counts frames arrived, applied and drawn apart, and how far the drawing is behind', () => {
+    const stats = new StatsTracker();
+    for (let v = 1; v <= 6; ++v) stats.frameArrived(frame(v), 1000 + 10 * v);
+    stats.frameApplied(times, 0.5, 1070);
+    stats.frameDrawn(3n, 4, 1075);
+    stats.frameDrawn(3n, 4, 1080);  // a redraw of the same version (an orbit): not a frame drawn
+    const s = stats.snapshot(1100);
+    expect(s.framesPerSecond).toBe(3);
+    expect(s.appliedPerSecond).toBe(0.5);
+    expect(s.drawnPerSecond).toBe(0.5);
+    expect(s.behind).toBe(3);
+    expect(s.drawMs).toBe(4);
+    expect(s.pageMs).toBe(0.5);
+    const rows = Object.fromEntries(statsRows(s));
+    expect(rows['frames/s']).toBe('3.0 arrived, 0.5 applied, 0.5 drawn');
+    expect(rows['behind by']).toBe('3 versions');
+  });
+
+  it('times own edits to the frame that includes them being drawn, several in flight', () => {
+    const stats = new StatsTracker();
+    const first = stats.poseSent(100);
+    const second = stats.poseSent(110);
+    first(5n);
+    second(6n);
+    stats.frameDrawn(6n, 1, 150);  // includes the first edit only
+    expect(stats.snapshot(150).editToDrawnMs).toBe(50);
+    stats.frameDrawn(7n, 1, 190);
+    expect(stats.snapshot(190).editToDrawnMs).toBe(80);
   });
 });
 

@@ -1,0 +1,42 @@
+// The messages between the page (pipeline.ts) and its session worker
+// (session.worker.ts). Types only.
+import type { SessionInfo } from './client';
+import type { DeltaChunkData } from './frame';
+import type { Framing } from './geometry';
+
+// What the page draws from: positions and vertex normals (3 floats per
+// vertex), and the stretch colours while that overlay is on. Two sets take
+// turns (double buffering): the worker fills one while the page holds the
+// other; the page hands a set back as soon as a newer one replaced it.
+export interface Buffers { positions: Float32Array; normals: Float32Array; colors: Float32Array | null }
+
+export interface ChunkedFrameMessage {
+  version: bigint; keyframeVersion: bigint; vertexCount: number; chunks: DeltaChunkData[];
+}
+export interface SingleFrameMessage { version: bigint; vertexCount: number; deltas: Uint8Array }
+
+export type ToWorker =
+  | { type: 'join'; serverUrl: string; sessionId: string; token: string }
+  | { type: 'frame'; id: number; chunked?: ChunkedFrameMessage; single?: SingleFrameMessage }
+  | { type: 'recycle'; buffers: Buffers }
+  | { type: 'stretch'; on: boolean };
+
+// A failed call, as the page rebuilds it (a ConnectError cannot be posted).
+export interface CallError { code: number | null; rawMessage: string; message: string; fetchFailed: boolean }
+
+export type FromWorker =
+  | { type: 'progress'; stage: 'download' | 'build'; loaded: number; total: number | null }
+  // The session without its big arrays (info.rest emptied), those as typed arrays.
+  | {
+    type: 'joined'; info: SessionInfo; faces: Uint32Array; buffers: Buffers; framing: Framing;
+    basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; joinMs: number; buildMs: number;
+  }
+  | { type: 'joinFailed'; error: CallError }
+  | {
+    type: 'applied'; id: number; version: bigint; buffers: Buffers; kind: 'single' | 'keyframe' | 'sparse';
+    decodeMs: number; applyMs: number; normalsMs: number; stretchMs: number; displacement: number; stretchMax: number;
+  }
+  // The stretch colours of the frame held, when the overlay is turned on.
+  | { type: 'colors'; colors: Float32Array; stretchMax: number }
+  // resync: the keyframe the stream's next frames need is not held here.
+  | { type: 'frameFailed'; id: number; version: bigint; message: string; resync: boolean };
