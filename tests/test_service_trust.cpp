@@ -4,14 +4,18 @@
 // session exists, poses acknowledged that never made a frame, options
 // silently ignored, and error messages that echoed megabytes back.
 
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -359,6 +363,111 @@ TEST_F(TrustTest, ASigkillLosesNoAcknowledgedPoseAndVersionsNeverRepeat) {
   watch_ctx->TryCancel();
   watch->Finish();
   server.reset();
+  std::filesystem::remove_all(data);
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+// One flat polygon of `corners` corners: fan-triangulated, its first corner
+// gets a valence of `corners` (2,000 took 21 s to preprocess, 8,000 minutes).
+std::string polygon_obj(int corners) {
+  std::string obj;
+  char line[96];
+  for (int i = 0; i < corners; ++i) {
+    const double a = 2.0 * 3.14159265358979 * i / corners;
+    std::snprintf(line, sizeof line, "v %.9f %.9f 0\n", std::cos(a), std::sin(a));
+    obj += line;
+  }
+  obj += 'f';
+  for (int i = 1; i <= corners; ++i) {
+    obj += ' ';
+    obj += std::to_string(i);
+  }
+  obj += '\n';
+  return obj;
+}
+
+// An upload on its own thread that reports when preprocessing has begun.
+struct UploadInFlight {
+  UploadInFlight(v1::Filigree::Stub& stub, std::string bytes) {
+    thread = std::thread([this, &stub, bytes = std::move(bytes)] {
+      auto stream = stub.CreateSession(&context);
+      v1::CreateSessionRequest message;
+      message.mutable_begin()->set_format("obj");
+      message.mutable_begin()->set_total_bytes(bytes.size());
+      stream->Write(message);
+      message.set_chunk(bytes);
+      stream->Write(message);
+      stream->WritesDone();
+      v1::CreateSessionResponse r;
+      while (stream->Read(&r)) {
+        if (r.has_created()) created = true;
+        if (r.has_progress() && r.progress().stage() == "simplifying") {
+          std::lock_guard lock(mutex);
+          simplifying = true;
+          changed.notify_all();
+        }
+      }
+      status = stream->Finish();
+    });
+  }
+  ~UploadInFlight() {
+    if (thread.joinable()) thread.join();
+  }
+  bool wait_until_simplifying() {
+    std::unique_lock lock(mutex);
+    return changed.wait_for(lock, std::chrono::seconds(60), [&] { return simplifying; });
+  }
+  grpc::ClientContext context;
+  std::thread thread;
+  std::mutex mutex;
+  std::condition_variable changed;
+  bool simplifying = false, created = false;
+  grpc::Status status;
+};
+
+// SIGTERM waited for preprocessing to finish: with an 8,000-corner polygon
+// in flight the server had not stopped after 45 s. Preprocessing stops at
+// its next check; the upload (not yet a session) hears UNAVAILABLE.
+TEST_F(TrustTest, ShutdownDoesNotWaitForPreprocessing) {
+  MemoryServer server;
+  UploadInFlight upload(*server.stub, polygon_obj(8000));
+  ASSERT_TRUE(upload.wait_until_simplifying());
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ(server.process.terminate(), 0);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_LT(seconds, 10.0) << "the server took " << seconds << " s to stop";
+  upload.thread.join();
+  EXPECT_EQ(upload.status.error_code(), grpc::StatusCode::UNAVAILABLE) << upload.status.error_message();
+  EXPECT_FALSE(upload.created);
+}
+
+// An upload cancelled while it was preprocessed still became a session that
+// nobody held tokens for, persisted and counted.
+TEST_F(TrustTest, AnUploadCancelledWhilePreprocessingLeavesNoSession) {
+  const std::filesystem::path data = temp("data");
+  std::filesystem::remove_all(data);
+  // One preprocessing slot: the second upload is preprocessed only after the
+  // first has finished (and made its session, or not).
+  MemoryServer server({"--preprocessing-slots", "1", "--data-dir", data.string()});
+  {
+    UploadInFlight cancelled(*server.stub, polygon_obj(3000));
+    ASSERT_TRUE(cancelled.wait_until_simplifying());
+    cancelled.context.TryCancel();
+  }
+  const Created kept = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(kept.status.ok()) << kept.status.error_message();
+  v1::ListSessionsResponse list;
+  ASSERT_TRUE(server.stub->ListSessions(with({}).get(), {}, &list).ok());
+  ASSERT_EQ(list.sessions_size(), 1);
+  EXPECT_EQ(list.sessions(0).session_id(), kept.id());
+  std::size_t records = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(data / "sessions")) records += entry.path().extension() == ".session";
+  EXPECT_EQ(records, 1u);
   std::filesystem::remove_all(data);
 }
 
