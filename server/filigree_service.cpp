@@ -230,7 +230,12 @@ grpc::Status FiligreeService::open_stream(const Session& session, std::shared_pt
     return grpc::Status::OK;
   }
   const ApiKey* key = keys->by_name(session.owner());
-  const std::uint64_t limit = key ? key->quota.streams : 0;  // a key removed since: no quota left to apply
+  // A key revoked since (SIGHUP): its sessions open no new streams. (Taking
+  // "no key" for "no quota" lifted the limit of a revoked key's sessions.)
+  if (!key)
+    return {grpc::StatusCode::PERMISSION_DENIED, "the API key that created session " + session.id() +
+                                                     " was revoked: its sessions take no new streams"};
+  const std::uint64_t limit = key->quota.streams;
   std::shared_ptr<void> quota = ledger_.open_stream(session.owner(), limit);
   if (!quota)
     return {grpc::StatusCode::RESOURCE_EXHAUSTED, "the sessions of API key '" + session.owner() + "' have their quota of " +
@@ -295,6 +300,29 @@ grpc::Status FiligreeService::admit_memory() {
               std::to_string(evicted) + " idle sessions; sessions in use stay. Try later or another server"};
 }
 
+grpc::Status FiligreeService::reserve_upload_memory(std::uint64_t bytes, std::shared_ptr<void>* reserved) {
+  reserved->reset();
+  if (limits_.max_memory_bytes == 0) return grpc::Status::OK;
+  std::lock_guard lock(upload_memory_mutex_);
+  // Resident memory already holds what uploads received so far: counted
+  // twice, on the safe side.
+  const std::uint64_t resident = resident_bytes();
+  if (resident + upload_memory_reserved_ + bytes > limits_.max_memory_bytes) {
+    constexpr std::uint64_t kMiB = 1 << 20;
+    return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+            "an upload of " + std::to_string(bytes / kMiB) + " MiB does not fit: the server holds " +
+                std::to_string(resident / kMiB) + " MiB and uploads in progress reserve " +
+                std::to_string(upload_memory_reserved_ / kMiB) + " MiB of its " + std::to_string(limits_.max_memory_bytes / kMiB) +
+                " MiB (--max-memory). Try later or another server"};
+  }
+  upload_memory_reserved_ += bytes;
+  *reserved = std::shared_ptr<void>(static_cast<void*>(this), [this, bytes](void*) {
+    std::lock_guard lock(upload_memory_mutex_);
+    upload_memory_reserved_ -= bytes;
+  });
+  return grpc::Status::OK;
+}
+
 void FiligreeService::track_upload(const void* upload, std::function<void()> expire) {
   if (limits_.upload_seconds <= 0) return;
   const auto deadline = std::chrono::steady_clock::now() +
@@ -335,6 +363,9 @@ void FiligreeService::drain() {
 // ------------------------------------------------------------ CreateSession
 
 namespace {
+
+// What an upload's buffer starts with; it grows as bytes arrive.
+constexpr std::uint64_t kInitialUploadBuffer = 4 << 20;
 
 // Nice value of preprocessing threads (sessions' frames run at 0).
 constexpr int kPreprocessingNice = 10;
@@ -398,12 +429,18 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       // A proposed id is checked now, not after seconds of preprocessing (create() checks it again).
       if (const grpc::Status id_status = check_proposed_id(begin_.session_id()); !id_status.ok())
         return writer_.finish(id_status);
-      bytes_.reserve(begin_.total_bytes());
+      if (const grpc::Status memory = service_.reserve_upload_memory(begin_.total_bytes(), &memory_); !memory.ok())
+        return writer_.finish(memory);
+      // Grown as bytes arrive: a Begin alone holds no memory (a hundred
+      // silent 256 MiB Begins reserved 26 GiB of address space).
+      bytes_.reserve(std::min<std::uint64_t>(begin_.total_bytes(), kInitialUploadBuffer));
     } else {
       if (!begun_) return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the first message must be 'begin'"});
+      if (request_.chunk().size() > begin_.total_bytes() - bytes_.size())
+        return writer_.finish({grpc::StatusCode::INVALID_ARGUMENT, "the upload sends more than the " +
+                                                                       std::to_string(begin_.total_bytes()) +
+                                                                       " bytes its 'begin' declared (total_bytes)"});
       bytes_ += request_.chunk();
-      if (bytes_.size() > service_.limits().max_mesh_bytes)
-        return writer_.finish({grpc::StatusCode::RESOURCE_EXHAUSTED, too_large(bytes_.size())});
     }
     StartRead(&request_);
   }
@@ -540,6 +577,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       auto session = service_.registry().create(h, key, o, std::move(uploaded_ids), begin_.session_id(), std::move(rig),
                                                 key_ ? key_->name : std::string());
       pending_.reset();  // a session now: counted by the registry
+      memory_.reset();   // and in the resident memory
       if (cancelled_) {  // it gave up while the session was made
         service_.registry().close(session->id());
         return grpc::Status::CANCELLED;
@@ -579,6 +617,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   std::shared_ptr<const ApiKeys> keys_;  // keeps key_ alive across a reload
   const ApiKey* key_ = nullptr;          // null: no keys configured
   std::shared_ptr<void> pending_;        // this upload in its key's session quota until it is a session
+  std::shared_ptr<void> memory_;         // its declared bytes under --max-memory until it is a session
   StreamWriter<CreateReactor, v1::CreateSessionResponse> writer_;
   v1::CreateSessionRequest request_;
   v1::CreateSessionRequest::Begin begin_;

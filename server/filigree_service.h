@@ -110,6 +110,12 @@ class FiligreeService final : public FiligreeServiceBase {
   // an upload is parsed and preprocessed.
   void acquire_preprocessing();
   void release_preprocessing();
+  // Reserves `bytes` of an upload (its declared size) against
+  // limits().max_memory_bytes, with what the server holds now and what other
+  // uploads in progress reserved, under one lock: concurrent uploads cannot
+  // all pass one check. *reserved holds them until it is released (the
+  // upload became a session or failed). RESOURCE_EXHAUSTED with the figures.
+  grpc::Status reserve_upload_memory(std::uint64_t bytes, std::shared_ptr<void>* reserved);
   // Set when the server starts draining: preprocessing stops (PreprocessOptions::stop).
   const std::atomic<bool>& preprocessing_stop() const { return stop_preprocessing_; }
   // Calls waiting for a turn to load their session (limits().session_loads).
@@ -184,6 +190,8 @@ class FiligreeService final : public FiligreeServiceBase {
   Turns loads_;          // limits_.session_loads, or one per core
   bool draining_ = false;
   std::atomic<bool> stop_preprocessing_{false};
+  std::mutex upload_memory_mutex_;
+  std::uint64_t upload_memory_reserved_ = 0;  // declared bytes of uploads in progress
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key
   SlotCounter vertices_;       // vertices of those uploads that passed the quota, by API key

@@ -4,6 +4,7 @@
 // session exists, poses acknowledged that never made a frame, options
 // silently ignored, and error messages that echoed megabytes back.
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -469,6 +470,65 @@ TEST_F(TrustTest, AnUploadCancelledWhilePreprocessingLeavesNoSession) {
   for (const auto& entry : std::filesystem::directory_iterator(data / "sessions")) records += entry.path().extension() == ".session";
   EXPECT_EQ(records, 1u);
   std::filesystem::remove_all(data);
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+// --max-memory was checked only when an upload started: 8 concurrent
+// 100 MiB uploads under --max-memory 300 all passed (peak RSS 969 MiB). An
+// upload's declared bytes are reserved when it begins, under one lock.
+TEST_F(TrustTest, UploadsReserveTheirDeclaredBytesAgainstMaxMemory) {
+  MemoryServer server({"--max-memory", "420"});
+  // Two uploads that declare 200 MiB each and send nothing more: one fits
+  // beside the idle server, not both.
+  auto begin = [&](grpc::ClientContext& ctx, grpc::Status& status) {
+    ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+    auto stream = server.stub->CreateSession(&ctx);
+    v1::CreateSessionRequest message;
+    message.mutable_begin()->set_format("obj");
+    message.mutable_begin()->set_total_bytes(200ull << 20);
+    stream->Write(message);
+    v1::CreateSessionResponse r;
+    while (stream->Read(&r)) {
+    }
+    status = stream->Finish();
+  };
+  grpc::ClientContext first_context, second_context;
+  grpc::Status first, second;
+  std::thread a([&] { begin(first_context, first); }), b([&] { begin(second_context, second); });
+  a.join();
+  b.join();
+  const std::vector<grpc::StatusCode> codes = {first.error_code(), second.error_code()};
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), grpc::StatusCode::RESOURCE_EXHAUSTED), 1)
+      << first.error_message() << " / " << second.error_message();
+  EXPECT_EQ(std::count(codes.begin(), codes.end(), grpc::StatusCode::DEADLINE_EXCEEDED), 1);
+  const std::string refused = first.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED ? first.error_message()
+                                                                                         : second.error_message();
+  EXPECT_NE(refused.find("uploads in progress reserve 200 MiB"), std::string::npos) << refused;
+
+  // Both ended: nothing stays reserved, and a small upload passes.
+  const Created small = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  EXPECT_TRUE(small.status.ok()) << small.status.error_message();
+  // Bytes beyond the declared size are refused.
+  grpc::ClientContext ctx;
+  auto stream = server.stub->CreateSession(&ctx);
+  v1::CreateSessionRequest message;
+  message.mutable_begin()->set_format("obj");
+  message.mutable_begin()->set_total_bytes(10);
+  stream->Write(message);
+  message.set_chunk(test::file_bytes(kBunny));
+  stream->Write(message);
+  stream->WritesDone();
+  v1::CreateSessionResponse r;
+  while (stream->Read(&r)) {
+  }
+  const grpc::Status over = stream->Finish();
+  EXPECT_EQ(over.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(over.error_message().find("more than the 10 bytes"), std::string::npos) << over.error_message();
 }
 
 }  // namespace

@@ -232,3 +232,29 @@ def test_vertices_quota_at_its_boundary_counts_what_the_key_holds_and_reserves()
     finally:
         server.stop()
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def test_a_revoked_keys_sessions_open_no_new_streams():
+    # Revoking a key with SIGHUP lifted the streams quota of its sessions
+    # (no key was taken for no limit); now they take no new stream at all.
+    tmp = Path(tempfile.mkdtemp(prefix="filigree_keyfile_"))
+    key, line = make_key("gone", "--streams", "1")
+    keys_file = tmp / "keys"
+    keys_file.write_text(line + "\n")
+    server = KeyedServer(keys_file)
+    try:
+        with client(server, key) as gone:
+            session = gone.create_session(MESH, options=OPTIONS)
+            with session.watch() as watcher:
+                watcher.next_frame(30)
+            keys_file.write_text("# no keys\n")
+            server.process.send_signal(signal.SIGHUP)
+            server.wait_for_log("event=api_keys_reloaded keys=0")
+            for _ in range(2):
+                watcher = session.watch()
+                with pytest.raises(filigree.PermissionDenied, match="revoked"):
+                    watcher.next_frame(30)
+                watcher.free()
+    finally:
+        server.stop()
+        shutil.rmtree(tmp, ignore_errors=True)
