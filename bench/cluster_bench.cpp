@@ -117,7 +117,7 @@ int main() {
       Client lb(cluster.lb());
       const SessionHandle s = lb.create_session(mesh, "off", {}, "failover");
       drive(lb, s, 1, 10);
-      cluster.kill(cluster.index_of(lb.locate(s.session_id).replica_id()));
+      cluster.kill(cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id()));
       const auto t = Clock::now();
       for (std::uint64_t i = 11;; ++i) {
         if (!drive(lb, s, i, i).empty()) break;

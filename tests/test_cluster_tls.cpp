@@ -118,7 +118,7 @@ TEST_F(ClusterTls, ABrowserOnAnotherReplicaReachesTheSessionOverMutualTls) {
   start(1, "ca.pem");
   Client owner = engine(0);
   const SessionHandle s = owner.create_session(test::file_bytes(test::shipped_path("bunny_small.obj")), "obj", {}, "engine");
-  ASSERT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
+  ASSERT_EQ(owner.locate(s.session_id, s.viewer_token).replica_id(), "replica-1");
   // One pose, so that the state names a frame of its own.
   auto driver = owner.drive(s.session_id, s.editor_token, "engine");
   std::vector<float> pose = s.mesh.base_positions;
@@ -143,7 +143,7 @@ TEST_F(ClusterTls, ABrowserOnAnotherReplicaReachesTheSessionOverMutualTls) {
   EXPECT_EQ(state.version(), direct.version());
   EXPECT_EQ(state.pose_size(), direct.pose_size());
   // Forwarded, not moved: replica 1 still serves it.
-  EXPECT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
+  EXPECT_EQ(owner.locate(s.session_id, s.viewer_token).replica_id(), "replica-1");
 }
 
 TEST_F(ClusterTls, AReplicaThatDoesNotTrustTheOtherFailsTheCallAndServesOn) {
@@ -159,7 +159,7 @@ TEST_F(ClusterTls, AReplicaThatDoesNotTrustTheOtherFailsTheCallAndServesOn) {
   // Nothing else is harmed: both replicas answer, the session is where it was.
   EXPECT_NO_THROW(engine(1).list());
   EXPECT_NO_THROW(owner.state(s.session_id, s.viewer_token));
-  EXPECT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
+  EXPECT_EQ(owner.locate(s.session_id, s.viewer_token).replica_id(), "replica-1");
 }
 
 TEST_F(ClusterTls, AReplicaWhoseCertificateDoesNotNameItsAddressIsNotCalled) {
@@ -167,7 +167,7 @@ TEST_F(ClusterTls, AReplicaWhoseCertificateDoesNotNameItsAddressIsNotCalled) {
   start(1, "ca.pem");
   Client owner = engine(0, "elsewhere.test");
   const SessionHandle s = owner.create_session(test::file_bytes(test::shipped_path("bunny_small.obj")), "obj", {}, "engine");
-  ASSERT_EQ(owner.locate(s.session_id).replica_id(), "replica-1");
+  ASSERT_EQ(owner.locate(s.session_id, s.viewer_token).replica_id(), "replica-1");
   const test::Frames frames = browser_get_state(1, s);
   ASSERT_TRUE(frames.well_formed);
   EXPECT_TRUE(frames.messages.empty());
