@@ -30,6 +30,7 @@
 #include "server/state/redis_hierarchy_store.h"
 #include "server/state/redis_session_store.h"
 #include "server/tls_files.h"
+#include "server/verified_tls_files.h"
 
 namespace {
 
@@ -116,6 +117,10 @@ int main(int argc, char** argv) {
   TlsFiles tls;
   app.add_option("--tls-cert", tls.cert, "Server certificate chain (PEM): TLS on the gRPC port; re-read when it changes");
   app.add_option("--tls-key", tls.key, "The certificate's private key (PEM)");
+  app.add_option("--tls-refresh", tls.refresh_seconds,
+                 "Seconds between looks at --tls-cert, --tls-key and the CA files; a changed pair is checked (parse, "
+                 "key match, validity, strength) and put in force only if good (SIGHUP: look now)")
+      ->check(CLI::Range(1u, 86400u));
   app.add_option("--tls-client-ca", tls.client_ca, "CA bundle (PEM) of client certificates: mutual TLS, clients without one are refused");
   app.add_option("--peer-ca", tls.peer_ca,
                  "CA bundle (PEM) the other replicas' certificates chain to, for calls this replica forwards to them "
@@ -200,6 +205,16 @@ int main(int argc, char** argv) {
       throw std::runtime_error("--http " + http_listen + " is reachable from other machines without TLS: give --tls-cert "
                                "and --tls-key (HTTPS there too, same certificate), or --insecure if TLS ends before "
                                "this server");
+    // Only replicas serving browsers forward calls to each other.
+    const bool forwards = !redis_address.empty() && !http_listen.empty();
+    // The certificate and key are read and checked before anything else
+    // starts: a pair that could only fail handshakes refuses the start, saying why.
+    std::unique_ptr<VerifiedTlsFiles> verified_tls;
+    if (tls.enabled()) {
+      if (!forwards && !tls.peer_ca.empty())
+        throw std::runtime_error("--peer-ca is for replicas (--redis) that serve browsers (--http): without both, nothing forwards");
+      verified_tls = std::make_unique<VerifiedTlsFiles>(tls);
+    }
     const std::filesystem::path data = data_dir;
     // One machine: records as files. Replicas: records, leases and hierarchies in Redis
     // (hierarchy files stay in --data-dir as a local cache).
@@ -239,13 +254,9 @@ int main(int argc, char** argv) {
     grpc::reflection::InitProtoReflectionServerBuilderPlugin();
     grpc::ServerBuilder builder;
     int port = 0;
-    builder.AddListeningPort(listen, server_credentials(tls), &port);
-    // Only replicas serving browsers forward calls to each other. Checked at
-    // start: a wrong --peer-ca fails here, not on the first forwarded call.
-    const bool forwards = redis && !http_listen.empty();
-    if (!forwards && !tls.peer_ca.empty())
-      throw std::runtime_error("--peer-ca is for replicas (--redis) that serve browsers (--http): without both, nothing forwards");
-    const std::shared_ptr<grpc::ChannelCredentials> peers = forwards ? peer_credentials(tls) : nullptr;
+    builder.AddListeningPort(listen, server_credentials(tls, verified_tls.get()), &port);
+    // A wrong --peer-ca failed above (VerifiedTlsFiles), not on the first forwarded call.
+    const std::shared_ptr<grpc::ChannelCredentials> peers = forwards ? peer_credentials(tls, verified_tls.get()) : nullptr;
     builder.SetMaxReceiveMessageSize(max_message_mib << 20);
     builder.SetMaxSendMessageSize(max_message_mib << 20);
     // gRPC allows SO_REUSEPORT by default: a second server started on the same
@@ -316,9 +327,9 @@ int main(int argc, char** argv) {
     });
 
     int signal = 0;
-    // SIGHUP: re-read the API keys and the HTTPS certificate now. A broken
-    // file keeps what is in force. (The gRPC port re-reads its certificate
-    // files by itself within TlsFiles::refresh_seconds.)
+    // SIGHUP: re-read the API keys and the certificate files now. A broken
+    // file keeps what is in force. (Both ports also re-read their certificate
+    // files by themselves within TlsFiles::refresh_seconds.)
     while (sigwait(&signals, &signal) == 0 && signal == SIGHUP) {
       if (!api_keys_path.empty()) {
         try {
@@ -330,6 +341,7 @@ int main(int argc, char** argv) {
           spdlog::error("event=api_keys_reload_failed error=\"{}\"", e.what());
         }
       }
+      if (verified_tls) verified_tls->refresh();  // logs what it put in force or refused
       if (http_server && http_server->https()) {
         try {
           http_server->reload_certificates();

@@ -20,6 +20,8 @@ inline std::string read_pem(const std::string& path, const char* option) {
   text << in.rdbuf();
   if (!in.good() && !in.eof()) throw std::runtime_error(std::string(option) + " " + path + " cannot be read");
   std::string out = std::move(text).str();
+  // Said apart: a renewal that truncates before it writes leaves an empty file.
+  if (out.empty()) throw std::runtime_error(std::string(option) + " " + path + " is empty");
   if (out.find("-----BEGIN ") == std::string::npos)
     throw std::runtime_error(std::string(option) + " " + path + " holds no PEM block");
   return out;

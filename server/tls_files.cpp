@@ -7,11 +7,11 @@
 #include <grpcpp/security/tls_certificate_provider.h>
 #include <grpcpp/security/tls_credentials_options.h>
 
-#include "server/pem_file.h"
+#include "server/verified_tls_files.h"
 
 namespace filigree::server {
 
-std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& files) {
+std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& files, const VerifiedTlsFiles* verified) {
   if (files.cert.empty() != files.key.empty())
     throw std::runtime_error("--tls-cert and --tls-key go together");
   if (!files.enabled()) {
@@ -19,14 +19,12 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& file
     if (!files.peer_ca.empty()) throw std::runtime_error("--peer-ca needs --tls-cert and --tls-key");
     return grpc::InsecureServerCredentials();
   }
-  // Checked here, so a wrong path fails at start with its name rather than as
-  // handshakes that fail later with a generic error.
-  read_pem(files.cert, "--tls-cert");
-  read_pem(files.key, "--tls-key");
-  if (!files.client_ca.empty()) read_pem(files.client_ca, "--tls-client-ca");
-  // A file watcher: a renewed certificate is picked up within refresh_seconds.
+  if (!verified) throw std::logic_error("server_credentials: TLS files given, but not verified");
+  // gRPC's watcher reads only the checked copies (the key and chain in one
+  // file, read as both): a renewal is picked up within refresh_seconds + 1.
   auto provider = std::make_shared<grpc::experimental::FileWatcherCertificateProvider>(
-      files.key, files.cert, files.client_ca, files.refresh_seconds);
+      verified->identity_path(), verified->identity_path(), verified->client_ca_path(),
+      VerifiedTlsFiles::kGrpcReadSeconds);
   grpc::experimental::TlsServerCredentialsOptions options(provider);
   options.watch_identity_key_cert_pairs();
   if (!files.client_ca.empty()) {
@@ -38,14 +36,15 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& file
   return grpc::experimental::TlsServerCredentials(options);
 }
 
-std::shared_ptr<grpc::ChannelCredentials> peer_credentials(const TlsFiles& files) {
+std::shared_ptr<grpc::ChannelCredentials> peer_credentials(const TlsFiles& files, const VerifiedTlsFiles* verified) {
   if (!files.enabled()) return grpc::InsecureChannelCredentials();
-  if (!files.peer_ca.empty()) read_pem(files.peer_ca, "--peer-ca");
+  if (!verified) throw std::logic_error("peer_credentials: TLS files given, but not verified");
   const bool identity = !files.client_ca.empty();  // the other replica demands a client certificate
   grpc::experimental::TlsChannelCredentialsOptions options;
   if (identity || !files.peer_ca.empty()) {
+    const std::string pair = identity ? verified->identity_path() : std::string();
     options.set_certificate_provider(std::make_shared<grpc::experimental::FileWatcherCertificateProvider>(
-        identity ? files.key : "", identity ? files.cert : "", files.peer_ca, files.refresh_seconds));
+        pair, pair, verified->peer_ca_path(), VerifiedTlsFiles::kGrpcReadSeconds));
     if (!files.peer_ca.empty()) options.watch_root_certs();  // else gRPC uses the system store
     if (identity) options.watch_identity_key_cert_pairs();
   }

@@ -1,7 +1,9 @@
 #pragma once
 // The gRPC port's transport security: plaintext, TLS, or mutual TLS, from PEM
 // files that are re-read while the server runs (replacing them renews the
-// certificate without a restart or a dropped session).
+// certificate without a restart or a dropped session). Files are checked
+// before they are put in force (verified_tls_files.h): a bad version keeps
+// the good one.
 
 #include <memory>
 #include <string>
@@ -22,10 +24,14 @@ struct TlsFiles {
   bool enabled() const { return !cert.empty(); }
 };
 
-// The credentials for ServerBuilder::AddListeningPort. Throws
-// std::runtime_error naming the file and what is wrong when cert and key are
-// not given together or a file cannot be read or holds no PEM block.
-std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& files);
+class VerifiedTlsFiles;
+
+// The credentials for ServerBuilder::AddListeningPort: plaintext without
+// files; else TLS from `verified` (made from the same files, and kept alive
+// as long as the server), whose checked copies gRPC re-reads. Throws
+// std::runtime_error when cert and key are not given together, or a CA
+// option is given without them.
+std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& files, const VerifiedTlsFiles* verified);
 
 // The credentials with which this replica calls another (the gRPC-Web
 // bridge's forwarding, replica_router.h), which serves as this one does:
@@ -33,8 +39,8 @@ std::shared_ptr<grpc::ServerCredentials> server_credentials(const TlsFiles& file
 // certificate against peer_ca (or the system store) and its advertised host
 // name, and, when replicas demand client certificates (client_ca), presenting
 // this replica's own certificate, which then needs clientAuth among its
-// extended key usages. Files are re-read as for the server. Throws
-// std::runtime_error naming the option when a file cannot be read.
-std::shared_ptr<grpc::ChannelCredentials> peer_credentials(const TlsFiles& files);
+// extended key usages. The checked copies of `verified` are re-read as for
+// the server (it must outlive the channels).
+std::shared_ptr<grpc::ChannelCredentials> peer_credentials(const TlsFiles& files, const VerifiedTlsFiles* verified);
 
 }  // namespace filigree::server

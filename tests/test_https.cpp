@@ -3,7 +3,8 @@
 // over TLS; an untrusted server certificate, a plaintext request and missing
 // client certificates (mutual TLS) fail cleanly; replaced certificate files
 // reach new connections (on reload_certificates() and by themselves) while
-// open connections keep theirs, and bad ones keep the old certificate.
+// open connections keep theirs, and bad ones (garbage, mismatched, empty,
+// expired, weak, SHA-1-signed) keep the old certificate.
 //
 // In-process: the HTTP server in front of a gRPC server that has only a fake
 // filigree.v1.Filigree (the transport is under test, not the service). The
@@ -324,6 +325,57 @@ TEST_F(HttpsTest, ReloadOfBadFilesThrowsWhyAndKeepsTheOldCertificate) {
   install(*pki_ / "server-2.key", key_path());
   http_->reload_certificates();
   EXPECT_EQ(connect()->serial(), kSecondSerial);
+}
+
+TEST_F(HttpsTest, ExpiredWeakAndSha1PairsAreRefusedAtStartAndOnReload) {
+  pki_->reissue("expired", "server-1", "test-ca", kLoopbackServer, 4100, CertOptions{"ec", "", -1});
+  pki_->reissue("sha1", "server-1", "test-ca", kLoopbackServer, 4101, CertOptions{"ec", "sha1", 1});
+  pki_->issue("rsa-1024", "test-ca", kLoopbackServer, 4102, CertOptions{"rsa:1024", "", 1});
+  struct Case {
+    const char* cert;
+    const char* key;
+    const char* reason;
+  };
+  const Case cases[] = {{"expired.pem", "server-1.key", "expired on"},
+                        {"sha1.pem", "server-1.key", "is signed with SHA1"},
+                        {"rsa-1024.pem", "rsa-1024.key", "has a weak key (RSA 1024 bits)"}};
+  const server::http::HttpsFiles files{cert_path().string(), key_path().string(), "", std::chrono::seconds(5)};
+  // At start: no context is made from them.
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.cert);
+    install(*pki_ / c.cert, cert_path());
+    install(*pki_ / c.key, key_path());
+    try {
+      server::http::make_https_context(files);
+      ADD_FAILURE() << "accepted";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(c.reason), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("--tls-cert " + cert_path().string()), std::string::npos) << e.what();
+    }
+  }
+  // On reload: the good certificate stays.
+  install(*pki_ / "server-1.pem", cert_path());
+  install(*pki_ / "server-1.key", key_path());
+  start();
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.cert);
+    install(*pki_ / c.cert, cert_path());
+    install(*pki_ / c.key, key_path());
+    EXPECT_THROW(http_->reload_certificates(), std::runtime_error);
+    auto client = connect();
+    EXPECT_EQ(client->serial(), kFirstSerial);
+    expect_index(*client);
+  }
+  // An empty key (a renewal that truncates first): refused too, saying so.
+  install(*pki_ / "server-1.pem", cert_path());
+  write_file(key_path(), "");
+  try {
+    http_->reload_certificates();
+    FAIL() << "an empty key was accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("--tls-key " + key_path().string() + " is empty"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(connect()->serial(), kFirstSerial);
 }
 
 TEST_F(HttpsTest, ReplacedFilesArePickedUpByThemselvesAndBadOnesAreNot) {

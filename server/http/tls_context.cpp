@@ -16,17 +16,12 @@
 #include <spdlog/spdlog.h>
 
 #include "server/pem_file.h"
+#include "server/tls_pair_check.h"
 
 namespace filigree::server::http {
 namespace {
 
 namespace ssl = boost::asio::ssl;
-
-// Zeroes the private key's text however the build ends.
-struct Cleansed {
-  std::string& text;
-  ~Cleansed() { OPENSSL_cleanse(text.data(), text.size()); }
-};
 
 // Every certificate of the bundle is trusted for client certificates and
 // named in the CertificateRequest, so that a browser offers only a matching one.
@@ -72,10 +67,9 @@ HttpsContextSource::Stamp stamp_of(const std::string& path) {
 }  // namespace
 
 std::shared_ptr<ssl::context> make_https_context(const HttpsFiles& files) {
-  if (files.cert.empty() || files.key.empty()) throw std::runtime_error("--tls-cert and --tls-key go together");
-  const std::string cert = read_pem(files.cert, "--tls-cert");
-  std::string key = read_pem(files.key, "--tls-key");
-  const Cleansed cleanse{key};
+  // The same checks as the gRPC port's (parse, key match, validity, strength,
+  // signature digest), so that both ports accept and refuse the same files.
+  CheckedTlsPair pair = read_checked_tls_pair(files.cert, files.key);
   const std::string client_ca = files.client_ca.empty() ? std::string() : read_pem(files.client_ca, "--tls-client-ca");
 
   auto context = std::make_shared<ssl::context>(ssl::context::tls_server);
@@ -84,15 +78,11 @@ std::shared_ptr<ssl::context> make_https_context(const HttpsFiles& files) {
   // TLS 1.0 and 1.1 are deprecated (RFC 8996); every browser speaks 1.2 and 1.3.
   SSL_CTX_set_min_proto_version(context->native_handle(), TLS1_2_VERSION);
   boost::system::error_code ec;
-  context->use_certificate_chain(boost::asio::buffer(cert), ec);
+  context->use_certificate_chain(boost::asio::buffer(pair.chain_pem), ec);
   if (ec) throw std::runtime_error("--tls-cert " + files.cert + " is not a usable certificate chain: " + ec.message());
-  context->use_private_key(boost::asio::buffer(key), ssl::context::pem, ec);
-  // A renewal half done (a new certificate, the old key) is the likely mistake: say so plainly.
-  const bool mismatch = ec && ec.category() == boost::asio::error::get_ssl_category() &&
-                        ERR_GET_REASON(static_cast<unsigned long>(ec.value())) == X509_R_KEY_VALUES_MISMATCH;
-  if (ec && !mismatch)
-    throw std::runtime_error("--tls-key " + files.key + " is not a usable private key: " + ec.message());
-  if (mismatch || SSL_CTX_check_private_key(context->native_handle()) != 1) {
+  context->use_private_key(boost::asio::buffer(pair.key_pem), ssl::context::pem, ec);
+  if (ec) throw std::runtime_error("--tls-key " + files.key + " is not a usable private key: " + ec.message());
+  if (SSL_CTX_check_private_key(context->native_handle()) != 1) {
     ERR_clear_error();
     throw std::runtime_error("--tls-key " + files.key + " is not the key of the certificate in --tls-cert " +
                              files.cert);
@@ -131,7 +121,8 @@ std::shared_ptr<ssl::context> HttpsContextSource::current() {
       try {
         replace(make_https_context(files_), "files_changed");
       } catch (const std::exception& e) {
-        spdlog::error("event=https_certificate_reload_failed error=\"{}\" kept=\"{}\"", e.what(),
+        // Warn, once per change of the files: the certificate in force keeps serving.
+        spdlog::warn("event=https_certificate_reload_failed error=\"{}\" kept=\"{}\"", e.what(),
                       subject_of(*context_));
       }
     }

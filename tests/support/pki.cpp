@@ -52,12 +52,24 @@ void Pki::ca(const std::string& name) {
                  "basicConstraints=critical,CA:TRUE", "-addext", "keyUsage=critical,keyCertSign,cRLSign"});
 }
 
-void Pki::issue(const std::string& name, const std::string& ca, const std::string& extensions, long serial) {
+void Pki::issue(const std::string& name, const std::string& ca, const std::string& extensions, long serial,
+                const CertOptions& options) {
+  std::vector<std::string> request = {"req", "-newkey"};
+  if (options.key == "ec")
+    request.insert(request.end(), {"ec", "-pkeyopt", "ec_paramgen_curve:P-256"});
+  else
+    request.push_back(options.key);
+  request.insert(request.end(), {"-nodes", "-keyout", name + ".key", "-out", name + ".csr", "-subj", "/CN=" + name});
+  openssl(dir_, request);
+  reissue(name, name, ca, extensions, serial, options);
+}
+
+void Pki::reissue(const std::string& name, const std::string& of, const std::string& ca, const std::string& extensions,
+                  long serial, const CertOptions& options) {
   std::ofstream(dir_ / (name + ".ext")) << extensions << "\n";
-  openssl(dir_, {"req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:P-256", "-nodes", "-keyout", name + ".key", "-out",
-                 name + ".csr", "-subj", "/CN=" + name});
-  std::vector<std::string> sign = {"x509", "-req", "-in", name + ".csr", "-CA", ca + ".pem", "-CAkey", ca + ".key", "-days", "1",
-                                   "-out", name + ".pem", "-extfile", name + ".ext"};
+  std::vector<std::string> sign = {"x509", "-req", "-in", of + ".csr", "-CA", ca + ".pem", "-CAkey", ca + ".key", "-days",
+                                   std::to_string(options.days), "-out", name + ".pem", "-extfile", name + ".ext"};
+  if (!options.digest.empty()) sign.push_back("-" + options.digest);
   if (serial != 0) {
     sign.insert(sign.end(), {"-set_serial", std::to_string(serial)});
   } else {

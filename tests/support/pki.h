@@ -12,6 +12,13 @@ inline constexpr char kLoopbackServer[] = "subjectAltName=DNS:localhost,IP:127.0
 // A client certificate.
 inline constexpr char kClient[] = "extendedKeyUsage=clientAuth";
 
+// How `issue` makes a certificate; the defaults are a sound one.
+struct CertOptions {
+  std::string key = "ec";  // "ec" (P-256) or an openssl -newkey argument such as "rsa:1024"
+  std::string digest;      // the signature's digest ("sha1"); empty: openssl's default (SHA-256)
+  int days = 1;            // validity from now; negative: expired that many days ago
+};
+
 class Pki {
  public:
   // Creates `dir` if needed; files go there.
@@ -21,7 +28,12 @@ class Pki {
   void ca(const std::string& name);
   // NAME.pem and NAME.key: a certificate signed by CA `ca`, with the x509v3
   // `extensions` (lines of an openssl extfile), serial `serial` (0: random).
-  void issue(const std::string& name, const std::string& ca, const std::string& extensions, long serial = 0);
+  void issue(const std::string& name, const std::string& ca, const std::string& extensions, long serial = 0,
+             const CertOptions& options = {});
+  // NAME.pem only: another certificate for the key of `of` (made by issue),
+  // signed by CA `ca` with `options` (days, digest; the key is `of`'s).
+  void reissue(const std::string& name, const std::string& of, const std::string& ca, const std::string& extensions,
+               long serial, const CertOptions& options);
 
   std::filesystem::path operator/(const std::string& file) const { return dir_ / file; }
   const std::filesystem::path& dir() const { return dir_; }
