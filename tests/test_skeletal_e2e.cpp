@@ -362,14 +362,15 @@ TEST_F(SkeletalTest, BadJointPosesAreInvalidArgumentsAndChangeNothing) {
   twice.add_joint_indices(1);
   twice.mutable_values()->Assign(rest.begin(), rest.begin() + 20);
   expect_invalid(twice, "named twice");
-  // Valid values that cannot skin: scales of 3e38 compose to 9e76, out of
-  // float range. Refused after the joints were set, so they must be undone.
+  // Valid values that cannot skin: scales of 3e38 compose to 9e76, far past
+  // the mesh's reach (and float's range). Refused after the joints were set,
+  // so they must be undone.
   std::vector<JointTransform> huge = rest_locals();
   huge[0].scale = huge[1].scale = Vec3::Constant(3e38);
   const std::vector<float> huge_values = trs_values(huge);
   v1::JointPose overflow;
   overflow.mutable_values()->Assign(huge_values.begin(), huge_values.end());
-  expect_invalid(overflow, "out of float range");
+  expect_invalid(overflow, "beyond this mesh's reach");
   // Nothing changed: the session is still at rest, and still takes good poses.
   const v1::SessionState state = client_->state(s.session_id, s.viewer_token);
   EXPECT_EQ(state.version(), 0u);

@@ -94,14 +94,14 @@ struct Kind {
 };
 
 // In the order send() takes them. Expected codes: filigree_service.cpp's
-// authorize() (unknown session, then token: missing, wrong, wrong role),
+// authorize() (token missing; unknown session or wrong token, one answer; wrong role),
 // Session::submit's PoseError → INVALID_ARGUMENT, CreateReactor's
 // MeshIoError / InvalidMeshError / missing begin → INVALID_ARGUMENT.
 const Kind kKinds[] = {
     {"wrong-size pose (Drive)", StatusCode::INVALID_ARGUMENT},
     {"NaN coordinate (SubmitPose)", StatusCode::INVALID_ARGUMENT},
     {"base index out of range (Drive, partial pose)", StatusCode::INVALID_ARGUMENT},
-    {"wrong token (GetState)", StatusCode::PERMISSION_DENIED},
+    {"wrong token (GetState)", StatusCode::NOT_FOUND},  // what an unknown id hears
     {"no token (JoinSession)", StatusCode::UNAUTHENTICATED},
     {"viewer token poses (SubmitPose)", StatusCode::PERMISSION_DENIED},
     {"unknown session (Watch)", StatusCode::NOT_FOUND},
