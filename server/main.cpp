@@ -73,6 +73,27 @@ std::string redis_password(const std::string& file) {
   return line;
 }
 
+// Session records hold editor tokens, and hierarchy files are loaded in
+// place: another user who can write in --data-dir (or its subdirectories)
+// could replace them. Said at start, once; the server still starts (the
+// directory is the operator's to fix).
+void warn_if_writable_by_others(const std::filesystem::path& data) {
+  namespace fs = std::filesystem;
+  if (data.empty()) return;
+  for (const fs::path& dir : {data, data / "sessions", data / "hierarchies"}) {
+    std::error_code ec;
+    const fs::file_status st = fs::status(dir, ec);
+    if (ec || !fs::is_directory(st)) continue;
+    const fs::perms p = st.permissions();
+    const bool others = (p & fs::perms::others_write) != fs::perms::none;
+    const bool group = (p & fs::perms::group_write) != fs::perms::none;
+    if (!others && !group) continue;
+    spdlog::warn("event=data_dir_writable_by_others dir=\"{}\" mode={:04o} writable_by={} advice=\"chmod 700: session "
+                 "records hold editor tokens\"",
+                 dir.string(), static_cast<unsigned>(p) & 07777u, others ? "everyone" : "group");
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -137,6 +158,10 @@ int main(int argc, char** argv) {
   app.add_option("--http", http_listen,
                  "Also serve browsers over HTTP/1.1 on HOST:PORT: the web viewer's files and gRPC-Web (port 0 picks a "
                  "free one; default: off)");
+  std::vector<std::string> cors_origins;
+  app.add_option("--http-cors-origin", cors_origins,
+                 "An origin (scheme://host[:port]) whose pages may call gRPC-Web on --http across origins; repeat for "
+                 "several, * for any page (default: none; the web viewer served on --http is same-origin and needs none)");
   app.add_option("--web-root", web_root_flag,
                  "Directory of the built web viewer served over --http (default: <executable dir>/../../web_viewer/dist "
                  "if it exists)");
@@ -216,6 +241,7 @@ int main(int argc, char** argv) {
       verified_tls = std::make_unique<VerifiedTlsFiles>(tls);
     }
     const std::filesystem::path data = data_dir;
+    warn_if_writable_by_others(data);
     // One machine: records as files. Replicas: records, leases and hierarchies in Redis
     // (hierarchy files stay in --data-dir as a local cache).
     std::shared_ptr<RedisClient> redis;
@@ -283,6 +309,7 @@ int main(int argc, char** argv) {
       http_options.listen = http_listen;
       http_options.web_root = web_root(web_root_flag);
       http_options.grpc_web_services = {filigree::v1::Filigree::service_full_name()};
+      http_options.cors_origins = cors_origins;
       // HTTPS with the gRPC port's files, mutual TLS included: otherwise --http
       // would reach the same service around --tls-client-ca.
       http_options.tls = {tls.cert, tls.key, tls.client_ca, std::chrono::seconds(tls.refresh_seconds)};

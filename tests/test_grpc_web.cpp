@@ -225,7 +225,8 @@ class GrpcWebTest : public ::testing::Test {
     write(scratch_ / "www" / "assets" / "draco.wasm", std::string("\0asm\1\0\0\0", 8));
     write(scratch_ / "secret.txt", "outside the web root");
     server_ = std::make_unique<ServerProcess>(FILIGREE_SERVER_BINARY,
-                                              std::vector<std::string>{"--web-root", (scratch_ / "www").string()},
+                                              std::vector<std::string>{"--web-root", (scratch_ / "www").string(),
+                                                                       "--http-cors-origin", "http://localhost:5173"},
                                               /*http=*/true);
     stub_ = v1::Filigree::NewStub(grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials()));
   }
@@ -295,7 +296,8 @@ TEST_F(GrpcWebTest, JoinSessionReturnsTheSessionInfoAndStatusOk) {
   const Reply r = call("JoinSession", req, auth(id, created.viewer_token()));
   EXPECT_EQ(r.http_status, 200u);
   EXPECT_EQ(std::string(r.headers[bhttp::field::content_type]), "application/grpc-web+proto");
-  EXPECT_EQ(std::string(r.headers[bhttp::field::access_control_allow_origin]), "*");
+  // Same origin (no Origin header, as the viewer served here): no CORS grant is needed, none is sent.
+  EXPECT_EQ(std::string(r.headers[bhttp::field::access_control_allow_origin]), "");
   EXPECT_TRUE(r.one_trailer_last);
   EXPECT_EQ(r.grpc_status(), 0) << r.grpc_message();
   ASSERT_EQ(r.messages.size(), 1u);
@@ -378,11 +380,12 @@ TEST_F(GrpcWebTest, CorsPreflightAllowsTheGrpcWebHeaders) {
   const auto res = client.exchange(req);
   EXPECT_GE(res.result_int(), 200u);
   EXPECT_LT(res.result_int(), 300u);
-  const std::string origin(res[bhttp::field::access_control_allow_origin]);
-  EXPECT_TRUE(origin == "*" || origin == "http://localhost:5173") << origin;
+  // The origin given with --http-cors-origin, and no other.
+  EXPECT_EQ(std::string(res[bhttp::field::access_control_allow_origin]), "http://localhost:5173");
   EXPECT_NE(std::string(res[bhttp::field::access_control_allow_methods]).find("POST"), std::string::npos);
   const std::string allowed(res[bhttp::field::access_control_allow_headers]);
-  for (const char* h : {"content-type", "x-grpc-web", "x-user-agent", "grpc-timeout", "x-filigree-token", "x-session-id"})
+  for (const char* h : {"content-type", "x-grpc-web", "x-user-agent", "grpc-timeout", "x-filigree-token",
+                        "x-filigree-api-key", "x-session-id"})
     EXPECT_NE(allowed.find(h), std::string::npos) << h << " not in " << allowed;
   const std::string exposed(res[bhttp::field::access_control_expose_headers]);
   EXPECT_NE(exposed.find("grpc-status"), std::string::npos);
@@ -392,6 +395,31 @@ TEST_F(GrpcWebTest, CorsPreflightAllowsTheGrpcWebHeaders) {
   const Reply r = to_reply(client.exchange(grpc_web_request("ListSessions", frame_bytes(0, ""), {})));
   EXPECT_EQ(r.grpc_status(), 0);
   EXPECT_EQ(r.messages.size(), 1u);
+
+  // Another origin's page is not allowed.
+  req.set(bhttp::field::origin, "https://elsewhere.example");
+  const auto refused = client.exchange(req);
+  EXPECT_EQ(refused.result_int(), 403u);
+  EXPECT_EQ(std::string(refused[bhttp::field::access_control_allow_origin]), "");
+}
+
+// A browser can present an API key (x-filigree-api-key): the bridge forwards
+// it to the service, which then lets it list sessions.
+TEST(GrpcWebApiKeys, ABrowserCallWithTheApiKeyHeaderIsAuthorised) {
+  const std::filesystem::path keys = std::filesystem::path(::testing::TempDir()) /
+                                     ("filigree_web_keys_" + std::to_string(::getpid()));
+  // SHA-256 of "browser-api-key-7d2a".
+  std::ofstream(keys) << "browser 903a0e0661a55b86c709123e9daa29ec5d3048d35b96eb3870f3c22f070f435d\n";
+  ServerProcess server(FILIGREE_SERVER_BINARY, {"--api-keys", keys.string()}, /*http=*/true);
+  const auto list = [&](const Headers& headers) {
+    HttpClient client(server.http_address());
+    return to_reply(client.exchange(grpc_web_request("ListSessions", frame_bytes(0, ""), headers)));
+  };
+  EXPECT_EQ(list({}).grpc_status(), 16);  // UNAUTHENTICATED
+  EXPECT_EQ(list({{"x-filigree-api-key", "not-the-key"}}).grpc_status(), 7);  // PERMISSION_DENIED
+  const Reply r = list({{"x-filigree-api-key", "browser-api-key-7d2a"}});
+  EXPECT_EQ(r.grpc_status(), 0) << r.grpc_message();
+  std::filesystem::remove(keys);
 }
 
 TEST_F(GrpcWebTest, WatchStreamsFramesAsTheyComeAndEndsOnShutdown) {

@@ -4,7 +4,8 @@
 // client certificates (mutual TLS) fail cleanly; replaced certificate files
 // reach new connections (on reload_certificates() and by themselves) while
 // open connections keep theirs, and bad ones (garbage, mismatched, empty,
-// expired, weak, SHA-1-signed) keep the old certificate.
+// expired, weak, SHA-1-signed) keep the old certificate; every response
+// carries HSTS, Referrer-Policy and nosniff.
 //
 // In-process: the HTTP server in front of a gRPC server that has only a fake
 // filigree.v1.Filigree (the transport is under test, not the service). The
@@ -179,6 +180,23 @@ TEST_F(HttpsTest, ServesFilesAndGrpcWebOnOneKeptAliveConnection) {
   EXPECT_EQ(list.sessions(0).session_id(), kSessionId);
 
   expect_index(*client);
+}
+
+TEST_F(HttpsTest, EveryResponseSaysHstsNoReferrerAndNoSniffing) {
+  start();
+  auto client = connect();
+  const auto check = [](const auto& res) {
+    EXPECT_EQ(std::string(res["strict-transport-security"]), "max-age=31536000");
+    EXPECT_EQ(std::string(res["referrer-policy"]), "no-referrer");
+    EXPECT_EQ(std::string(res["x-content-type-options"]), "nosniff");
+  };
+  check(client->exchange(get("/index.html")));
+  check(client->exchange(get("/?session=s&token=t")));
+  check(client->exchange(get("/no-such-file")));
+  check(client->exchange(grpc_web_request("ListSessions", v1::ListSessionsRequest())));
+  v1::WatchRequest watch;
+  watch.set_session_id(kSessionId);
+  check(client->exchange(grpc_web_request("Watch", watch)));  // a streamed response's header
 }
 
 TEST_F(HttpsTest, StreamsAServerStreamingCallThenCloses) {

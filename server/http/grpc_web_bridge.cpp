@@ -52,8 +52,10 @@ bool printable_ascii(std::string_view s) {
 }
 
 // Request headers that become call metadata. Everything else (HTTP, CORS,
-// x-grpc-web, x-user-agent) stays at the HTTP layer; grpc-timeout becomes the deadline.
-constexpr std::string_view kForwardedHeaders[] = {"x-filigree-token", "x-session-id"};
+// x-grpc-web, x-user-agent) stays at the HTTP layer; grpc-timeout becomes the
+// deadline. The API key too, so that browsers can create and list sessions
+// on a server with --api-keys.
+constexpr std::string_view kForwardedHeaders[] = {"x-filigree-token", "x-filigree-api-key", "x-session-id"};
 
 }  // namespace
 

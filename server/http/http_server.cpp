@@ -30,6 +30,7 @@
 #include <spdlog/spdlog.h>
 
 #include "server/http/grpc_web_bridge.h"
+#include "server/http/log_redaction.h"
 #include "server/http/static_files.h"
 
 namespace filigree::server::http {
@@ -55,10 +56,53 @@ std::string lower(std::string_view s) {
   return out;
 }
 
+// The request headers a cross-origin page may send (the preflight's answer).
+constexpr char kAllowedHeaders[] =
+    "content-type, x-grpc-web, x-user-agent, grpc-timeout, x-filigree-token, x-filigree-api-key, x-session-id";
+
+// What Access-Control-Allow-Origin says to a request from `origin` (its
+// Origin header, empty if none): nothing unless the origin is configured.
+std::optional<std::string> allowed_origin(const std::vector<std::string>& allowed, const std::string& origin) {
+  if (origin.empty() || allowed.empty()) return std::nullopt;
+  for (const std::string& a : allowed) {
+    if (a == "*") return std::string("*");
+    if (a == origin) return origin;
+  }
+  return std::nullopt;
+}
+
+// `allowed`: allowed_origin()'s answer; `varies`: the answer depends on the
+// request's Origin (a cache must keep one per origin).
 template <class Body>
-void set_cors(bhttp::response<Body>& res) {
-  res.set(bhttp::field::access_control_allow_origin, "*");
+void set_cors(bhttp::response<Body>& res, const std::optional<std::string>& allowed, bool varies) {
+  if (varies) res.set(bhttp::field::vary, "Origin");
+  if (!allowed) return;
+  res.set(bhttp::field::access_control_allow_origin, *allowed);
   res.set(bhttp::field::access_control_expose_headers, "grpc-status, grpc-message, grpc-status-details-bin");
+}
+
+template <class Body>
+void set_security_headers(bhttp::response<Body>& res, bool https) {
+  // The viewer's address carries a token: no Referer may take it to another site.
+  res.set("referrer-policy", "no-referrer");
+  res.set("x-content-type-options", "nosniff");
+  // Browsers that once reached this host over HTTPS never try plaintext for a year.
+  if (https) res.set("strict-transport-security", "max-age=31536000");
+}
+
+// Origins as browsers send them: "*", or scheme://host[:port] and nothing
+// after. Throws std::runtime_error for any other (one that could never match).
+void check_origins(const std::vector<std::string>& origins) {
+  for (const std::string& o : origins) {
+    if (o == "*") continue;
+    const auto scheme = o.find("://");
+    const bool ok = (o.rfind("http://", 0) == 0 || o.rfind("https://", 0) == 0) && scheme != std::string::npos &&
+                    o.size() > scheme + 3 && o.find('/', scheme + 3) == std::string::npos &&
+                    o.find_first_of("?#* \t") == std::string::npos;
+    if (!ok)
+      throw std::runtime_error("--http-cors-origin '" + o.substr(0, 200) +
+                               "' is not an origin: give scheme://host[:port] (no path, no trailing slash), or *");
+  }
 }
 
 template <class Body>
@@ -234,7 +278,9 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     const unsigned max_requests = server_.options.max_requests_per_connection;
     if (max_requests != 0 && ++requests_ >= max_requests) keep_alive_ = false;
     head_ = req.method() == bhttp::verb::head;
-    request_line_ = std::string(sv(req.method_string())) + " " + std::string(sv(req.target()));
+    // Redacted: the viewer's address carries the session's token.
+    request_line_ = std::string(sv(req.method_string())) + " " + redacted_target(sv(req.target()));
+    origin_ = std::string(sv(req[bhttp::field::origin]).substr(0, 1024));
     if (too_large) return refuse_too_large();
     if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
       auto res = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::continue_, version_);
@@ -278,13 +324,31 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     }
   }
 
+  // A browser asks before a cross-origin call. Only configured origins get
+  // the Access-Control-Allow-* answer; another origin gets a 403 (its call
+  // would be refused by the browser anyway: this says why, to a person
+  // reading the network log). Without an Origin it is no preflight: 204.
   void send_preflight() {
+    if (!origin_.empty() && !allowed_origin(server_.options.cors_origins, origin_))
+      return send(text(bhttp::status::forbidden,
+                       "cross-origin calls from this origin are not allowed here (filigree-server --http-cors-origin)\n"));
     bhttp::response<bhttp::empty_body> res{bhttp::status::no_content, version_};
-    res.set(bhttp::field::access_control_allow_methods, "POST, GET, OPTIONS");
-    res.set(bhttp::field::access_control_allow_headers,
-            "content-type, x-grpc-web, x-user-agent, grpc-timeout, x-filigree-token, x-session-id");
-    res.set(bhttp::field::access_control_max_age, "86400");
+    res.set(bhttp::field::allow, "GET, HEAD, POST, OPTIONS");
+    if (!origin_.empty()) {
+      res.set(bhttp::field::access_control_allow_methods, "POST, GET, OPTIONS");
+      res.set(bhttp::field::access_control_allow_headers, kAllowedHeaders);
+      res.set(bhttp::field::access_control_max_age, "86400");
+    }
     send(std::move(res));
+  }
+
+  template <class Body>
+  void set_response_headers(bhttp::response<Body>& res) {
+    res.set(bhttp::field::server, "filigree-server");
+    const auto& allowed = server_.options.cors_origins;
+    const bool varies = !allowed.empty() && std::find(allowed.begin(), allowed.end(), "*") == allowed.end();
+    set_cors(res, allowed_origin(allowed, origin_), varies);
+    set_security_headers(res, kTls);
   }
 
   void serve_file(const bhttp::request<bhttp::string_body>& req) {
@@ -298,7 +362,6 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     const auto headers = [&](auto& res) {
       res.set(bhttp::field::content_type, found.content_type);
       res.set(bhttp::field::cache_control, "no-cache");
-      res.set("x-content-type-options", "nosniff");
       res.content_length(size);
     };
     if (req.method() == bhttp::verb::head) {
@@ -391,6 +454,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     keep_alive_ = false;
     head_ = false;
     request_line_ = "(header over the limit)";
+    origin_.clear();
     send(text(bhttp::status::request_header_fields_too_large,
               "request header over the limit of " + std::to_string(server_.options.max_header_bytes) + " bytes\n"));
   }
@@ -400,9 +464,8 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   void begin_stream() {
     chunked_ = version_ >= 11;
     auto head = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::ok, version_);
-    set_cors(*head);
+    set_response_headers(*head);
     set_grpc_web(*head);
-    head->set(bhttp::field::server, "filigree-server");
     head->set("x-accel-buffering", "no");  // a proxy in front must not buffer the stream
     head->keep_alive(false);
     if (chunked_) head->chunked(true);
@@ -457,8 +520,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   template <class Body>
   void send(bhttp::response<Body>&& res) {
     res.version(version_);
-    res.set(bhttp::field::server, "filigree-server");
-    set_cors(res);
+    set_response_headers(res);
     res.keep_alive(keep_alive_ && !stopping_);
     if constexpr (std::is_same_v<Body, bhttp::string_body>) {
       res.prepare_payload();
@@ -542,7 +604,8 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   beast::flat_buffer buffer_;
   std::optional<bhttp::request_parser<bhttp::string_body>> parser_;
   unsigned version_ = 11;
-  std::string request_line_;
+  std::string request_line_;  // for log lines: secrets redacted
+  std::string origin_;        // the request's Origin header; empty: none
   bool keep_alive_ = true, head_ = false, idle_ = false, stopping_ = false, closed_ = false;
   unsigned requests_ = 0;  // begun on this connection
   // gRPC-Web
@@ -601,6 +664,7 @@ void HttpServer::Impl::refuse(tcp::socket& socket) {
   if (!tls) {
     static constexpr std::string_view kBusy =
         "HTTP/1.1 503 Service Unavailable\r\nServer: filigree-server\r\nRetry-After: 1\r\n"
+        "Referrer-Policy: no-referrer\r\nX-Content-Type-Options: nosniff\r\n"
         "Content-Type: text/plain; charset=utf-8\r\nContent-Length: 26\r\nConnection: close\r\n\r\n"
         "too many open connections\n";
     socket.non_blocking(true, ec);
@@ -629,6 +693,7 @@ std::vector<std::shared_ptr<ConnectionBase>> HttpServer::Impl::live_connections(
 HttpServer::HttpServer(HttpOptions options, std::shared_ptr<grpc::Channel> channel)
     : impl_(std::make_unique<Impl>(std::move(options), std::move(channel))) {
   Impl& s = *impl_;
+  check_origins(s.options.cors_origins);
   const std::string& listen = s.options.listen;
   const auto colon = listen.rfind(':');
   if (colon == std::string::npos) throw std::runtime_error("--http wants HOST:PORT, got '" + listen + "'");
@@ -663,9 +728,11 @@ HttpServer::HttpServer(HttpOptions options, std::shared_ptr<grpc::Channel> chann
         }
       }
     });
-  spdlog::info("event=http_listening address={} transport={} web_root=\"{}\"", s.address,
+  std::string cors;
+  for (const std::string& o : s.options.cors_origins) cors += (cors.empty() ? "" : ",") + o;
+  spdlog::info("event=http_listening address={} transport={} web_root=\"{}\" cors_origins=\"{}\"", s.address,
                !s.tls ? "plaintext" : s.options.tls.client_ca.empty() ? "https" : "https-mutual-tls",
-               s.files.root() ? s.files.root()->string() : std::string());
+               s.files.root() ? s.files.root()->string() : std::string(), cors);
 }
 
 HttpServer::~HttpServer() { shutdown(); }

@@ -1,15 +1,23 @@
 #pragma once
 // The HTTP/1.1 face of filigree-server for browsers (Boost.Beast): the built
 // web viewer as static files, and gRPC-Web for the same service on the same
-// port (grpc_web_bridge.h), with CORS. Its own I/O threads; nothing blocks
+// port (grpc_web_bridge.h), with CORS for the origins configured (none by
+// default: the viewer is served from this port, same origin, and needs
+// none). Its own I/O threads; nothing blocks
 // them on gRPC (gRPC completions are posted to each connection's strand).
 //
 // With HttpOptions::tls, HTTPS only (tls_context.h): the gRPC port's
 // certificate, renewed without dropping connections; a plaintext request
 // there gets its connection closed.
 //
-// Routes: OPTIONS anything → CORS preflight (204); POST → gRPC-Web
-// (/<package.Service>/<Method>); GET/HEAD → static files (static_files.h).
+// Routes: OPTIONS anything → CORS preflight (204; 403 for an origin not
+// allowed); POST → gRPC-Web (/<package.Service>/<Method>); GET/HEAD → static
+// files (static_files.h).
+//
+// Every response says Referrer-Policy: no-referrer (the viewer's address
+// carries a token, which must not leave in a Referer) and
+// X-Content-Type-Options: nosniff; over HTTPS also Strict-Transport-Security.
+// Log lines never show a token or key (log_redaction.h).
 
 #include <chrono>
 #include <cstddef>
@@ -80,6 +88,11 @@ struct HttpOptions {
   // channel to the replica that serves it, or nullptr for the in-process
   // channel. Empty: always in-process (one machine).
   std::function<std::shared_ptr<grpc::Channel>(const std::string& session_id)> route;
+  // Origins (scheme://host[:port], as browsers send them in Origin) whose
+  // pages may call gRPC-Web here across origins; "*": any page. Empty: none,
+  // no Access-Control-Allow-Origin is ever sent (same origin only: the web
+  // viewer served on this port needs nothing more).
+  std::vector<std::string> cors_origins;
   // Certificate and key: HTTPS instead of HTTP; with client_ca, mutual TLS
   // (browsers then need a client certificate of that CA installed).
   HttpsFiles tls;
