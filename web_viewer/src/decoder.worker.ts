@@ -20,6 +20,7 @@ import {
   type DracoDecoderModule,
 } from './frame';
 import { frameMesh, vertexNormals } from './geometry';
+import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
 import type { Buffers, CallError, ChunkedFrameMessage, FromWorker, SingleFrameMessage, ToWorker } from './pipeline-protocol';
 import { STRETCH_RED, stretchColor, TriangleStretch } from './stretch';
 
@@ -49,6 +50,8 @@ let stretch: TriangleStretch | null = null;
 let stretchValues = new Float32Array(0);
 let vertexStretch = new Float32Array(0);
 let stretchMax = 0;
+let client: SessionClient | null = null;
+let fineEdges: Set<number> | null = null;  // of the detailed mesh, for the cut overlay
 
 // ------------------------------------------------------------------ join
 
@@ -86,11 +89,12 @@ function callError(error: unknown): CallError {
 
 async function join(serverUrl: string, sessionId: string, token: string): Promise<void> {
   const started = performance.now();
-  const client = new SessionClient(serverUrl, sessionId, token,
+  const joining = new SessionClient(serverUrl, sessionId, token,
     countingFetch((loaded, total) => post({ type: 'progress', stage: 'download', loaded, total })));
+  client = new SessionClient(serverUrl, sessionId, token);
   let info;
   try {
-    info = await client.join();
+    info = await joining.join();
   } catch (error) {
     post({ type: 'joinFailed', error: callError(error) });
     return;
@@ -234,6 +238,47 @@ function stretchColors(out: Float32Array): void {
   }
 }
 
+// ------------------------------------------------------------------ overlays
+
+// The cut (coarse edges over a tint of what is refined) and the regions
+// (palette colours, outlines) of the latest frame, for drawing.
+async function overlays(id: number): Promise<void> {
+  let answer;
+  try {
+    answer = await client!.getOverlays();
+  } catch (error) {
+    post({ type: 'overlaysFailed', id, error: callError(error) });
+    return;
+  }
+  const n = rest.length / 3;
+  const regionColors = new Float32Array(3 * n);
+  let regionEdges: Uint32Array = new Uint32Array(0);
+  let cutEdges: Uint32Array = new Uint32Array(0);
+  const refined = new Float32Array(3 * n);
+  let refinedTriangles = 0;
+  if (answer.ready && answer.regionOf.length === n) {
+    regionVertexColours(answer.regionOf, colourRegions(answer.regionOf, faces), regionColors);
+    regionEdges = regionBoundaryEdges(answer.regionOf, faces);
+  }
+  if (answer.ready) {
+    fineEdges ??= edgeSet(faces, n);
+    const cut = cutForDrawing(answer.cutFaces, fineEdges, n);
+    cutEdges = cut.coarse;
+    refinedTriangles = cut.refinedTriangles;
+    // Refined: a cyan tint; elsewhere the mesh's own colour (linear RGB of 0xc9bfae and of 0x5fd3f0).
+    for (let v = 0; v < n; ++v) {
+      const [r, g, b] = cut.refined[v] ? [0.117, 0.651, 0.871] : [0.584, 0.521, 0.423];
+      refined[3 * v] = r;
+      refined[3 * v + 1] = g;
+      refined[3 * v + 2] = b;
+    }
+  }
+  post({
+    type: 'overlays', id, ready: answer.ready, version: answer.version, regionCount: answer.regionCount,
+    cutTriangles: Math.floor(answer.cutFaces.length / 3), refinedTriangles, regionColors, regionEdges, cutEdges, refined,
+  }, [regionColors.buffer, regionEdges.buffer, cutEdges.buffer, refined.buffer]);
+}
+
 // ------------------------------------------------------------------ messages
 
 self.onmessage = (event: MessageEvent<ToWorker>) => {
@@ -247,6 +292,9 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       break;
     case 'recycle':
       if (message.buffers.positions.length === rest.length) spare.push(message.buffers);
+      break;
+    case 'overlays':
+      void overlays(message.id);
       break;
     case 'stretch':
       stretchOn = message.on;

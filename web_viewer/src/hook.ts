@@ -61,6 +61,10 @@ export interface TestHook {
   lastLoss: string;         // why the last stream was lost
   newestVersion: number;    // of the frames arrived
   drawnVersion: number;     // of the last frame drawn
+  framesDrawn: number;      // draws that showed a newer version than the one before
+  pageMsTotal: number;      // this thread's own time for frames (receiving, swapping in), summed
+  drawMsTotal: number;      // renderer.render time (uploads and draw calls), summed over draws
+  draws: number;            // every draw (frames, orbits, overlays)
 }
 
 declare global {
@@ -76,4 +80,5 @@ export const hook: TestHook = window.__filigree = {
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
   loadStage: '', joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
   editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
+  framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0,
 };

@@ -7,7 +7,7 @@
 // hands frames on (the newest first), swaps finished buffers into the
 // geometry and draws on requestAnimationFrame when something changed.
 import { ChangeLog } from './changes';
-import { Code, describeError, isCode, SessionClient, type Overlays, type SessionInfo } from './client';
+import { Code, describeError, isCode, SessionClient, type SessionInfo } from './client';
 import { isChunked } from './frame';
 import { HandleEditor, type EditMode } from './handles';
 import { FRAME_EVENT, hook } from './hook';
@@ -18,7 +18,7 @@ import { StretchOverlay } from './overlay-stretch';
 import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
 import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
-import { FramePipeline, type Applied, type Arrival, type Failed, type Joined } from './pipeline';
+import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined } from './pipeline';
 import { pollPresence } from './presence';
 import { isFinal, lossReason, retryDelay } from './reconnect';
 import { MeshView } from './scene';
@@ -44,7 +44,7 @@ class Viewer {
   private cut!: CutWireframe;
   private regions!: RegionsOverlay;
   private stretch!: StretchOverlay;
-  private feed!: OverlayFeed;
+  private feed!: OverlayFeed<DrawableOverlays>;
   private handles: HandleEditor | null = null;
   private lastVersion = 0n;
   private stream = { number: 0, abort: new AbortController() };  // the current Watch
@@ -122,7 +122,12 @@ class Viewer {
     this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing);
     this.view.onDrawn = (drawMs, at) => {
       this.stats.frameDrawn(this.appliedVersion, drawMs, at);
-      if (this.appliedVersion !== null) hook.drawnVersion = Number(this.appliedVersion);
+      hook.drawMsTotal += drawMs;
+      ++hook.draws;
+      if (this.appliedVersion !== null && Number(this.appliedVersion) !== hook.drawnVersion) {
+        hook.drawnVersion = Number(this.appliedVersion);
+        ++hook.framesDrawn;
+      }
     };
     this.setupOverlays(joined);
 
@@ -243,13 +248,12 @@ class Viewer {
   // worker; the cut and the regions from GetOverlays, polled while one of them is shown.
   private setupOverlays(joined: Joined): void {
     const wireframe = new BaseWireframe(joined.basePositions, joined.baseFaces, joined.originalIds);
-    const position = this.view.geometry.getAttribute('position') as import('three').BufferAttribute;
-    this.cut = new CutWireframe(position);
+    this.cut = new CutWireframe(this.view.geometry);
     this.regions = new RegionsOverlay(this.view.geometry);
     this.stretch = new StretchOverlay(this.view.geometry, (on) => this.pipeline.setStretch(on));
     for (const overlay of [this.regions, this.stretch, this.cut, wireframe]) this.view.add(overlay.object);
     this.overlays = [wireframe, this.cut, this.regions, this.stretch];
-    this.feed = new OverlayFeed(() => this.client.getOverlays(), (overlays) => this.showServerOverlays(overlays),
+    this.feed = new OverlayFeed(() => this.pipeline.overlays(), (overlays) => this.showServerOverlays(overlays),
       (error) => setNote('overlays-status', this.describe(error), true));
     showOverlayToggles(this.overlays, (overlay, visible) => {
       if (visible) this.shown.add(overlay);
@@ -261,14 +265,15 @@ class Viewer {
     });
   }
 
-  private showServerOverlays(overlays: Overlays): void {
-    this.cut.setFaces(overlays.cutFaces);
-    this.regions.setRegions(overlays.regionOf);
+  private showServerOverlays(overlays: DrawableOverlays): void {
+    this.cut.setCut(overlays.cutEdges, overlays.refined, overlays.cutTriangles, overlays.refinedTriangles);
+    this.regions.setRegions(overlays.regionColors, overlays.regionEdges);
     hook.regionCount = overlays.regionCount;
     hook.overlaysVersion = Number(overlays.version);
     hook.cutTriangles = this.cut.triangleCount;
     setNote('overlays-status', `Frame ${overlays.version}: ${overlays.regionCount} ` +
-      `region${overlays.regionCount === 1 ? '' : 's'}, a cut mesh of ${this.cut.triangleCount} triangles.`);
+      `region${overlays.regionCount === 1 ? '' : 's'}, a cut mesh of ${this.cut.triangleCount} triangles ` +
+      `(${overlays.refinedTriangles} at full detail).`);
     this.view.invalidate();
   }
 
@@ -414,6 +419,7 @@ class Viewer {
     ++hook.framesApplied;
     const pageMs = this.pendingPageMs + performance.now() - start;
     this.pendingPageMs = 0;
+    hook.pageMsTotal += pageMs;
     this.stats.frameApplied(result, pageMs, performance.now());
     window.dispatchEvent(new Event(FRAME_EVENT));
   }

@@ -1,25 +1,44 @@
 // The cut mesh (GetOverlays.cut_faces): the triangles the runtime is made of
 // after its last cut update, coarse where detail is recovered directly and
-// fine where it was refined, drawn as a wireframe over the deformed positions.
+// fine where it was refined. Drawn so that it reads on a dense scan: the
+// edges of its coarse triangles (those that are not triangles of the
+// detailed mesh) as lines, and where it is refined to full detail as a cyan
+// tint of the surface, not every one of its triangles. The session worker
+// builds both (overlay-build.ts); this only swaps them in.
 import * as THREE from 'three';
 
-import { uniqueEdges, type Overlay } from './overlays';
+import type { Overlay } from './overlays';
 
 export class CutWireframe implements Overlay {
   readonly id = 'cut';
-  readonly label = 'Cut mesh';
+  readonly label = 'Cut mesh (lines: coarse, cyan: refined)';
   readonly fromServer = true;
-  readonly object: THREE.LineSegments;
-  private faces: ArrayLike<number> = [];
+  readonly object = new THREE.Group();
+  private readonly lines: THREE.LineSegments;
+  private readonly tint: THREE.Mesh;
+  private readonly colors: THREE.BufferAttribute;
+  triangleCount = 0;
+  refinedTriangles = 0;
 
-  // `live` is the mesh's position attribute (original order), which every frame replaces the array of.
-  constructor(private readonly live: THREE.BufferAttribute) {
-    // Depth-tested (the mesh is pushed back a little, scene.ts): only the
-    // visible side's edges, else tens of thousands of lines overlap.
-    const material = new THREE.LineBasicMaterial({ color: 0x7fe3ff, transparent: true, opacity: 0.7 });
-    this.object = new THREE.LineSegments(this.geometry([]), material);
-    this.object.frustumCulled = false;
-    this.object.renderOrder = 1;
+  // `mesh`: the detailed mesh's geometry, whose attributes this shares.
+  constructor(private readonly mesh: THREE.BufferGeometry) {
+    // Depth-tested (the mesh is pushed back a little, scene.ts): only the visible side's edges.
+    const material = new THREE.LineBasicMaterial({ color: 0x7fe3ff, transparent: true, opacity: 0.8 });
+    this.lines = new THREE.LineSegments(this.edges(new Uint32Array(0)), material);
+    this.lines.frustumCulled = false;
+    this.lines.renderOrder = 1;
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute('position', mesh.getAttribute('position'));
+    geometry.setAttribute('normal', mesh.getAttribute('normal'));
+    geometry.setIndex(mesh.getIndex());
+    this.colors = new THREE.BufferAttribute(new Float32Array(mesh.getAttribute('position').count * 3), 3);
+    geometry.setAttribute('color', this.colors);
+    this.tint = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({
+      vertexColors: true, roughness: 0.55, polygonOffset: true, polygonOffsetFactor: -1, polygonOffsetUnits: -1,
+    }));
+    this.tint.frustumCulled = false;
+    this.tint.visible = false;
+    this.object.add(this.tint, this.lines);
     this.object.visible = false;
   }
 
@@ -29,32 +48,26 @@ export class CutWireframe implements Overlay {
 
   update(): void {}  // the shared position attribute moves it
 
-  // A new cut: a new geometry (the edge count changes), the old one freed.
-  setFaces(faces: ArrayLike<number>): void {
-    if (sameValues(faces, this.faces)) return;
-    this.faces = faces;
-    const old = this.object.geometry;
-    this.object.geometry = this.geometry(faces);
+  // A new cut: its coarse edges (index pairs) and the per-vertex tint.
+  setCut(coarse: Uint32Array, tint: Float32Array, triangles: number, refined: number): void {
+    this.triangleCount = triangles;
+    this.refinedTriangles = refined;
+    const old = this.lines.geometry;
+    this.lines.geometry = this.edges(coarse);
     // Disposing a geometry frees its attributes' GPU buffers: not the shared one.
     old.deleteAttribute('position');
     old.dispose();
+    if (tint.length === this.colors.array.length) {
+      this.colors.array = tint;
+      this.colors.needsUpdate = true;
+      this.tint.visible = refined > 0;
+    }
   }
 
-  get triangleCount(): number {
-    return Math.floor(this.faces.length / 3);
-  }
-
-  private geometry(faces: ArrayLike<number>): THREE.BufferGeometry {
+  private edges(pairs: Uint32Array): THREE.BufferGeometry {
     const geometry = new THREE.BufferGeometry();
-    // The mesh's own attribute: one upload per frame serves both.
-    geometry.setAttribute('position', this.live);
-    geometry.setIndex(new THREE.BufferAttribute(uniqueEdges(faces), 1));
+    geometry.setAttribute('position', this.mesh.getAttribute('position'));
+    geometry.setIndex(new THREE.BufferAttribute(pairs, 1));
     return geometry;
   }
-}
-
-function sameValues(a: ArrayLike<number>, b: ArrayLike<number>): boolean {
-  if (a.length !== b.length) return false;
-  for (let i = 0; i < a.length; ++i) if (a[i] !== b[i]) return false;
-  return true;
 }

@@ -2,11 +2,12 @@
 // received frame, at most one call in flight and one call per MIN_INTERVAL_MS.
 // The server builds overlays only while someone asks (at least every 5 s), so
 // an answer may be `ready: false`: the next frame brings the next ask.
-import type { Overlays } from './client';
+// What an answer needs for the polling: the generated Overlays, or what the worker made of it.
+interface Overlays { ready: boolean; version: bigint }
 
 export const MIN_INTERVAL_MS = 250;
 
-export class OverlayFeed {
+export class OverlayFeed<O extends Overlays = Overlays> {
   private wanted = false;
   private due = false;        // a frame arrived since the last call started
   private busy = false;
@@ -14,8 +15,8 @@ export class OverlayFeed {
   private timer: ReturnType<typeof setTimeout> | undefined;
   private newest = -1n;       // version of the newest overlays handed on
 
-  constructor(private readonly fetch: () => Promise<Overlays>,
-              private readonly ready: (overlays: Overlays) => void,
+  constructor(private readonly fetch: () => Promise<O>,
+              private readonly ready: (overlays: O) => void,
               private readonly failed: (error: unknown) => void,
               private readonly now: () => number = () => performance.now()) {}
 

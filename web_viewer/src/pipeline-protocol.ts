@@ -19,7 +19,8 @@ export type ToWorker =
   | { type: 'join'; serverUrl: string; sessionId: string; token: string }
   | { type: 'frame'; id: number; chunked?: ChunkedFrameMessage; single?: SingleFrameMessage }
   | { type: 'recycle'; buffers: Buffers }
-  | { type: 'stretch'; on: boolean };
+  | { type: 'stretch'; on: boolean }
+  | { type: 'overlays'; id: number };
 
 // A failed call, as the page rebuilds it (a ConnectError cannot be posted).
 export interface CallError { code: number | null; rawMessage: string; message: string; fetchFailed: boolean }
@@ -38,5 +39,12 @@ export type FromWorker =
   }
   // The stretch colours of the frame held, when the overlay is turned on.
   | { type: 'colors'; colors: Float32Array; stretchMax: number }
+  // GetOverlays made drawable (overlay-build.ts); ready false: not built yet, ask after the next frame.
+  | {
+    type: 'overlays'; id: number; ready: boolean; version: bigint; regionCount: number; cutTriangles: number;
+    refinedTriangles: number; regionColors: Float32Array; regionEdges: Uint32Array; cutEdges: Uint32Array;
+    refined: Float32Array;
+  }
+  | { type: 'overlaysFailed'; id: number; error: CallError }
   // resync: the keyframe the stream's next frames need is not held here.
   | { type: 'frameFailed'; id: number; version: bigint; message: string; resync: boolean };

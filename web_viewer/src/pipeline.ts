@@ -13,6 +13,7 @@ import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protoc
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
 export type Applied = Extract<FromWorker, { type: 'applied' }>;
 export type Failed = Extract<FromWorker, { type: 'frameFailed' }>;
+export type DrawableOverlays = Extract<FromWorker, { type: 'overlays' }>;
 
 // A frame and the Watch stream it came on (streams are numbered from 1).
 export interface Arrival { frame: Frame; stream: number }
@@ -40,6 +41,7 @@ export class FramePipeline {
   private inFlight: { id: number; arrival: Arrival } | null = null;
   private nextId = 1;
   private joinWaiter: { resolve(j: Joined): void; reject(e: Error): void } | null = null;
+  private readonly overlayWaiters = new Map<number, { resolve(o: DrawableOverlays): void; reject(e: Error): void }>();
 
   constructor(private readonly events: PipelineEvents) {
     this.worker.onmessage = (event: MessageEvent<FromWorker>) => this.received(event.data);
@@ -79,6 +81,15 @@ export class FramePipeline {
     const transfer: Transferable[] = [buffers.positions.buffer, buffers.normals.buffer];
     if (buffers.colors) transfer.push(buffers.colors.buffer);
     this.send({ type: 'recycle', buffers }, transfer);
+  }
+
+  // GetOverlays, called and made drawable in the worker.
+  overlays(): Promise<DrawableOverlays> {
+    const id = this.nextId++;
+    return new Promise((resolve, reject) => {
+      this.overlayWaiters.set(id, { resolve, reject });
+      this.send({ type: 'overlays', id });
+    });
   }
 
   setStretch(on: boolean): void {
@@ -122,6 +133,14 @@ export class FramePipeline {
         this.joinWaiter?.resolve(message);
         this.joinWaiter = null;
         break;
+      case 'overlays':
+      case 'overlaysFailed': {
+        const waiter = this.overlayWaiters.get(message.id);
+        this.overlayWaiters.delete(message.id);
+        if (message.type === 'overlays') waiter?.resolve(message);
+        else waiter?.reject(rebuild(message.error));
+        break;
+      }
       case 'colors':
         this.events.colors(message.colors, message.stretchMax);
         break;

@@ -8,7 +8,7 @@ export const FIRST_DELAY_MS = 250;
 // While the server has been gone less than SHORT_OUTAGE_MS, retries stay at
 // most SHORT_CAP_MS apart, so that the page follows again within about that
 // long of the server's return (a restart takes seconds); after that, up to LONG_CAP_MS.
-export const SHORT_CAP_MS = 1500;
+export const SHORT_CAP_MS = 1000;
 export const LONG_CAP_MS = 15_000;
 export const SHORT_OUTAGE_MS = 60_000;
 

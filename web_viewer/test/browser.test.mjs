@@ -13,7 +13,7 @@
 
 import { after, before, describe, it } from 'node:test';
 import assert from 'node:assert/strict';
-import { execFileSync } from 'node:child_process';
+import { execFileSync, spawn } from 'node:child_process';
 import { createHash, X509Certificate } from 'node:crypto';
 import { mkdtempSync, readFileSync, rmSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -23,7 +23,8 @@ import { chromium } from 'playwright-core';
 import { PNG } from 'pngjs';
 
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, cli, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, upload,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, upload,
+  waitForHealth, writeEllipsoidObj,
 } from './harness.mjs';
 
 const MESH = join(ROOT, 'tests', 'data', 'bunny_small.obj');
@@ -392,6 +393,90 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await page.context().close();
   });
 
+  // Generated bodies (harness.mjs, writeEllipsoidObj): one standing along z
+  // whose detail faces +x, one standing along y whose detail faces −z.
+  for (const body of [
+    { name: 'Z-up', axes: [1, 0.6, 3], up: 'z', front: [1, 0, 0] },
+    { name: 'Y-up', axes: [1, 3, 0.6], up: 'y', front: [0, 0, -1] },
+  ]) {
+    it(`frames a ${body.name} body from its front, filling the view, and fits it again on F and the Fit button`, { timeout: TEST_TIMEOUT_MS }, async (t) => {
+      const file = join(dataDir, `body-${body.up}.obj`);
+      writeEllipsoidObj(file, body.axes, body.up, body.front);
+      const made = await upload(grpcAddress, file, `browser-fit-${body.up}`);
+      const page = await open(`?session=${made.session_id}#token=${made.viewer_token}`);
+      await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesRendered >= 1);
+      const upVector = body.up === 'z' ? [0, 0, 1] : [0, 1, 0];
+      const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+      const look = async () => {
+        const [extent, view] = await page.evaluate(() => [window.__filigree.screenExtent(), window.__filigree.viewDirection()]);
+        return { extent, view, fill: Math.max(extent.width, extent.height) };
+      };
+      const first = await look();
+      assert.equal((await hookState(page)).upAxis, body.up);
+      // Seen from the front: looking along −front, up on screen is the body's up.
+      assert.ok(dot(first.view.look, body.front) < -0.99, `looks at the front: ${first.view.look}`);
+      assert.ok(dot(first.view.up, upVector) > 0.99, `up is ${body.up}: ${first.view.up}`);
+      assert.ok(first.fill >= 0.5, `fills ${(100 * first.fill).toFixed(0)}% of the view's height or width`);
+      assert.ok(first.extent.left >= 0 && first.extent.top >= 0 && first.extent.left + first.extent.width <= 1
+        && first.extent.top + first.extent.height <= 1, `all in view: ${JSON.stringify(first.extent)}`);
+
+      // Zoomed out and turned: F brings it back; so does the Fit button.
+      const canvas = await page.locator('#view canvas').boundingBox();
+      const middle = { x: canvas.x + canvas.width / 2, y: canvas.y + canvas.height / 2 };
+      for (const refit of [() => page.keyboard.press('f'), () => page.click('#fit')]) {
+        await page.mouse.move(middle.x, middle.y);
+        for (let i = 0; i < 6; ++i) await page.mouse.wheel(0, 400);
+        await page.mouse.move(middle.x + 5, middle.y + 5);
+        await page.mouse.down();
+        await page.mouse.move(middle.x + 150, middle.y + 60, { steps: 5 });
+        await page.mouse.up();
+        await waitFor(page, () => {
+          const e = window.__filigree.screenExtent();
+          return Math.max(e.width, e.height) < 0.4;
+        });
+        const fits = (await hookState(page)).fits;
+        await refit();
+        await waitFor(page, (n) => window.__filigree.fits > n, fits);
+        const again = await look();
+        assert.ok(Math.abs(again.fill - first.fill) < 1e-3, `fit again: ${again.fill} vs ${first.fill}`);
+        assert.ok(dot(again.view.look, body.front) < -0.99);
+      }
+      t.diagnostic(`${body.name}: fills ${(100 * first.extent.width).toFixed(0)}% × ${(100 * first.extent.height).toFixed(0)}% ` +
+        `of the view, looking along ${first.view.look.map((x) => x.toFixed(2))}`);
+      await page.context().close();
+    });
+  }
+
+  it('at phone width (390 px): the canvas first and whole, the panel a drawer, by keyboard too', { timeout: TEST_TIMEOUT_MS }, async () => {
+    const context = await browser.newContext({ viewport: { width: 390, height: 844 }, isMobile: true, hasTouch: true });
+    const page = await context.newPage();
+    page.on('pageerror', (error) => pageErrors.push(`phone: ${error.message}`));
+    await page.goto(`${baseUrl}/${viewerUrl(session.editor_token)}`);
+    await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesRendered >= 1);
+    const canvas = await page.locator('#view canvas').boundingBox();
+    assert.ok(canvas.x === 0 && canvas.y === 0 && canvas.width >= 389 && canvas.height >= 600,
+      `the canvas takes the screen: ${JSON.stringify(canvas)}`);
+    assert.equal(await page.isVisible('#panel'), false, 'the drawer starts closed');
+    const extent = await page.evaluate(() => window.__filigree.screenExtent());
+    assert.ok(Math.max(extent.width, extent.height) >= 0.5, `the mesh fills the view: ${JSON.stringify(extent)}`);
+
+    // Keyboard only: Tab to the panel button, Enter opens the drawer, Escape closes it.
+    await page.keyboard.press('Tab');
+    await page.keyboard.press('Tab');
+    assert.equal(await page.evaluate(() => document.activeElement?.id), 'panel-toggle');
+    await page.keyboard.press('Enter');
+    await waitFor(page, () => document.querySelector('#panel').getBoundingClientRect().height > 0);
+    const panel = await page.locator('#panel').boundingBox();
+    assert.ok(panel.x >= 0 && panel.x + panel.width <= 390 && panel.y + panel.height <= 844 + 1,
+      `the drawer is on screen: ${JSON.stringify(panel)}`);
+    assert.equal(await page.getAttribute('#panel-toggle', 'aria-expanded'), 'true');
+    assert.ok(await page.isVisible('#stats'));
+    await page.keyboard.press('Escape');
+    await waitFor(page, () => document.querySelector('#panel').getBoundingClientRect().height === 0);
+    assert.equal(await page.getAttribute('#panel-toggle', 'aria-expanded'), 'false');
+    await context.close();
+  });
+
   it('shows the regions, which the threshold turns on and off', { timeout: TEST_TIMEOUT_MS }, async (t) => {
     const page = await open(viewerUrl(session.editor_token));
     await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
@@ -522,5 +607,107 @@ describe('the web viewer over HTTPS (--tls-cert on the --http port)', { timeout:
     } finally {
       await plain.close();
     }
+  });
+});
+
+// ------------------------------------------------------------------ restarts
+
+describe('the web viewer across server restarts (--data-dir, same ports)', { timeout: 4 * TEST_TIMEOUT_MS }, () => {
+  const FOLLOW_MS = 2000;   // the page follows again within this long of the health check passing
+  let server;
+  let dataDir;
+  let addresses;
+  let browser;
+  let session;
+  let page;                 // one page across both restarts
+  const pageErrors = [];
+
+  before(async () => {
+    assert.ok(process.env.FILIGREE_SERVER, 'set FILIGREE_SERVER to the filigree-server binary');
+    checkTools();
+    dataDir = mkdtempSync(join(tmpdir(), 'filigree-viewer-restart-'));
+    server = startServer(dataDir);
+    addresses = await server.addresses;
+    session = await upload(addresses.grpc, MESH, 'browser-restart-test');
+    browser = await chromium.launch({ executablePath: CHROMIUM, headless: true, args: CHROMIUM_ARGS });
+    const context = await browser.newContext({ viewport: { width: 800, height: 600 } });
+    page = await context.newPage();
+    page.on('pageerror', (error) => pageErrors.push(`restart: ${error.message}`));
+    await page.goto(`http://${addresses.http}/?session=${session.session_id}#token=${session.viewer_token}`);
+    await page.waitForFunction(() => window.__filigree?.state === 'live', null, { timeout: WAIT_MS });
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  after(async () => {
+    await browser?.close();
+    if (server && server.child.exitCode === null && server.child.signalCode === null) await stopServer(server, STOP_TIMEOUT_MS);
+    if (dataDir) rmSync(dataDir, { recursive: true, force: true });
+    assert.deepEqual(pageErrors, [], 'no uncaught errors in the page');
+  }, { timeout: HOOK_TIMEOUT_MS });
+
+  // Drives the session until the server goes away; kills the server with
+  // `signal` while the page follows; starts it again on the same ports and
+  // data directory; once its health check passes, drives again and waits
+  // for the page to draw a version newer than any it saw before the kill.
+  async function restart(t, signal) {
+    const before = await hookState(page);
+    // A driver of its own (not cli()): it is stopped with the server, not awaited (it may retry for long).
+    const driver = spawn(CLI, driveArgs(addresses.grpc, session, 'bend', 100_000, 30, `restart-${signal}`), { stdio: 'ignore' });
+    const driverExited = new Promise((done) => driver.on('exit', done));
+    await page.waitForFunction((v) => window.__filigree.drawnVersion >= v + 5, before.drawnVersion, { timeout: WAIT_MS });
+
+    server.child.kill(signal);
+    const stopped = await server.exited;
+    assert.equal(stopped.signal ?? 'exit', signal === 'SIGKILL' ? 'SIGKILL' : 'exit', `the server stopped by ${signal}`);
+    await page.waitForFunction(() => window.__filigree.state === 'reconnecting', null, { timeout: WAIT_MS });
+    const lastSeen = (await hookState(page)).newestVersion;
+    driver.kill('SIGKILL');
+    await driverExited;
+
+    server = startServer(dataDir, [], addresses);
+    await server.addresses;
+    await waitForHealth(addresses.grpc, WAIT_MS);
+    const healthy = Date.now();
+    const again = cli(driveArgs(addresses.grpc, session, 'bend', 90, 30, `restart-${signal}-again`));
+    const following = (v) => window.__filigree.state === 'live' && window.__filigree.drawnVersion > v;
+    // Waits longer than the bound, so that a failure says how late the page was, and in what state.
+    const late = await page.waitForFunction(following, lastSeen, { timeout: WAIT_MS }).then(() => null, (e) => e.message);
+    const followed = Date.now() - healthy;
+    const atFollow = await hookState(page);
+    await again;
+    // And it keeps following: the new drive's frames arrive and are drawn.
+    await page.waitForFunction((n) => window.__filigree.framesDrawn >= n + 10, atFollow.framesDrawn, { timeout: WAIT_MS });
+    const status = await page.textContent('#status');
+    assert.ok(late === null && followed <= FOLLOW_MS, `the page followed ${followed} ms after the health check ` +
+      `(at most ${FOLLOW_MS}): ${late ?? 'in time'}; status "${status}", page ${JSON.stringify(await hookState(page))}`);
+    const after = await hookState(page);
+    assert.ok(after.reconnects > before.reconnects, 'the page opened its stream again');
+    assert.equal(after.error, null, 'no error shown');
+    assert.match(await page.textContent('#status'), /^Live\.$/);
+    t.diagnostic(`${signal}: last version seen v${lastSeen}; drawn v${after.drawnVersion} ${followed} ms after the ` +
+      `health check passed; loss: ${after.lastLoss}; reconnects ${after.reconnects}`);
+  }
+
+  it('follows the session again after SIGTERM and a restart', { timeout: 2 * TEST_TIMEOUT_MS }, (t) => restart(t, 'SIGTERM'));
+  it('follows the session again after SIGKILL and a restart', { timeout: 2 * TEST_TIMEOUT_MS }, (t) => restart(t, 'SIGKILL'));
+
+  it('stops, saying so, when the session is gone', { timeout: TEST_TIMEOUT_MS }, async () => {
+    // CloseSession through gRPC-Web from another page (the CLI has no close):
+    // CloseSessionRequest { session_id = 1 } in one uncompressed frame.
+    const closer = await (await browser.newContext()).newPage();
+    await closer.goto(`http://${addresses.http}/`);
+    const status = await closer.evaluate(async ({ id, token }) => {
+      const message = new TextEncoder().encode(id);
+      const body = new Uint8Array([0, 0, 0, 0, 2 + message.length, 0x0a, message.length, ...message]);
+      const response = await fetch('/filigree.v1.Filigree/CloseSession', {
+        method: 'POST', body,
+        headers: { 'content-type': 'application/grpc-web+proto', 'x-grpc-web': '1', 'x-filigree-token': token },
+      });
+      await response.arrayBuffer();
+      return response.headers.get('grpc-status') ?? 'in the trailer';
+    }, { id: session.session_id, token: session.editor_token });
+    await closer.context().close();
+    assert.ok(status === '0' || status === 'in the trailer', `CloseSession answered grpc-status ${status}`);
+    await page.waitForFunction(() => window.__filigree.state === 'closed', null, { timeout: WAIT_MS });
+    assert.match(await page.textContent('#status'), /closed/);
   });
 });

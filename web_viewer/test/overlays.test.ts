@@ -1,4 +1,4 @@
-// The overlays' pure parts: the stretch of a triangle, the region colours,
+// The overlays' pure parts: the stretch of a triangle, the regions and the cut for drawing,
 // the GetOverlays polling rhythm and the one-call-in-flight sender.
 import { create } from '@bufbuild/protobuf';
 import { afterEach, beforeEach, describe, expect, it, vi } from 'vitest';
@@ -6,7 +6,7 @@ import { afterEach, beforeEach, describe, expect, it, vi } from 'vitest';
 import { OverlaysSchema, type Overlays } from '../src/gen/filigree/v1/filigree_pb';
 import { LatestSender } from '../src/latest-sender';
 import { MIN_INTERVAL_MS, OverlayFeed } from '../src/overlay-feed';
-import { CUT_GREY, regionColor, regionColors } from '../src/overlay-regions';
+import { colourRegions, cutForDrawing, edgeSet, PALETTE, regionBoundaryEdges, regionVertexColours } from '../src/overlay-build';
 import { l2Stretch, STRETCH_RED, stretchColor, TriangleStretch } from '../src/stretch';
 
 // One triangle, not in a coordinate plane, so that the 3-D layout matters.
@@ -82,32 +82,56 @@ describe('triangle stretch', () => {
   });
 });
 
-describe('region colours', () => {
-  it('paints cut vertices neutral grey', () => {
-    expect(regionColor(0)).toEqual(CUT_GREY);
-    const [r, g, b] = CUT_GREY;
-    expect(r).toBe(g);
-    expect(g).toBe(b);
-  });
+describe('regions for drawing', () => {
+  // Two triangles per region, in a strip: regions 1-2-3 each touch the next;
+  // vertex 0 is a cut vertex.
+  const faces = [0, 1, 2, 1, 2, 3, 2, 3, 4, 3, 4, 5, 4, 5, 6, 5, 6, 7];
+  const regionOf = [0, 1, 1, 2, 2, 3, 3, 3];
 
-  it('gives each region its own, saturated colour, the same every time', () => {
-    const colours = Array.from({ length: 40 }, (_, r) => regionColor(r + 1));
-    expect(Array.from({ length: 40 }, (_, r) => regionColor(r + 1))).toEqual(colours);
-    for (const [r, g, b] of colours) expect(Math.max(r, g, b) - Math.min(r, g, b)).toBeGreaterThan(0.2);
-    // Neighbouring numbers differ clearly.
-    for (let i = 1; i < colours.length; ++i) {
-      const distance = Math.hypot(...colours[i].map((c, k) => c - colours[i - 1][k]));
-      expect(distance).toBeGreaterThan(0.2);
+  it('colours neighbouring regions differently from a bounded palette', () => {
+    const colour = colourRegions(regionOf, faces);
+    expect(colour[1]).not.toBe(colour[2]);
+    expect(colour[2]).not.toBe(colour[3]);
+    // Thousands of regions still use only the palette.
+    const many = Array.from({ length: 3000 }, (_, v) => 1 + Math.floor(v / 2));
+    const strip = Array.from({ length: 3 * 2998 }, (_, k) => Math.floor(k / 3) + (k % 3));
+    const colours = colourRegions(many, strip);
+    expect(Math.max(...colours)).toBeLessThan(PALETTE.length);
+    for (let f = 0; f < strip.length; f += 3) {
+      const [a, b] = [many[strip[f]], many[strip[f + 2]]];
+      if (a !== b) expect(colours[a]).not.toBe(colours[b]);
     }
   });
 
-  it('fills a colour per vertex, equal labels equal colours', () => {
-    const out = new Float32Array(12);
-    regionColors([0, 3, 3, 0], out);
-    expect(Array.from(out.subarray(3, 6))).toEqual(Array.from(out.subarray(6, 9)));
-    expect(Array.from(out.subarray(0, 3))).toEqual(Array.from(out.subarray(9, 12)));
-    expect(out[0]).toBe(out[1]);
-    expect(Array.from(out.subarray(0, 3))).not.toEqual(Array.from(out.subarray(3, 6)));
+  it('paints cut vertices grey and each region its palette colour', () => {
+    const out = new Float32Array(3 * regionOf.length);
+    const colour = colourRegions(regionOf, faces);
+    regionVertexColours(regionOf, colour, out);
+    expect(out[0]).toBe(out[1]);  // grey: r = g = b
+    expect(out[1]).toBe(out[2]);
+    expect(Array.from(out.subarray(3, 6))).toEqual(Array.from(out.subarray(6, 9)));  // one region, one colour
+  });
+
+  it('outlines the regions: edges whose ends are in different regions, each once', () => {
+    const edges = Array.from(regionBoundaryEdges(regionOf, faces));
+    const pairs = [];
+    for (let k = 0; k < edges.length; k += 2) pairs.push([edges[k], edges[k + 1]].sort((a, b) => a - b).join('-'));
+    expect(pairs.sort()).toEqual(['0-1', '0-2', '1-3', '2-3', '2-4', '3-5', '4-5', '4-6'].sort());
+  });
+});
+
+describe('the cut for drawing', () => {
+  it('draws coarse triangles as their non-mesh edges and tints refined triangles', () => {
+    // The detailed mesh: a fan of 4 triangles around vertex 4 in the square 0-1-2-3.
+    const mesh = [0, 1, 4, 1, 2, 4, 2, 3, 4, 3, 0, 4];
+    const fine = edgeSet(mesh, 5);
+    // A cut: two detailed triangles kept, the other half as one coarse triangle 2-3-0.
+    const cut = cutForDrawing([0, 1, 4, 1, 2, 4, 2, 3, 0], fine, 5);
+    expect(cut.refinedTriangles).toBe(2);
+    expect(Array.from(cut.refined)).toEqual([1, 1, 1, 0, 1]);
+    const edges = Array.from(cut.coarse);
+    expect(edges.length).toBe(2);  // 0-2 only: 2-3 and 3-0 are mesh edges
+    expect(edges.sort()).toEqual([0, 2]);
   });
 });
 

@@ -37,7 +37,7 @@ try {
   const open = async (session) => {
     const page = await (await browser.newContext({ viewport: VIEWPORT })).newPage();
     page.on('pageerror', (error) => { throw error; });
-    await page.goto(`http://${http}/?session=${session.session_id}&token=${session.editor_token}`);
+    await page.goto(`http://${http}/?session=${session.session_id}#token=${session.editor_token}`);
     await page.waitForFunction(() => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1,
       null, { timeout: WAIT_MS });
     return page;
@@ -51,24 +51,10 @@ try {
     panel.scrollTop = document.querySelector(s).closest('section').offsetTop - 8;
   }, selector);
 
-  // Orbits half a turn with a real drag on the background (the meshes face
-  // −z; the camera starts on +z).
-  const turnAround = async (page) => {
-    const rect = await page.locator('#view canvas').boundingBox();
-    const start = { x: rect.x + 10, y: rect.y + rect.height / 2 };
-    if (await page.evaluate(({ x, y }) => window.__filigree.vertexAt(x, y), start) !== null) throw new Error('no background to orbit from');
-    await page.mouse.move(start.x, start.y);
-    await page.mouse.down();
-    // OrbitControls: a drag of the canvas height turns by 2π.
-    await page.mouse.move(start.x + rect.height / 2, start.y, { steps: 10 });
-    await page.mouse.up();
-  };
-
   // ---- regions: bend with T = 1e6, stop the drive part-way, wait for that frame's overlays.
   {
     const session = await upload(grpc, MESH, 'screenshots');
     const page = await open(session);
-    await turnAround(page);
     await page.check('#overlay-regions');
     await page.fill('#threshold', String(THRESHOLD));
     await page.click('#options button[type=submit]');
@@ -91,7 +77,7 @@ try {
   {
     const session = await upload(grpc, MESH, 'screenshots-handles');
     const page = await open(session);
-    await turnAround(page);
+    await page.selectOption('#edit-mode', 'handles');
     await page.check('#overlay-stretch');
     // Where the mesh is: the top of the centre column, the ends of a row near the bottom.
     const extent = await page.evaluate(() => {
