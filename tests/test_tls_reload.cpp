@@ -5,7 +5,7 @@
 //    which file and what is wrong, and no key material;
 //  - on re-read, files that become any of those keep the good pair serving
 //    new handshakes, with one warning per change saying why, and the next
-//    good pair is picked up.
+//    good pair is picked up; a client CA bundle likewise.
 // filigree-server runs as a child process; certificates are made by the
 // openssl CLI at run time.
 
@@ -147,9 +147,14 @@ class LoggedServer {
 // The serial number of the certificate the server presents to a new
 // connection (a new handshake: a channel of its own), after a ListSessions
 // call that succeeded; -1 when the handshake or call fails.
-long served_serial(const std::string& address, const fs::path& ca) {
+// With `client`: presents NAME.pem / NAME.key of that path stem (mutual TLS).
+long served_serial(const std::string& address, const fs::path& ca, const std::optional<fs::path>& client = {}) {
   grpc::SslCredentialsOptions ssl;
   ssl.pem_root_certs = file_text(ca);
+  if (client) {
+    ssl.pem_cert_chain = file_text(client->string() + ".pem");
+    ssl.pem_private_key = file_text(client->string() + ".key");
+  }
   grpc::ChannelArguments args;
   args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);  // never reuse another channel's connection
   args.SetSslTargetNameOverride("localhost");
@@ -310,6 +315,34 @@ TEST_F(TlsReload, SighupLooksAtTheFilesAtOnce) {
   install(*pki_ / "server-2.pem", cert());
   server.signal(SIGHUP);
   EXPECT_TRUE(LoggedServer::wait_for([&] { return served_serial(server.address(), ca) == kSecondSerial; }, 20s))
+      << server.text();
+}
+
+TEST_F(TlsReload, ABadClientCaBundleKeepsTheOneInForce) {
+  pki_->ca("clients-1");
+  pki_->ca("clients-2");
+  pki_->issue("alice", "clients-1", test::kClient, 7001);
+  pki_->issue("bob", "clients-2", test::kClient, 7002);
+  const fs::path bundle = scratch_ / "live" / "clients.pem";
+  install(*pki_ / "clients-1.pem", bundle);
+  std::vector<std::string> args = tls_args();
+  args.insert(args.end(), {"--tls-client-ca", bundle.string()});
+  LoggedServer server(args, scratch_ / "server.log");
+  const fs::path ca = *pki_ / "ca.pem";
+  ASSERT_EQ(served_serial(server.address(), ca, *pki_ / "alice"), kFirstSerial) << server.text();
+  EXPECT_EQ(served_serial(server.address(), ca, *pki_ / "bob"), -1) << "a client of a CA not in the bundle";
+
+  // Emptied (a renewal that truncates first): warned about, the bundle in force stays.
+  overwrite(bundle, "");
+  ASSERT_TRUE(LoggedServer::wait_for(
+      [&] { return server.text().find("--tls-client-ca " + bundle.string() + " is empty") != std::string::npos; }, 20s))
+      << server.text();
+  EXPECT_NE(server.text().find("level=warning event=tls_ca_bundle_rejected"), std::string::npos);
+  EXPECT_EQ(served_serial(server.address(), ca, *pki_ / "alice"), kFirstSerial) << server.text();
+
+  // A good new bundle is taken.
+  overwrite(bundle, file_text(*pki_ / "clients-1.pem") + file_text(*pki_ / "clients-2.pem"));
+  EXPECT_TRUE(LoggedServer::wait_for([&] { return served_serial(server.address(), ca, *pki_ / "bob") == kFirstSerial; }, 20s))
       << server.text();
 }
 
