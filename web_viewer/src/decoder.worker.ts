@@ -7,8 +7,11 @@
 // colours. Finished buffers go to the page by transfer, two sets taking turns
 // (pipeline-protocol.ts, Buffers); the page only uploads and draws them.
 //
-// One frame at a time: the page sends the next frame when this one is done,
-// skipping to the newest (its FrameMailbox), so the worker never queues.
+// Every frame is applied as it comes (a frame that arrives while another is
+// being applied supersedes the one waiting: FrameMailbox), whatever the page
+// is doing; the page gets the newest applied state whenever it has a buffer
+// set free, so a page slowed down by drawing skips frames it cannot draw but
+// the worker does not fall behind the stream.
 import createDecoderModule from 'draco3d/draco_decoder_nodejs.js';
 import wasmUrl from 'draco3d/draco_decoder.wasm?url';
 
@@ -21,7 +24,8 @@ import {
 } from './frame';
 import { frameMesh, vertexNormals } from './geometry';
 import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
-import type { Buffers, CallError, ChunkedFrameMessage, FromWorker, SingleFrameMessage, ToWorker } from './pipeline-protocol';
+import { FrameMailbox } from './mailbox';
+import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
 import { STRETCH_RED, stretchColor, TriangleStretch } from './stretch';
 
 // Loaded at once: the first frame should not wait for it.
@@ -131,18 +135,56 @@ async function join(serverUrl: string, sessionId: string, token: string): Promis
 
 // ------------------------------------------------------------------ frames
 
-function takeBuffers(): Buffers {
+function takeBuffers(): Buffers | null {
+  const set = spare.pop();
+  if (!set) return null;
   const n3 = rest.length;
-  const set = spare.pop() ?? { positions: new Float32Array(n3), normals: new Float32Array(n3), colors: null };
   if (stretchOn && (set.colors === null || set.colors.length !== n3)) set.colors = new Float32Array(n3);
   if (!stretchOn) set.colors = null;
   return set;
 }
 
-async function applyFrame(id: number, chunked?: ChunkedFrameMessage, single?: SingleFrameMessage): Promise<void> {
+type FrameIn = Extract<ToWorker, { type: 'frame' }>;
+const isKeyframeIn = (m: FrameIn) => m.chunked !== undefined && isKeyframe(m.chunked);
+// The frames not applied yet, in order. Frames come in bursts (the page's
+// thread reads the stream between its own tasks), and each is applied while
+// the worker keeps up; once more than MAX_WAITING wait (it is behind), only
+// the newest and the keyframe it needs are kept (a sparse frame is whole
+// against its keyframe, so the ones between can go: FrameMailbox).
+const MAX_WAITING = 8;
+let waiting: FrameIn[] = [];
+let working = false;
+// The latest applied frame, not yet handed to the page (it had no buffer set free).
+let pending: { version: bigint; kind: 'single' | 'keyframe' | 'sparse'; decodeMs: number; applyMs: number; displacement: number } | null = null;
+
+function put(message: FrameIn): void {
+  waiting.push(message);
+  if (waiting.length > MAX_WAITING) {
+    const box = new FrameMailbox<FrameIn>(isKeyframeIn);
+    let superseded = 0;
+    for (const m of waiting) superseded += box.put(m);
+    waiting = [box.take(), box.take()].filter((m): m is FrameIn => m !== null);
+    post({ type: 'applied', version: -1n, decodeMs: 0, applyMs: 0, skipped: superseded });
+  }
+  if (!working) void work();
+}
+
+// Applies the frames as they come, yielding between them so that newer ones
+// can supersede the one waiting.
+async function work(): Promise<void> {
+  working = true;
+  for (let next = waiting.shift(); next !== undefined; next = waiting.shift()) {
+    await applyFrame(next);
+    await new Promise((resolve) => setTimeout(resolve, 0));
+  }
+  working = false;
+}
+
+async function applyFrame(message: FrameIn): Promise<void> {
+  const { chunked, single, stream } = message;
   const frame = chunked ?? single!;
-  let decodeMs = 0;
-  let applyMs = 0;
+  let decodeMs: number;
+  let applyMs: number;
   let kind: 'single' | 'keyframe' | 'sparse';
   let displacement: number;
   try {
@@ -177,13 +219,27 @@ async function applyFrame(id: number, chunked?: ChunkedFrameMessage, single?: Si
       kind = 'single';
     }
   } catch (error) {
-    const message = error instanceof Error ? error.message : String(error);
-    // The frames after a keyframe that failed, or after one that never came, cannot be read.
-    const resync = chunked !== undefined && (isKeyframe(chunked) || chunked.keyframeVersion !== keyed.keyframeVersion);
-    post({ type: 'frameFailed', id, version: frame.version, message, resync });
+    const text = error instanceof Error ? error.message : String(error);
+    // The frames after a keyframe that failed, or after one that never came,
+    // cannot be read, unless a newer keyframe waits.
+    const resync = chunked !== undefined && !waiting.some(isKeyframeIn)
+      && (isKeyframe(chunked) || chunked.keyframeVersion !== keyed.keyframeVersion);
+    post({ type: 'frameFailed', stream, version: frame.version, message: text, resync });
     return;
   }
+  post({ type: 'applied', version: frame.version, decodeMs, applyMs, skipped: 0 });
+  pending = { version: frame.version, kind, decodeMs, applyMs, displacement };
+  output();
+}
+
+// Hands the latest applied state to the page if it has a buffer set free:
+// positions, normals and, while shown, the stretch colours.
+function output(): void {
+  if (pending === null) return;
   const out = takeBuffers();
+  if (out === null) return;  // the page holds both sets: once it hands one back
+  const p = pending;
+  pending = null;
   out.positions.set(positions);
   const t2 = performance.now();
   vertexNormals(positions, faces, out.normals);
@@ -193,8 +249,8 @@ async function applyFrame(id: number, chunked?: ChunkedFrameMessage, single?: Si
   const transfer: Transferable[] = [out.positions.buffer, out.normals.buffer];
   if (out.colors) transfer.push(out.colors.buffer);
   post({
-    type: 'applied', id, version: frame.version, buffers: out, kind, decodeMs, applyMs, normalsMs: t3 - t2, stretchMs,
-    displacement, stretchMax: out.colors ? stretchMax : 0,
+    type: 'ready', version: p.version, buffers: out, kind: p.kind, decodeMs: p.decodeMs, applyMs: p.applyMs,
+    normalsMs: t3 - t2, stretchMs, displacement: p.displacement, stretchMax: out.colors ? stretchMax : 0,
   }, transfer);
 }
 
@@ -288,10 +344,14 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       void join(message.serverUrl, message.sessionId, message.token);
       break;
     case 'frame':
-      void applyFrame(message.id, message.chunked, message.single);
+      put(message);
+      break;
+    case 'clear':
+      waiting = [];
       break;
     case 'recycle':
       if (message.buffers.positions.length === rest.length) spare.push(message.buffers);
+      output();
       break;
     case 'overlays':
       void overlays(message.id);

@@ -8,7 +8,6 @@
 // geometry and draws on requestAnimationFrame when something changed.
 import { ChangeLog } from './changes';
 import { Code, describeError, isCode, SessionClient, type SessionInfo } from './client';
-import { isChunked } from './frame';
 import { HandleEditor, type EditMode } from './handles';
 import { FRAME_EVENT, hook } from './hook';
 import { CutWireframe } from './overlay-cut';
@@ -18,7 +17,7 @@ import { StretchOverlay } from './overlay-stretch';
 import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
 import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
-import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined } from './pipeline';
+import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined, type Ready } from './pipeline';
 import { pollPresence } from './presence';
 import { isFinal, lossReason, retryDelay } from './reconnect';
 import { MeshView } from './scene';
@@ -61,8 +60,9 @@ class Viewer {
     this.client = new SessionClient(params.serverUrl, params.sessionId, params.token);
     this.pipeline = new FramePipeline({
       progress: (stage, loaded, total) => this.loading(stage, loaded, total),
-      applied: (result, arrival) => this.applied(result, arrival),
-      failed: (result, arrival) => this.failed(result, arrival),
+      applied: (result) => this.applied(result),
+      ready: (result) => this.ready(result),
+      failed: (result) => this.failed(result),
       skipped: (count) => {
         hook.framesSkipped += count;
         this.stats.frameSkipped(count);
@@ -369,7 +369,7 @@ class Viewer {
   // The keyframe the next frames are relative to was lost (it could not be
   // decoded, or never came): reopen the Watch, unless a newer keyframe waits.
   private resync(): void {
-    if (this.resyncAsked || this.pipeline.hasKeyframe) return;
+    if (this.resyncAsked) return;
     this.resyncAsked = true;
     this.pipeline.clear();  // relative to the lost keyframe, all of them
     this.stream.abort.abort();
@@ -395,9 +395,18 @@ class Viewer {
     this.pendingPageMs += performance.now() - start;
   }
 
-  private applied(result: Applied, arrival: Arrival): void {
+  // A frame applied in the worker: counted (drawing may skip it).
+  private applied(result: Applied): void {
+    ++hook.framesApplied;
+    const { decodeMs, applyMs } = result;
+    this.stats.frameApplied({ decodeMs, applyMs, normalsMs: 0, stretchMs: 0 }, this.pendingPageMs, performance.now());
+    hook.pageMsTotal += this.pendingPageMs;
+    this.pendingPageMs = 0;
+  }
+
+  // The newest applied state, to draw at the next animation frame.
+  private ready(result: Ready): void {
     const start = performance.now();
-    const { frame } = arrival;
     const old = this.view.setBuffers(result.buffers.positions, result.buffers.normals);
     let oldColors: Float32Array | null = null;
     if (result.buffers.colors !== null) {
@@ -410,26 +419,26 @@ class Viewer {
     }
     this.pipeline.recycle({ ...old, colors: oldColors });
     for (const overlay of this.overlays) if (overlay.id === 'base' && this.shown.has(overlay)) overlay.update(this.view.positions);
-    this.appliedVersion = frame.version;
+    this.appliedVersion = result.version;
     this.resyncDelayMs = 0;
-    hook.version = Number(frame.version);
+    hook.version = Number(result.version);
     hook.displacement = result.displacement;
     hook.frameKind = result.kind;
     if (result.kind === 'sparse') ++hook.framesSparse;
-    ++hook.framesApplied;
-    const pageMs = this.pendingPageMs + performance.now() - start;
-    this.pendingPageMs = 0;
+    const { decodeMs, applyMs, normalsMs, stretchMs } = result;
+    this.stats.frameReady({ decodeMs, applyMs, normalsMs, stretchMs });
+    const pageMs = performance.now() - start;
+    this.stats.pageTime(pageMs, performance.now());
     hook.pageMsTotal += pageMs;
-    this.stats.frameApplied(result, pageMs, performance.now());
     window.dispatchEvent(new Event(FRAME_EVENT));
   }
 
-  private failed(result: Failed, arrival: Arrival): void {
+  private failed(result: Failed): void {
     // One bad frame is reported; the next good one repairs the view (a
     // sparse frame is whole against its keyframe), unless the next ones
     // need the keyframe that failed or never came: then it is asked again.
     showError(`Frame ${result.version} could not be shown: ${result.message}`);
-    if (result.resync && isChunked(arrival.frame) && arrival.stream === this.stream.number) this.resync();
+    if (result.resync && result.stream === this.stream.number) this.resync();
   }
 
   // Clips of a skinned upload: played by the server (PlayClip); the frames

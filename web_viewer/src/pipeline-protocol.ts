@@ -17,7 +17,10 @@ export interface SingleFrameMessage { version: bigint; vertexCount: number; delt
 
 export type ToWorker =
   | { type: 'join'; serverUrl: string; sessionId: string; token: string }
-  | { type: 'frame'; id: number; chunked?: ChunkedFrameMessage; single?: SingleFrameMessage }
+  // Every frame off the stream, at once; `stream` numbers the Watch stream it came on.
+  | { type: 'frame'; stream: number; chunked?: ChunkedFrameMessage; single?: SingleFrameMessage }
+  // Drop the frames waiting (they need a keyframe that was lost).
+  | { type: 'clear' }
   | { type: 'recycle'; buffers: Buffers }
   | { type: 'stretch'; on: boolean }
   | { type: 'overlays'; id: number };
@@ -33,8 +36,11 @@ export type FromWorker =
     basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; joinMs: number; buildMs: number;
   }
   | { type: 'joinFailed'; error: CallError }
+  // A frame applied to the worker's state (every frame it gets, unless a newer one superseded it while it was busy).
+  | { type: 'applied'; version: bigint; decodeMs: number; applyMs: number; skipped: number }
+  // The state to draw, when the page has a buffer set free: the newest applied frame, with normals (and stretch colours).
   | {
-    type: 'applied'; id: number; version: bigint; buffers: Buffers; kind: 'single' | 'keyframe' | 'sparse';
+    type: 'ready'; version: bigint; buffers: Buffers; kind: 'single' | 'keyframe' | 'sparse';
     decodeMs: number; applyMs: number; normalsMs: number; stretchMs: number; displacement: number; stretchMax: number;
   }
   // The stretch colours of the frame held, when the overlay is turned on.
@@ -47,4 +53,4 @@ export type FromWorker =
   }
   | { type: 'overlaysFailed'; id: number; error: CallError }
   // resync: the keyframe the stream's next frames need is not held here.
-  | { type: 'frameFailed'; id: number; version: bigint; message: string; resync: boolean };
+  | { type: 'frameFailed'; stream: number; version: bigint; message: string; resync: boolean };

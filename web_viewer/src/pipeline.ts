@@ -1,17 +1,17 @@
 // The page's side of the session worker (decoder.worker.ts): joins through
-// it, and feeds it the frames of the Watch stream one at a time, newest first
-// (FrameMailbox: a frame that arrives while another is being worked on
-// replaces the one waiting, a keyframe waits until taken). Finished buffers
-// come back to `applied`; the page hands the set it replaced back (recycle).
+// it, hands it every frame of the Watch stream at once (the worker applies
+// them, skipping to the newest when it falls behind), and receives the state
+// to draw whenever the page has a buffer set free; the page hands the set it
+// replaced back (recycle), which lets the worker send the next one.
 import { Code, ConnectError } from '@connectrpc/connect';
 
 import type { Frame } from './client';
-import { isChunked, isKeyframe } from './frame';
-import { FrameMailbox } from './mailbox';
+import { isChunked } from './frame';
 import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
 
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
 export type Applied = Extract<FromWorker, { type: 'applied' }>;
+export type Ready = Extract<FromWorker, { type: 'ready' }>;
 export type Failed = Extract<FromWorker, { type: 'frameFailed' }>;
 export type DrawableOverlays = Extract<FromWorker, { type: 'overlays' }>;
 
@@ -20,9 +20,12 @@ export interface Arrival { frame: Frame; stream: number }
 
 export interface PipelineEvents {
   progress(stage: 'download' | 'build', loaded: number, total: number | null): void;
-  applied(result: Applied, arrival: Arrival): void;
-  failed(result: Failed, arrival: Arrival): void;
-  // Superseded in the mailbox before the worker saw them.
+  // A frame applied in the worker (not drawn yet).
+  applied(result: Applied): void;
+  // The state to draw.
+  ready(result: Ready): void;
+  failed(result: Failed): void;
+  // Superseded in the worker's mailbox before it applied them.
   skipped(count: number): void;
   // The stretch colours of the frame drawn, after the overlay was turned on.
   colors(colors: Float32Array, stretchMax: number): void;
@@ -37,8 +40,6 @@ function rebuild(error: CallError): Error {
 
 export class FramePipeline {
   private readonly worker = new Worker(new URL('./decoder.worker.ts', import.meta.url), { type: 'module' });
-  private readonly mailbox = new FrameMailbox<Arrival>(({ frame }) => isChunked(frame) && isKeyframe(frame));
-  private inFlight: { id: number; arrival: Arrival } | null = null;
   private nextId = 1;
   private joinWaiter: { resolve(j: Joined): void; reject(e: Error): void } | null = null;
   private readonly overlayWaiters = new Map<number, { resolve(o: DrawableOverlays): void; reject(e: Error): void }>();
@@ -60,20 +61,27 @@ export class FramePipeline {
     });
   }
 
-  // A frame off the Watch stream; returns at once.
-  put(arrival: Arrival): void {
-    const superseded = this.mailbox.put(arrival);
-    if (superseded > 0) this.events.skipped(superseded);
-    this.pump();
+  // A frame off the Watch stream, handed on at once. Copies: the message's
+  // bytes are views into the response's buffer.
+  put({ frame, stream }: Arrival): void {
+    if (isChunked(frame)) {
+      const chunks = frame.chunks.map((c) => ({
+        firstVertex: c.firstVertex, vertexCount: c.vertexCount, runs: Uint32Array.from(c.runs), deltas: c.deltas.slice(),
+      }));
+      this.send({
+        type: 'frame', stream,
+        chunked: { version: frame.version, keyframeVersion: frame.keyframeVersion, vertexCount: frame.vertexCount, chunks },
+      }, chunks.flatMap((c) => [c.deltas.buffer, c.runs.buffer]));
+    } else {
+      const deltas = frame.deltas.slice();
+      this.send({ type: 'frame', stream, single: { version: frame.version, vertexCount: frame.vertexCount, deltas } },
+        [deltas.buffer]);
+    }
   }
 
-  get hasKeyframe(): boolean {
-    return this.mailbox.hasKeyframe;
-  }
-
-  // Frames relative to a lost keyframe: all of them.
+  // Frames relative to a lost keyframe: all those waiting.
   clear(): void {
-    this.mailbox.clear();
+    this.send({ type: 'clear' });
   }
 
   // Buffers the page no longer draws from.
@@ -94,34 +102,6 @@ export class FramePipeline {
 
   setStretch(on: boolean): void {
     this.send({ type: 'stretch', on });
-  }
-
-  // Whether a frame is being worked on or waits.
-  get busy(): boolean {
-    return this.inFlight !== null;
-  }
-
-  private pump(): void {
-    if (this.inFlight !== null) return;
-    const arrival = this.mailbox.take();
-    if (arrival === null) return;
-    const id = this.nextId++;
-    this.inFlight = { id, arrival };
-    const { frame } = arrival;
-    // Copies: the message's bytes are views into the response's buffer.
-    if (isChunked(frame)) {
-      const chunks = frame.chunks.map((c) => ({
-        firstVertex: c.firstVertex, vertexCount: c.vertexCount, runs: Uint32Array.from(c.runs), deltas: c.deltas.slice(),
-      }));
-      this.send({
-        type: 'frame', id,
-        chunked: { version: frame.version, keyframeVersion: frame.keyframeVersion, vertexCount: frame.vertexCount, chunks },
-      }, chunks.flatMap((c) => [c.deltas.buffer, c.runs.buffer]));
-    } else {
-      const deltas = frame.deltas.slice();
-      this.send({ type: 'frame', id, single: { version: frame.version, vertexCount: frame.vertexCount, deltas } },
-        [deltas.buffer]);
-    }
   }
 
   private received(message: FromWorker): void {
@@ -149,15 +129,15 @@ export class FramePipeline {
         this.joinWaiter = null;
         break;
       case 'applied':
-      case 'frameFailed': {
-        const done = this.inFlight;
-        if (done === null || done.id !== message.id) return;
-        this.inFlight = null;
-        if (message.type === 'applied') this.events.applied(message, done.arrival);
-        else this.events.failed(message, done.arrival);
-        this.pump();
+        if (message.skipped > 0) this.events.skipped(message.skipped);
+        else this.events.applied(message);
         break;
-      }
+      case 'ready':
+        this.events.ready(message);
+        break;
+      case 'frameFailed':
+        this.events.failed(message);
+        break;
     }
   }
 

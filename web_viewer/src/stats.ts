@@ -46,7 +46,11 @@ class Mean {
 
   get(): number | null {
     if (this.values.length === 0) return null;
-    return this.values.reduce((s, v) => s + v.value, 0) / this.values.length;
+    return this.sum() / this.values.length;
+  }
+
+  sum(): number {
+    return this.values.reduce((s, v) => s + v.value, 0);
   }
 }
 
@@ -65,7 +69,7 @@ export interface StatsSnapshot {
   bytesPerVertex: number;
   decodeMs: number | null;          // in the worker, last frame
   worker: WorkerTimes | null;       // the worker's stages, last frame
-  pageMs: number | null;            // the page's own JavaScript per applied frame (mean)
+  pageMs: number | null;            // the page's own JavaScript per applied frame (over the window)
   drawMs: number | null;            // uploads and draw call per drawn frame (mean)
   framesSkipped: number;            // superseded before the worker saw them (a slow page)
   frame: Frame | null;              // the last frame arrived, for its stats and version
@@ -111,12 +115,21 @@ export class StatsTracker {
     this.decodeMs = decodeMs;
   }
 
-  // A frame the worker finished, handed to the GPU; `pageMs`: the page's own
-  // JavaScript for it (receiving it off the stream and swapping it in).
+  // A frame the worker applied; `pageMs`: the page's own JavaScript for the
+  // frames since the last one (receiving them off the stream, handing them on).
   frameApplied(times: WorkerTimes, pageMs: number, now: number): void {
-    this.worker = times;
     this.decodeMs = times.decodeMs;
     this.applied.add(now);
+    this.pageMs.add(pageMs, now);
+  }
+
+  // The state handed to the page for drawing, with the worker's stage times.
+  frameReady(times: WorkerTimes): void {
+    this.worker = times;
+  }
+
+  // The page's own time for swapping a state in, counted with the applied frames' time.
+  pageTime(pageMs: number, now: number): void {
     this.pageMs.add(pageMs, now);
   }
 
@@ -181,7 +194,7 @@ export class StatsTracker {
       bytesPerVertex: this.last && this.last.vertexCount > 0 ? bytes / this.last.vertexCount : 0,
       decodeMs: this.decodeMs,
       worker: this.worker,
-      pageMs: this.pageMs.get(),
+      pageMs: this.applied.list.length > 0 ? this.pageMs.sum() / this.applied.list.length : null,
       drawMs: this.drawMs.get(),
       framesSkipped: this.skipped,
       frame: this.last,
