@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <deque>
 #include <limits>
 #include <mutex>
 #include <optional>
@@ -647,6 +648,7 @@ grpc::Status parse_request(const grpc::ByteBuffer& bytes, Message& out) {
 // stream's pose id), and the version it has if it is a chunked keyframe.
 struct OutgoingFrame {
   grpc::ByteBuffer bytes;
+  std::uint64_t version = 0;
   std::optional<std::uint64_t> keyframe;
 };
 const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
@@ -661,7 +663,28 @@ class FrameStream : public FrameSink {
   FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
     writer_.on_start_write([this](const OutgoingFrame& f) {
       if (f.keyframe) written_keyframe_ = *f.keyframe;
+      std::lock_guard lock(unread_mutex_);
+      unread_.push_back(f.version);
     });
+  }
+
+  // The client read every frame up to `version` (Follow): the frames written
+  // at or below it leave the writer's window.
+  void acknowledge(std::uint64_t version) {
+    std::size_t read = 0;
+    {
+      std::lock_guard lock(unread_mutex_);
+      // Written in version order, but a keyframe may go before an older
+      // frame's place: count every written version at or below this one.
+      for (auto it = unread_.begin(); it != unread_.end();)
+        if (*it <= version) {
+          it = unread_.erase(it);
+          ++read;
+        } else {
+          ++it;
+        }
+    }
+    if (read) writer_.release(read);
   }
 
   // Set once, before the stream subscribes.
@@ -719,6 +742,7 @@ class FrameStream : public FrameSink {
       if (const auto it = published.pose_of_driver.find(driver_); it != published.pose_of_driver.end()) pose_id = it->second;
     auto out = std::make_shared<OutgoingFrame>();
     out->bytes = bytes.for_stream(pose_id);
+    out->version = message.version();
     if (!message.chunks().empty() && message.keyframe_version() == message.version()) out->keyframe = message.version();
     return out;
   }
@@ -734,6 +758,8 @@ class FrameStream : public FrameSink {
   std::uint64_t queued_keyframe_ = kNone;  // offer_mutex_
   bool offered_any_ = false;               // offer_mutex_
   std::uint64_t offered_version_ = 0;
+  std::mutex unread_mutex_;
+  std::deque<std::uint64_t> unread_;  // versions written and not acknowledged (Follow)
 };
 
 // A frame stream's end (OnDone): it no longer subscribes or drives (a
@@ -923,6 +949,32 @@ class DriveReactor final : public FrameStreamReactor<DriveReactor, grpc::ServerB
   v1::DriveRequest request_;
 };
 
+// A watching stream's start (Watch, Follow) once its session is admitted:
+// subscribes it as `request` says and ends the start.
+template <class Reactor>
+void start_watching(FiligreeService& service, const grpc::Status& status, const std::shared_ptr<Session>& session,
+                    const v1::WatchRequest& request, const std::shared_ptr<StreamStart>& started,
+                    const std::shared_ptr<FrameStream<Reactor>>& stream) {
+  if (!status.ok()) return end_start(started, stream, status);
+  stream->set_format(request.frame_format());
+  // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
+  const std::optional<std::uint64_t> after =
+      request.after_version() == 0 ? std::nullopt : std::optional<std::uint64_t>(request.after_version());
+  if (session->needs_single(request.frame_format())) {
+    // subscribe() transcodes the current frame into one buffer first: on a
+    // job thread, not one of the callback threads. The start holds the
+    // reactor until it ends.
+    return service.run_job(
+        [session, stream, started, after] {
+          session->subscribe(stream, after);
+          end_start(started, stream, grpc::Status::OK);
+        },
+        [started, stream](const grpc::Status& why) { end_start(started, stream, why); });
+  }
+  session->subscribe(stream, after);
+  end_start(started, stream, grpc::Status::OK);
+}
+
 class WatchReactor final : public FrameStreamReactor<WatchReactor, grpc::ServerWriteReactor<grpc::ByteBuffer>> {
  public:
   WatchReactor(FiligreeService& service, grpc::CallbackServerContext* context, const grpc::ByteBuffer& request_bytes)
@@ -937,30 +989,53 @@ class WatchReactor final : public FrameStreamReactor<WatchReactor, grpc::ServerW
  private:
   void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
              const std::shared_ptr<FrameStream<WatchReactor>>& stream) override {
-    if (status.ok()) {
-      stream_->set_format(request_.frame_format());
-      if (session_->needs_single(request_.frame_format())) {
-        // subscribe() transcodes the current frame into one buffer first: on
-        // a job thread, not one of the callback threads. The start holds
-        // this reactor until it ends.
-        return service_.run_job(
-            [this, started, stream] {
-              subscribe();
-              end_start(started, stream, grpc::Status::OK);
-            },
-            [started, stream](const grpc::Status& why) { end_start(started, stream, why); });
-      }
-      subscribe();
-    }
-    end_start(started, stream, status);
-  }
-  void subscribe() {
-    // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
-    session_->subscribe(stream_, request_.after_version() == 0 ? std::nullopt
-                                                               : std::optional<std::uint64_t>(request_.after_version()));
+    start_watching(service_, status, session_, request_, started, stream);
   }
 
   v1::WatchRequest request_;
+};
+
+// Watch with acknowledgements: the stream's writer keeps at most
+// max_in_flight frames unacknowledged (StreamWriter::set_window), so what
+// waits in the HTTP/2 window is bounded in frames, not only in bytes.
+class FollowReactor final : public FrameStreamReactor<FollowReactor, grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>> {
+ public:
+  static constexpr std::uint32_t kDefaultInFlight = 2, kMostInFlight = 8;
+
+  FollowReactor(FiligreeService& service, grpc::CallbackServerContext* context)
+      : FrameStreamReactor(service, 0, this), context_(context) {
+    StartRead(&request_bytes_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) return stream_->writer().finish(grpc::Status::OK);  // the client is done reading
+    if (const grpc::Status parsed = parse_request(request_bytes_, request_); !parsed.ok())
+      return stream_->writer().finish(parsed);
+    if (!watch_) {
+      // The first message says what to follow: no read until the session is there.
+      if (request_.max_in_flight() > kMostInFlight)
+        return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT,
+                                         "max_in_flight is at most " + std::to_string(kMostInFlight) + ", not " +
+                                             std::to_string(request_.max_in_flight())});
+      stream_->writer().set_window(request_.max_in_flight() == 0 ? kDefaultInFlight : request_.max_in_flight());
+      watch_ = request_.watch();
+      return open(*context_, watch_->session_id(), Role::kViewer);
+    }
+    stream_->acknowledge(request_.read_version());
+    StartRead(&request_bytes_);
+  }
+
+ private:
+  void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
+             const std::shared_ptr<FrameStream<FollowReactor>>& stream) override {
+    if (status.ok()) StartRead(&request_bytes_);  // acknowledgements from now on
+    start_watching(service_, status, session_, *watch_, started, stream);
+  }
+
+  grpc::CallbackServerContext* context_;
+  grpc::ByteBuffer request_bytes_;
+  v1::FollowRequest request_;
+  std::optional<v1::WatchRequest> watch_;
 };
 
 // Plays a clip of the session's rig: a thread samples it at the stream's
@@ -1110,6 +1185,10 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* FiligreeService::Dr
 grpc::ServerWriteReactor<grpc::ByteBuffer>* FiligreeService::Watch(grpc::CallbackServerContext* context,
                                                                    const grpc::ByteBuffer* request) {
   return new WatchReactor(*this, context, *request);
+}
+
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* FiligreeService::Follow(grpc::CallbackServerContext* context) {
+  return new FollowReactor(*this, context);
 }
 
 // ------------------------------------------------------------ unary calls

@@ -40,7 +40,7 @@ struct ServiceLimits {
 
 // Every method on the callback API (v1::Filigree::CallbackService, spelled
 // out: a method left out here would be a synchronous one). The frame streams
-// (Drive, Watch, PlayClip) are raw methods: each frame is serialized once
+// (Drive, Watch, Follow, PlayClip) are raw methods: each frame is serialized once
 // and its bytes written by every stream (serialized_frame.h); so are the
 // answers with a SessionInfo (JoinSession, SetOptions), whose meshes are
 // serialized once per mesh (session_info_wire.h), GetState's, which shares
@@ -50,7 +50,8 @@ using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCa
     rpc::WithRawCallbackMethod_Drive<rpc::WithCallbackMethod_SubmitPose<rpc::WithCallbackMethod_SetHandles<
         rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
-                rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<rpc::Service>>>>>>>>>>>>>;
+                rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<
+                    rpc::WithRawCallbackMethod_Follow<rpc::Service>>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
  public:
@@ -81,6 +82,8 @@ class FiligreeService final : public FiligreeServiceBase {
   // Request: a WatchRequest; frames out.
   grpc::ServerWriteReactor<grpc::ByteBuffer>* Watch(grpc::CallbackServerContext* context,
                                                     const grpc::ByteBuffer* request) override;
+  // Requests: FollowRequests (what to watch, then acknowledgements); frames out.
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Follow(grpc::CallbackServerContext* context) override;
   // Request: a GetStateRequest; answer: a SessionState whose frames are the
   // bytes the streams send (serialized_frame.h).
   grpc::ServerUnaryReactor* GetState(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,

@@ -7,6 +7,7 @@
 // are held by shared pointer, so one frame can be written to every
 // subscriber uncopied.
 
+#include <algorithm>
 #include <deque>
 #include <functional>
 #include <memory>
@@ -47,6 +48,22 @@ class StreamWriter {
     pump();
   }
 
+  // At most `n` messages written and not yet released (release()), unless
+  // the stream is finishing; 0 (the default): no bound. For a client that
+  // acknowledges what it read (Follow): the HTTP/2 window then holds at most
+  // `n` frames, and a slow reader gets the newest.
+  void set_window(std::size_t n) {
+    std::lock_guard<std::recursive_mutex> lock(mutex_);
+    window_ = n;
+    pump();
+  }
+  // `n` written messages were read by the client: as many more may be written.
+  void release(std::size_t n) {
+    std::lock_guard<std::recursive_mutex> lock(mutex_);
+    in_flight_ -= std::min(n, in_flight_);
+    pump();
+  }
+
   // Called (under the writer's lock) with each message as its write starts.
   void on_start_write(std::function<void(const Message&)> observer) {
     std::lock_guard<std::recursive_mutex> lock(mutex_);
@@ -84,6 +101,8 @@ class StreamWriter {
  private:
   void pump() {
     if (finished_ || writing_) return;
+    const bool window_full = window_ != 0 && in_flight_ >= window_ && !closing_;
+    if (window_full) return;  // release() pumps again
     if (!must_send_.empty() || waiting_) {
       if (!must_send_.empty()) {
         out_ = std::move(must_send_.front());
@@ -92,6 +111,7 @@ class StreamWriter {
         out_ = std::move(waiting_);
       }
       writing_ = true;
+      ++in_flight_;
       if (observer_) observer_(*out_);
       reactor_->StartWrite(&wire(*out_));
     } else if (closing_) {
@@ -109,6 +129,7 @@ class StreamWriter {
   std::function<void(const Message&)> observer_;
   bool writing_ = false;
   bool finished_ = false;
+  std::size_t window_ = 0, in_flight_ = 0;
   std::optional<grpc::Status> closing_;
 };
 

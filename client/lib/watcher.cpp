@@ -23,20 +23,26 @@ Watcher::Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, c
 void Watcher::open() {
   auto context = std::make_unique<grpc::ClientContext>();
   set_session_metadata(*context, session_id_, token_, routing_);
-  std::unique_ptr<grpc::ClientReader<v1::Frame>> stream;
+  std::unique_ptr<grpc::ClientReader<v1::Frame>> clip_stream;
+  std::unique_ptr<grpc::ClientReaderWriter<v1::FollowRequest, v1::Frame>> follow;
   if (clip_) {
-    stream = stub_.PlayClip(context.get(), *clip_);
+    clip_stream = stub_.PlayClip(context.get(), *clip_);
   } else {
-    v1::WatchRequest request;
-    request.set_session_id(session_id_);
-    request.set_after_version(last_version_);
-    request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-    stream = stub_.Watch(context.get(), request);
+    // Follow, not Watch: each frame read is acknowledged, so the frames on
+    // the wire stay few and a slow reader gets the newest.
+    follow = stub_.Follow(context.get());
+    v1::FollowRequest first;
+    first.mutable_watch()->set_session_id(session_id_);
+    first.mutable_watch()->set_after_version(last_version_);
+    first.mutable_watch()->set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+    first.set_max_in_flight(kFramesInFlight);
+    follow->Write(first);  // a failed write shows as the stream's end in read()
   }
   std::lock_guard lock(mutex_);
-  stream_.reset();  // the old stream goes before its context
+  clip_stream_.reset(), follow_.reset();  // the old stream goes before its context
   context_ = std::move(context);
-  stream_ = std::move(stream);
+  clip_stream_ = std::move(clip_stream);
+  follow_ = std::move(follow);
   if (cancelled_) context_->TryCancel();  // cancel() came while this opened
 }
 
@@ -49,12 +55,18 @@ Watcher::~Watcher() {
 std::optional<v1::Frame> Watcher::read() {
   while (!status_) {  // set once the stream has ended for good
     v1::Frame frame;
-    if (stream_->Read(&frame)) {
+    if (follow_ ? follow_->Read(&frame) : clip_stream_->Read(&frame)) {
       last_version_ = std::max(last_version_, frame.version());
+      if (follow_) {
+        v1::FollowRequest read;
+        read.set_read_version(frame.version());
+        follow_->Write(read);  // a failed write shows as the stream's end at the next read
+      }
       reconnect_.reset();
       return frame;
     }
-    const grpc::Status status = stream_->Finish();  // gRPC's rule: Finish once Read failed
+    // gRPC's rule: Finish once Read failed.
+    const grpc::Status status = follow_ ? follow_->Finish() : clip_stream_->Finish();
     if (auto ended = reconnect_.wait_to_reconnect(status, mutex_, cancelled_cv_, cancelled_)) {
       status_ = std::move(*ended);
     } else {

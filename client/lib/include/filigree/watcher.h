@@ -1,5 +1,6 @@
 #pragma once
-// One Watch stream: the session's frames as they are computed.
+// One stream of a session's frames as they are computed (Follow: each frame
+// read is acknowledged), or of a clip's (PlayClip).
 
 #include <condition_variable>
 #include <cstdint>
@@ -17,8 +18,9 @@
 namespace filigree {
 
 // Made by Client::watch() (or Client::play_clip(), whose stream carries the
-// frames of the clip it plays and ends after the clip's last one). A slow reader skips frames (it always gets the
-// newest) and never slows the session. cancel() may be called from any
+// frames of the clip it plays and ends after the clip's last one). A slow
+// reader skips frames and is at most two frames behind the newest; it never
+// slows the session. cancel() may be called from any
 // thread, e.g. to wake a thread blocked in read(); finish() once no other
 // thread is inside read().
 class Watcher {
@@ -63,7 +65,11 @@ class Watcher {
   std::condition_variable cancelled_cv_;
   bool cancelled_ = false;
   std::unique_ptr<grpc::ClientContext> context_;  // one per stream; outlives it
-  std::unique_ptr<grpc::ClientReader<v1::Frame>> stream_;
+  // Frames on the wire beyond the newest one read (FollowRequest.max_in_flight).
+  static constexpr std::uint32_t kFramesInFlight = 2;
+  // One of the two: a clip's stream, or a Follow stream of the session.
+  std::unique_ptr<grpc::ClientReader<v1::Frame>> clip_stream_;
+  std::unique_ptr<grpc::ClientReaderWriter<v1::FollowRequest, v1::Frame>> follow_;
   std::optional<grpc::Status> status_;
 };
 
