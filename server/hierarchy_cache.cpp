@@ -1,5 +1,6 @@
 #include "server/hierarchy_cache.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -48,6 +49,30 @@ std::string HierarchyCache::key_of(std::uint64_t mesh_hash, const PreprocessOpti
 }
 
 std::filesystem::path HierarchyCache::file_of(const std::string& key) const { return dir_ / (key + ".fgh"); }
+
+std::size_t HierarchyCache::collect(const std::set<std::string>& in_use, std::size_t keep_unused) {
+  if (dir_.empty() || !std::filesystem::exists(dir_)) return 0;
+  std::vector<std::pair<std::filesystem::file_time_type, std::filesystem::path>> unused;
+  // Under the lock: a hierarchy cannot start loading or building meanwhile.
+  std::lock_guard lock(mutex_);
+  for (const auto& entry : std::filesystem::directory_iterator(dir_)) {
+    if (entry.path().extension() != ".fgh") continue;
+    const std::string key = entry.path().stem().string();
+    if (in_use.count(key) || building_.count(key)) continue;
+    if (const auto it = loaded_.find(key); it != loaded_.end() && !it->second.expired()) continue;
+    std::error_code error;
+    const auto written = entry.last_write_time(error);
+    if (!error) unused.emplace_back(written, entry.path());
+  }
+  if (unused.size() <= keep_unused) return 0;
+  std::sort(unused.begin(), unused.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::size_t removed = 0;
+  for (std::size_t i = keep_unused; i < unused.size(); ++i) {
+    std::error_code error;
+    removed += std::filesystem::remove(unused[i].second, error) ? 1 : 0;
+  }
+  return removed;
+}
 
 std::shared_ptr<const Hierarchy> HierarchyCache::remember(const std::string& key, std::shared_ptr<const Hierarchy> h) {
   std::lock_guard lock(mutex_);

@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 
 #include "hierarchy/hierarchy.h"
@@ -36,6 +37,11 @@ class HierarchyCache {
   // A hierarchy by key from memory, disk or the shared store; throws if it
   // is in none.
   std::shared_ptr<const Hierarchy> load(const std::string& key);
+
+  // Deletes the files of hierarchies that are not in `in_use`, not loaded
+  // and not being built, but the `keep_unused` most recently written.
+  // Returns how many it deleted.
+  std::size_t collect(const std::set<std::string>& in_use, std::size_t keep_unused);
 
   std::size_t builds() const;
   // Hierarchies this process loaded from the shared store (built elsewhere).

@@ -269,6 +269,8 @@ int main(int argc, char** argv) {
     HierarchyCache cache(data.empty() ? data : data / "hierarchies", shared_hierarchies.get());
     SessionRegistry registry(cache, *store, registry_limits);
     const std::size_t restored = registry.restore();
+    // One machine: hierarchy files no session uses go (replicas share them through Redis).
+    if (!store->shared()) registry.collect_hierarchies();
     FiligreeService service(registry, cache, service_limits);
     if (!api_keys_path.empty()) {
       auto keys = std::make_shared<const ApiKeys>(ApiKeys::load(api_keys_path));

@@ -123,6 +123,8 @@ class Session {
   const std::string& id() const { return record_.id; }
   // The API key that created the session (fixed at creation); empty without keys.
   const std::string& owner() const { return record_.owner; }
+  // The key of its hierarchy in the HierarchyCache (fixed at creation).
+  const std::string& hierarchy_key() const { return record_.hierarchy_key; }
   // Vertices of the detailed mesh.
   std::size_t vertex_count() const;
   Role authorize(const std::string& token) const;

@@ -246,7 +246,27 @@ bool SessionRegistry::close(const std::string& id) {
   s->close();
   store_.remove(id);
   spdlog::info("event=session_closed session={}", id);
+  // A closed session's hierarchy may be nobody's now: the next tick looks,
+  // once the session (and its hold on the hierarchy) is gone.
+  collect_pending_ = !store_.shared();
   return true;
+}
+
+std::size_t SessionRegistry::collect_hierarchies(std::size_t keep_unused) {
+  std::set<std::string> in_use;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& [id, e] : sessions_) in_use.insert(e.session->hierarchy_key());
+    for (const auto& [id, key] : evicted_) in_use.insert(key);
+  }
+  try {
+    const std::size_t removed = cache_.collect(in_use, keep_unused);
+    if (removed) spdlog::info("event=hierarchies_collected removed={}", removed);
+    return removed;
+  } catch (const std::exception& e) {  // a folder that cannot be listed: nothing is lost by keeping files
+    spdlog::warn("event=hierarchy_collection_failed error=\"{}\"", e.what());
+    return 0;
+  }
 }
 
 SessionRegistry::Holdings SessionRegistry::holdings(const std::string& owner) const {
@@ -348,6 +368,7 @@ void SessionRegistry::maintain() {
   }
   // Scratch kept for a burst of busy sessions goes once their mesh is idle.
   assets_.trim_idle_pools();
+  if (collect_pending_.exchange(false)) collect_hierarchies();
 }
 
 void SessionRegistry::evict(const std::string& id, const Session& s, const char* why) {
@@ -361,7 +382,7 @@ void SessionRegistry::evict(const std::string& id, const Session& s, const char*
       // Its record stays on this machine and a request loads it again: it
       // still counts against --max-sessions. (A shared store's other
       // replicas may serve it next; a memory-only store kept nothing.)
-      if (!store_.shared() && store_.exists(id)) evicted_.insert(id);
+      if (!store_.shared() && store_.exists(id)) evicted_[id] = s.hierarchy_key();
     }
   }
   if (store_.shared()) {

@@ -5,6 +5,7 @@
 // records stay, and a later request loads them again) and, with a shared
 // store, the lease that makes exactly one replica compute each session.
 
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -96,6 +97,13 @@ class SessionRegistry {
   };
   Holdings holdings(const std::string& owner) const;
 
+  // Deletes the hierarchy files no session known here uses, but the
+  // `keep_unused` newest (a mesh uploaded again soon is not preprocessed
+  // again); returns how many went. Called at start, and by maintain() after
+  // a session closed.
+  std::size_t collect_hierarchies(std::size_t keep_unused = kUnusedHierarchiesKept);
+  static constexpr std::size_t kUnusedHierarchiesKept = 4;
+
   // Loads every persisted session (at start; a shared store loads lazily).
   std::size_t restore();
   // Every tick: writes changed records (local store) or renews leases
@@ -148,7 +156,9 @@ class SessionRegistry {
   // Sessions evicted from memory whose records this machine keeps (local
   // store), and ids reserved by a create in progress: both count against
   // --max-sessions, and neither id can be proposed for a new session.
-  std::set<std::string> evicted_, creating_;
+  std::map<std::string, std::string> evicted_;  // id → hierarchy key
+  std::set<std::string> creating_;
+  std::atomic<bool> collect_pending_{false};  // a session closed since the last collect_hierarchies()
   std::size_t counted_locked() const;
 };
 

@@ -111,6 +111,8 @@ TEST_F(FileSessionStoreTest, RecordsAndProgressAreOwnerOnly) {
   const SessionRecord r = created();
   ASSERT_TRUE(store_->create(r));
   ASSERT_TRUE(store_->save_progress(r.id, progress(3)));
+  EXPECT_EQ(std::filesystem::status(dir_).permissions() & std::filesystem::perms::all, std::filesystem::perms::owner_all)
+      << "the folder the store made";
   for (const char* ext : {".session", ".progress"}) {
     const auto perms = std::filesystem::status(file(ext)).permissions();
     EXPECT_EQ(perms & (std::filesystem::perms::group_all | std::filesystem::perms::others_all), std::filesystem::perms::none)

@@ -5,6 +5,7 @@
 // silently ignored, and error messages that echoed megabytes back.
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
@@ -529,6 +530,141 @@ TEST_F(TrustTest, UploadsReserveTheirDeclaredBytesAgainstMaxMemory) {
   const grpc::Status over = stream->Finish();
   EXPECT_EQ(over.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(over.error_message().find("more than the 10 bytes"), std::string::npos) << over.error_message();
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+// A watcher reading 5 frames/s of a 30 Hz session on a default channel was
+// minutes behind: frames waited in the HTTP/2 window, where the server's
+// newest-wins mailbox cannot reach them. Follow acknowledges what was read;
+// the server keeps at most max_in_flight frames on the wire.
+TEST_F(TrustTest, AFollowerReadingSlowlyOnADefaultChannelStaysOnTheNewestFrame) {
+  MemoryServer server;
+  const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok());
+  // A driver at about 50 poses a second until the follower is done.
+  std::atomic<bool> done{false};
+  std::thread driver([&] {
+    for (int i = 0; !done; ++i) {
+      v1::DriveRequest pose;
+      pose.set_session_id(s.id());
+      pose.add_indices(3);
+      pose.add_positions(0.001f * static_cast<float>(i % 100)), pose.add_positions(0.5f), pose.add_positions(0.5f);
+      v1::SubmitPoseResponse accepted;
+      server.stub->SubmitPose(with(s.created.editor_token()).get(), pose, &accepted);
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the pace of the drive, not a wait for anything
+    }
+  });
+  auto newest = [&] {
+    v1::GetStateRequest r;
+    r.set_session_id(s.id());
+    v1::SessionState state;
+    EXPECT_TRUE(server.stub->GetState(with(s.created.viewer_token()).get(), r, &state).ok());
+    return state.version();
+  };
+
+  auto ctx = with(s.created.viewer_token());
+  auto follow = server.stub->Follow(ctx.get());
+  v1::FollowRequest first;
+  first.mutable_watch()->set_session_id(s.id());
+  first.set_max_in_flight(1);
+  ASSERT_TRUE(follow->Write(first));
+  std::uint64_t worst = 0, reads = 0;
+  v1::Frame f;
+  for (; reads < 15 && follow->Read(&f); ++reads) {
+    // A slow reader: 200 ms per frame, against about 20 ms between frames.
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    const std::uint64_t behind = newest() - f.version();
+    if (reads >= 3) worst = std::max(worst, behind);  // after the stream has settled
+    v1::FollowRequest ack;
+    ack.set_read_version(f.version());
+    ASSERT_TRUE(follow->Write(ack));
+  }
+  done = true;
+  driver.join();
+  EXPECT_EQ(reads, 15u);
+  // One frame in flight, one waiting, and those made while this one was
+  // read: ten frames a 200 ms read, so at most about twelve behind, never
+  // the hundreds a window of frames would hold.
+  EXPECT_LE(worst, 14u) << "the follower fell behind";
+  follow->WritesDone();
+  while (follow->Read(&f)) {
+  }
+  EXPECT_TRUE(follow->Finish().ok());
+}
+
+// Follow's first message is checked like any request.
+TEST_F(TrustTest, FollowRefusesAnOversizedWindowAndUnknownSessions) {
+  MemoryServer server;
+  const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(s.status.ok());
+  auto status_of = [&](const v1::FollowRequest& first, const std::string& token) {
+    auto ctx = with(token);
+    auto follow = server.stub->Follow(ctx.get());
+    follow->Write(first);
+    follow->WritesDone();
+    v1::Frame f;
+    while (follow->Read(&f)) {
+    }
+    return follow->Finish();
+  };
+  v1::FollowRequest too_many;
+  too_many.mutable_watch()->set_session_id(s.id());
+  too_many.set_max_in_flight(9);
+  EXPECT_EQ(status_of(too_many, s.created.viewer_token()).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  v1::FollowRequest unknown;
+  unknown.mutable_watch()->set_session_id("0123456789abcdef0123");
+  EXPECT_EQ(status_of(unknown, s.created.viewer_token()).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+std::size_t hierarchy_files(const std::filesystem::path& data) {
+  std::size_t n = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(data / "hierarchies")) n += entry.path().extension() == ".fgh";
+  return n;
+}
+
+// Hierarchy files were never deleted: 30 uploads, each closed, left 31 files.
+// Files no session uses go, but the four newest (a mesh uploaded again soon
+// is not preprocessed again).
+TEST_F(TrustTest, HierarchyFilesNoSessionUsesAreCollected) {
+  const std::filesystem::path data = temp("data");
+  std::filesystem::remove_all(data);
+  MemoryServer server({"--data-dir", data.string()});
+  std::vector<Created> made;
+  for (std::uint32_t base = 100; base < 160; base += 10) {  // six keys: one mesh, six base sizes
+    made.push_back(upload(*server.stub, test::file_bytes(kBunny), "obj",
+                          [&](v1::CreateSessionRequest::Begin& b) { b.mutable_options()->set_base_vertices(base); }));
+    ASSERT_TRUE(made.back().status.ok()) << made.back().status.error_message();
+  }
+  EXPECT_EQ(hierarchy_files(data), 6u);
+  auto close = [&](const Created& c) {
+    v1::CloseSessionRequest r;
+    r.set_session_id(c.id());
+    v1::CloseSessionResponse response;
+    ASSERT_TRUE(server.stub->CloseSession(with(c.created.editor_token()).get(), r, &response).ok());
+  };
+  // The server looks once a second after a close (its maintenance tick).
+  auto files_become = [&](std::size_t n) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (hierarchy_files(data) != n && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));  // polling the folder, with a deadline
+    return hierarchy_files(data);
+  };
+  for (std::size_t i = 1; i < made.size(); ++i) close(made[i]);
+  EXPECT_EQ(files_become(5), 5u) << "the one in use and the four newest unused";
+  close(made[0]);
+  EXPECT_EQ(files_become(4), 4u);
+  std::filesystem::remove_all(data);
 }
 
 }  // namespace

@@ -15,7 +15,11 @@
 namespace filigree::server {
 
 FileSessionStore::FileSessionStore(std::filesystem::path dir) : dir_(std::move(dir)) {
-  if (!dir_.empty()) std::filesystem::create_directories(dir_);
+  if (dir_.empty()) return;
+  // Records hold tokens: the folder is the server's user's alone (made so;
+  // an existing one is warned about at start if others may write it).
+  if (std::filesystem::create_directories(dir_))
+    std::filesystem::permissions(dir_, std::filesystem::perms::owner_all, std::filesystem::perm_options::replace);
 }
 
 std::filesystem::path FileSessionStore::file_of(const std::string& id) const {
