@@ -22,7 +22,7 @@ import {
   applyDeltaRanges, applyDeltas, decodeChunk, decodeDeltas, FrameError, isKeyframe, KeyedDeltas, largestDelta,
   type DracoDecoderModule,
 } from './frame';
-import { frameMesh, vertexNormals } from './geometry';
+import { coarseIndex, frameMesh, vertexNormals } from './geometry';
 import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
 import { FrameMailbox } from './mailbox';
 import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
@@ -127,10 +127,12 @@ async function join(serverUrl: string, sessionId: string, token: string): Promis
   base.faces = [];
   base.originalIds = [];
   const facesForPage = faces.slice();
+  const coarseFaces = coarseIndex(rest, faces);
   post({
-    type: 'joined', info, faces: facesForPage, buffers: { positions: rest.slice(), normals, colors: null }, framing,
+    type: 'joined', info, faces: facesForPage, coarseFaces, buffers: { positions: rest.slice(), normals, colors: null }, framing,
     basePositions, baseFaces, originalIds, joinMs: joined - started, buildMs: performance.now() - joined,
-  }, [facesForPage.buffer, normals.buffer, basePositions.buffer, baseFaces.buffer, originalIds.buffer]);
+  }, [facesForPage.buffer, normals.buffer, basePositions.buffer, baseFaces.buffer, originalIds.buffer,
+    ...(coarseFaces ? [coarseFaces.buffer] : [])]);
 }
 
 // ------------------------------------------------------------------ frames

@@ -184,3 +184,57 @@ export function falloff(distance: number, radius: number): number {
   const t = distance / radius;
   return 1 - t * t * (3 - 2 * t);
 }
+
+// A coarse stand-in for a dense mesh, drawn while frames stream or the view
+// moves (software GL spends its time on vertices): triangles over a subset
+// of the mesh's own vertices, so the live position attribute moves it too.
+// Vertex clustering: the vertices in each cell of a grid over the bounding
+// box collapse onto the first of them; triangles that collapse are dropped,
+// duplicates kept once. The grid is refined until the result has at least
+// `target` / 2 triangles (or 512 cells a side). null for meshes of no more
+// than 2·target triangles: they are cheap enough.
+export function coarseIndex(positions: Float32Array, faces: Uint32Array, target = 40_000): Uint32Array | null {
+  const triangles = faces.length / 3;
+  if (triangles <= 2 * target) return null;
+  const n = positions.length / 3;
+  const lo = [Infinity, Infinity, Infinity];
+  const hi = [-Infinity, -Infinity, -Infinity];
+  for (let i = 0; i < positions.length; i += 3) {
+    for (let k = 0; k < 3; ++k) {
+      lo[k] = Math.min(lo[k], positions[i + k]);
+      hi[k] = Math.max(hi[k], positions[i + k]);
+    }
+  }
+  const size = Math.max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 1e-12);
+  const representative = new Int32Array(n);
+  for (let cells = 32; ; cells *= 2) {
+    const scale = cells / size;
+    const first = new Map<number, number>();
+    for (let v = 0; v < n; ++v) {
+      const x = Math.min(cells - 1, Math.floor((positions[3 * v] - lo[0]) * scale));
+      const y = Math.min(cells - 1, Math.floor((positions[3 * v + 1] - lo[1]) * scale));
+      const z = Math.min(cells - 1, Math.floor((positions[3 * v + 2] - lo[2]) * scale));
+      const key = (x * cells + y) * cells + z;
+      let r = first.get(key);
+      if (r === undefined) {
+        r = v;
+        first.set(key, v);
+      }
+      representative[v] = r;
+    }
+    const out: number[] = [];
+    const seen = new Set<string>();
+    for (let f = 0; f < faces.length; f += 3) {
+      const a = representative[faces[f]];
+      const b = representative[faces[f + 1]];
+      const c = representative[faces[f + 2]];
+      if (a === b || b === c || a === c) continue;
+      const sorted = [a, b, c].sort((p, q) => p - q);
+      const key = `${sorted[0]},${sorted[1]},${sorted[2]}`;
+      if (seen.has(key)) continue;
+      seen.add(key);
+      out.push(a, b, c);
+    }
+    if (out.length / 3 >= target / 2 || cells >= 512) return Uint32Array.from(out);
+  }
+}

@@ -65,6 +65,10 @@ export interface TestHook {
   pageMsTotal: number;      // this thread's own time for frames (receiving, swapping in), summed
   drawMsTotal: number;      // renderer.render time (uploads and draw calls), summed over draws
   draws: number;            // every draw (frames, orbits, overlays)
+  coarseTriangles: number;  // of the stand-in drawn while busy (0: none, the mesh is small)
+  coarseDraws: number;      // draws of the stand-in
+  pixelRatio: number;       // drawing resolution now (lowered while draws are slow to show)
+  drawShowMs: number;       // how long a draw takes to be shown (smoothed)
 }
 
 declare global {
@@ -80,5 +84,5 @@ export const hook: TestHook = window.__filigree = {
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
   loadStage: '', joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
   editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
-  framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0,
+  framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0, coarseTriangles: 0, coarseDraws: 0, pixelRatio: 1, drawShowMs: 0,
 };

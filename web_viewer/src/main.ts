@@ -119,7 +119,9 @@ class Viewer {
   private show(joined: Joined): void {
     const { info, buffers, faces, framing } = joined;
     const vertexCount = info.rest!.vertexCount;
-    this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing);
+    this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing, joined.coarseFaces !== null);
+    if (joined.coarseFaces) this.view.setCoarse(joined.coarseFaces);
+    hook.coarseTriangles = joined.coarseFaces ? joined.coarseFaces.length / 3 : 0;
     this.view.onDrawn = (drawMs, at) => {
       this.stats.frameDrawn(this.appliedVersion, drawMs, at);
       hook.drawMsTotal += drawMs;
@@ -139,6 +141,9 @@ class Viewer {
     hook.buildMs = joined.buildMs;
     Object.defineProperties(hook, {
       framesRendered: { get: () => this.view.framesRendered, enumerable: true },
+      coarseDraws: { get: () => this.view.coarseDraws, enumerable: true },
+      pixelRatio: { get: () => this.view.pixelRatio, enumerable: true },
+      drawShowMs: { get: () => this.view.drawShowMs, enumerable: true },
       roundTripMs: { get: () => this.stats.snapshot(performance.now()).roundTripMs, enumerable: true },
       editToDrawnMs: { get: () => this.stats.snapshot(performance.now()).editToDrawnMs, enumerable: true },
       handlesAnswered: { get: () => this.handles?.answered ?? 0, enumerable: true },

@@ -32,7 +32,7 @@ export type FromWorker =
   | { type: 'progress'; stage: 'download' | 'build'; loaded: number; total: number | null }
   // The session without its big arrays (info.rest emptied), those as typed arrays.
   | {
-    type: 'joined'; info: SessionInfo; faces: Uint32Array; buffers: Buffers; framing: Framing;
+    type: 'joined'; info: SessionInfo; faces: Uint32Array; coarseFaces: Uint32Array | null; buffers: Buffers; framing: Framing;
     basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; joinMs: number; buildMs: number;
   }
   | { type: 'joinFailed'; error: CallError }

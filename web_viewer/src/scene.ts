@@ -12,6 +12,10 @@ import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 import { fitDistance, type Framing } from './geometry';
 
 const FOV = 40;
+const REFINE_MS = 300;
+const SLOW_DRAW_MS = 50;
+const FAST_DRAW_MS = 25;
+const MIN_PIXEL_RATIO = 0.5;
 
 export class MeshView {
   readonly scene = new THREE.Scene();
@@ -24,18 +28,38 @@ export class MeshView {
   private readonly positionAttribute: THREE.BufferAttribute;
   private readonly normalAttribute: THREE.BufferAttribute;
   private dirty = true;
+  // The coarse stand-in (geometry.ts, coarseIndex), drawn while frames
+  // stream or the view moves; the full index when things are still.
+  private readonly fullIndex: THREE.BufferAttribute;
+  private coarse: THREE.BufferAttribute | null = null;
+  private lastChange = -Infinity;
+  private refineTimer: ReturnType<typeof setTimeout> | undefined;
   framesRendered = 0;
+  coarseDraws = 0;
+  // How long the browser takes to show a draw (the time from the animation
+  // frame that drew to the next one: with software compositing the page's
+  // thread waits for the GPU's readback in between), smoothed; and what is
+  // done about it: a lower pixel ratio, then fewer draws (see render()).
+  drawShowMs = 0;
+  pixelRatio: number;
+  private lastFrameAt = -Infinity;
+  private drewLastFrame = false;
+  private lastDrawAt = -Infinity;
+  private lastAdjust = 0;
   // Called after each draw with the version drawn, the draw's duration (the
   // uploads and the draw call) and its end time.
   onDrawn: (drawMs: number, at: number) => void = () => {};
 
+  // `dense`: a mesh heavy enough to be drawn coarser while busy; it is drawn
+  // without multisampling (its triangles are mostly smaller than a pixel).
   constructor(private readonly container: HTMLElement, positions: Float32Array, normals: Float32Array,
-              faces: Uint32Array, private readonly framing: Framing) {
+              faces: Uint32Array, private readonly framing: Framing, dense = false) {
     this.positionAttribute = new THREE.BufferAttribute(positions, 3).setUsage(THREE.DynamicDrawUsage);
     this.normalAttribute = new THREE.BufferAttribute(normals, 3).setUsage(THREE.DynamicDrawUsage);
     this.geometry.setAttribute('position', this.positionAttribute);
     this.geometry.setAttribute('normal', this.normalAttribute);
-    this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
+    this.fullIndex = new THREE.BufferAttribute(faces, 1);
+    this.geometry.setIndex(this.fullIndex);
     const [cx, cy, cz] = framing.center;
     this.geometry.boundingSphere = new THREE.Sphere(new THREE.Vector3(cx, cy, cz), framing.radius);
 
@@ -50,8 +74,9 @@ export class MeshView {
     this.scene.add(this.mesh);
     this.scene.background = new THREE.Color(0x1d2024);
 
-    this.renderer = new THREE.WebGLRenderer({ antialias: true });
+    this.renderer = new THREE.WebGLRenderer({ antialias: !dense });
     this.renderer.setPixelRatio(window.devicePixelRatio);
+    this.pixelRatio = window.devicePixelRatio;
     this.renderer.domElement.tabIndex = 0;
     this.renderer.domElement.setAttribute('aria-label', 'The session\'s mesh: drag to orbit, wheel to zoom, F to fit');
     container.appendChild(this.renderer.domElement);
@@ -63,7 +88,7 @@ export class MeshView {
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
     this.controls.addEventListener('change', () => {
       this.updateClipping();
-      this.invalidate();
+      this.moved();
     });
 
     // A sky/ground hemisphere for the overall shape, plus a key light that
@@ -119,6 +144,17 @@ export class MeshView {
     this.camera.updateProjectionMatrix();
   }
 
+  // Draw the coarse stand-in (index pairs of the same vertices) while busy.
+  setCoarse(faces: Uint32Array): void {
+    this.coarse = new THREE.BufferAttribute(faces, 1);
+  }
+
+  // Something moves (a frame, the camera): coarse for a while if there is a stand-in.
+  private moved(): void {
+    this.lastChange = performance.now();
+    this.invalidate();
+  }
+
   // A finished frame: draw from these arrays from now on; returns the arrays
   // they replace (no longer needed: the draw uploads from the new ones).
   setBuffers(positions: Float32Array, normals: Float32Array): { positions: Float32Array; normals: Float32Array } {
@@ -127,7 +163,7 @@ export class MeshView {
     this.normalAttribute.array = normals;
     this.positionAttribute.needsUpdate = true;
     this.normalAttribute.needsUpdate = true;
-    this.invalidate();
+    this.moved();
     return old;
   }
 
@@ -163,7 +199,11 @@ export class MeshView {
     // three.js skips meshes whose bounding sphere the ray misses, and frames
     // move vertices out of the rest sphere: refresh it (one pass, per click).
     this.geometry.computeBoundingSphere();
-    return this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
+    const drawn = this.geometry.getIndex();
+    this.geometry.setIndex(this.fullIndex);  // pick the mesh itself, not the stand-in
+    const hit = this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
+    this.geometry.setIndex(drawn);
+    return hit;
   }
 
   // Where a world point is drawn, in page coordinates.
@@ -218,9 +258,16 @@ export class MeshView {
     return { look: [d.x, d.y, d.z], up: [up.x, up.y, up.z] };
   }
 
-  // Drawing resolution: lower while the page cannot keep up.
-  setPixelRatio(ratio: number): void {
-    if (this.renderer.getPixelRatio() === ratio) return;
+  // Drawing resolution: lower while draws are slow to show, back up when
+  // they are quick; at most one step a second.
+  private adapt(now: number): void {
+    if (now - this.lastAdjust < 1000) return;
+    let ratio = this.pixelRatio;
+    if (this.drawShowMs > SLOW_DRAW_MS) ratio = Math.max(MIN_PIXEL_RATIO, ratio * 0.75);
+    else if (this.drawShowMs < FAST_DRAW_MS) ratio = Math.min(window.devicePixelRatio, ratio / 0.75);
+    if (ratio === this.pixelRatio) return;
+    this.lastAdjust = now;
+    this.pixelRatio = ratio;
     this.renderer.setPixelRatio(ratio);
     this.resize();
   }
@@ -236,9 +283,33 @@ export class MeshView {
 
   // Draws only when something changed: an idle viewer costs no GPU time.
   private render(): void {
+    const now = performance.now();
+    if (this.drewLastFrame) {
+      // The previous animation frame drew: this one came once that draw was shown.
+      this.drawShowMs = this.drawShowMs === 0 ? now - this.lastFrameAt : 0.8 * this.drawShowMs + 0.2 * (now - this.lastFrameAt);
+      this.adapt(now);
+    }
+    this.lastFrameAt = now;
+    this.drewLastFrame = false;
     if (!this.dirty) return;
+    // Slow to show even at the lowest pixel ratio: leave the page's thread
+    // idle between draws as long as a draw takes to show, so that input never
+    // waits behind two draws in a row.
+    if (this.pixelRatio <= MIN_PIXEL_RATIO && this.drawShowMs > SLOW_DRAW_MS && now - this.lastDrawAt < 2 * this.drawShowMs) return;
     this.dirty = false;
+    this.drewLastFrame = true;
+    this.lastDrawAt = now;
     const start = performance.now();
+    if (this.coarse) {
+      // Full detail once nothing has moved for REFINE_MS.
+      const busy = start - this.lastChange < REFINE_MS;
+      this.geometry.setIndex(busy ? this.coarse : this.fullIndex);
+      if (busy) {
+        ++this.coarseDraws;
+        clearTimeout(this.refineTimer);
+        this.refineTimer = setTimeout(() => this.invalidate(), REFINE_MS + 10 - (start - this.lastChange));
+      }
+    }
     this.renderer.render(this.scene, this.camera);
     const end = performance.now();
     ++this.framesRendered;
@@ -250,6 +321,7 @@ export class MeshView {
   // browser composites it.
   capture(): string {
     this.dirty = true;
+    this.lastChange = -Infinity;  // full detail
     this.render();
     return this.renderer.domElement.toDataURL('image/png');
   }

@@ -9,7 +9,7 @@ import { Code, ConnectError } from '@connectrpc/connect';
 import * as THREE from 'three';
 import { describe, expect, it } from 'vitest';
 
-import { falloff, fitDistance, frameMesh, principalAxes, vertexNormals, type Vec3 } from '../src/geometry';
+import { coarseIndex, falloff, fitDistance, frameMesh, principalAxes, vertexNormals, type Vec3 } from '../src/geometry';
 import { isFinal, LONG_CAP_MS, retryDelay, SHORT_CAP_MS } from '../src/reconnect';
 // @ts-expect-error: a plain ES module of the browser test, without types
 import { writeEllipsoidObj } from './harness.mjs';
@@ -112,6 +112,25 @@ describe('fitDistance', () => {
     expect(3 / ((d - 0.5) * Math.tan((20 * Math.PI) / 180))).toBeCloseTo(0.8, 9);
     const wide = fitDistance({ halfWidth: 3, halfHeight: 1, halfDepth: 0 }, 40, 0.5, 0.8);
     expect(3 / (wide * Math.tan((20 * Math.PI) / 180) * 0.5)).toBeCloseTo(0.8, 9);
+  });
+});
+
+describe('coarseIndex', () => {
+  it('stands in for a dense mesh with fewer triangles over its own vertices, none degenerate', () => {
+    const { positions, faces } = ellipsoid([1, 0.6, 3], 'z', [1, 0, 0]);  // 2256 triangles
+    expect(coarseIndex(positions, faces, 2000)).toBeNull();  // small enough as it is
+    const coarse = coarseIndex(positions, faces, 400)!;
+    const triangles = coarse.length / 3;
+    expect(triangles).toBeGreaterThanOrEqual(200);
+    expect(triangles).toBeLessThan(faces.length / 3);
+    const n = positions.length / 3;
+    for (let f = 0; f < coarse.length; f += 3) {
+      const [a, b, c] = [coarse[f], coarse[f + 1], coarse[f + 2]];
+      expect(a < n && b < n && c < n).toBe(true);
+      expect(a !== b && b !== c && a !== c).toBe(true);
+    }
+    // It still wraps the body: its signed volume is most of the mesh's.
+    expect(volume(positions, coarse)).toBeGreaterThan(0.8 * volume(positions, faces));
   });
 });
 
