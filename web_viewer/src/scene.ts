@@ -319,10 +319,24 @@ export class MeshView {
   // The current image as a PNG data URL. Renders first, in the same task:
   // without preserveDrawingBuffer the canvas is only readable until the
   // browser composites it.
+  // Full detail at the device's pixel ratio, whatever the load.
   capture(): string {
+    const ratio = this.pixelRatio;
+    if (ratio !== window.devicePixelRatio) {
+      this.renderer.setPixelRatio(window.devicePixelRatio);
+      this.resize();
+    }
     this.dirty = true;
-    this.lastChange = -Infinity;  // full detail
+    this.lastChange = -Infinity;
+    this.drewLastFrame = false;  // a draw outside the animation frames: not timed
+    this.lastDrawAt = -Infinity;
     this.render();
-    return this.renderer.domElement.toDataURL('image/png');
+    this.drewLastFrame = false;
+    const image = this.renderer.domElement.toDataURL('image/png');
+    if (ratio !== window.devicePixelRatio) {
+      this.renderer.setPixelRatio(ratio);
+      this.resize();
+    }
+    return image;
   }
 }
