@@ -17,6 +17,14 @@ namespace {
 constexpr char kMagic[4] = {'F', 'G', 'S', 'R'};
 constexpr std::size_t kHeader = sizeof kMagic + sizeof(std::uint64_t);
 
+// Versions only grow, one a frame: no session reaches 2^62 (a century at a
+// billion frames a second). A larger stored one is forged or corrupt, and
+// would wrap to 0 and reuse versions clients have seen.
+std::uint64_t checked_version(std::uint64_t version) {
+  if (version > kMaxSessionVersion) throw std::runtime_error("version " + std::to_string(version) + " is past the largest a session reaches");
+  return version;
+}
+
 std::string sealed(const std::string& body) {
   const std::uint64_t hash = hash_bytes(body.data(), body.size());
   std::string out(kMagic, sizeof kMagic);
@@ -131,7 +139,7 @@ SessionRecord decode_session_record(const std::string& bytes) {
   r.editor_token = p.editor_token();
   r.viewer_token = p.viewer_token();
   r.pose.assign(p.pose().begin(), p.pose().end());
-  r.version = p.version();
+  r.version = checked_version(p.version());
   r.uploaded_ids.assign(p.uploaded_ids().begin(), p.uploaded_ids().end());
   r.rig = p.rig();
   r.owner = p.owner();
@@ -159,7 +167,8 @@ SessionProgress decode_session_progress(const std::string& bytes) {
     throw std::runtime_error("unreadable session progress");
   // Progress written before handles were kept has none: the same as the
   // writer had (it dropped them on a restart too).
-  return {p.options(), {p.pose().begin(), p.pose().end()}, p.version(), handles_of(p), p.handles_pending(), cut_of(p)};
+  return {p.options(), {p.pose().begin(), p.pose().end()}, checked_version(p.version()), handles_of(p), p.handles_pending(),
+          cut_of(p)};
 }
 
 void apply_session_progress(const std::string& bytes, SessionRecord& r) { apply_progress(decode_session_progress(bytes), r); }

@@ -46,6 +46,8 @@ struct SessionRecord {
 // names and Redis keys, and what a client may propose for a new session.
 inline constexpr std::size_t kSessionIdLength = 20;
 bool is_session_id(const std::string& id);
+// The largest version a stored session may have (decode_* refuse larger).
+inline constexpr std::uint64_t kMaxSessionVersion = std::uint64_t{1} << 62;
 // `id` for a message: itself if it is a session id, else a bounded
 // description (a client's 1 MB "id" is not echoed back).
 std::string printable_session_id(const std::string& id);

@@ -110,6 +110,19 @@ TEST(SessionRecordTest, AnEmptyCutIsNotWritten) {
   EXPECT_TRUE(decode_session_record(encode_session_record(r)).cut.empty());
 }
 
+// A stored version past 2^62 is refused: the next frame would have wrapped
+// to version 0 and reused versions clients have seen.
+TEST(SessionRecordTest, VersionsPastTheLargestAreRefused) {
+  SessionRecord r = sample();
+  r.version = kMaxSessionVersion;
+  EXPECT_EQ(decode_session_record(encode_session_record(r)).version, kMaxSessionVersion);
+  r.version = kMaxSessionVersion + 1;
+  EXPECT_THROW(decode_session_record(encode_session_record(r)), std::runtime_error);
+  SessionProgress p = progress_of(sample());
+  p.version = ~std::uint64_t{0};
+  EXPECT_THROW(decode_session_progress(encode_session_progress(p)), std::runtime_error);
+}
+
 // Stored bytes carry a checksum: any flipped byte of a record or a progress
 // is refused as corrupt, not read as another pose, version or token.
 TEST(SessionRecordTest, EveryFlippedByteIsCaught) {

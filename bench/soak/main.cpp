@@ -29,12 +29,14 @@
 #include <unistd.h>
 #include <vector>
 
+#include "bench/soak/crash_cycles.h"
 #include "bench/soak/failures.h"
 #include "bench/soak/malformed_requests.h"
 #include "bench/soak/options.h"
 #include "bench/soak/rss_sampler.h"
 #include "bench/soak/session_load.h"
 #include "bench/soak/soak_mesh.h"
+#include "bench/soak/upload_pressure.h"
 #include "filigree/client.h"
 #include "support/server_process.h"
 
@@ -55,7 +57,7 @@ double warmup_seconds(double run_seconds) { return std::max(0.2 * run_seconds, 3
 
 struct Totals {
   std::uint64_t poses_sent = 0, acknowledged = 0, driver_frames = 0;
-  std::uint64_t watcher_frames[3] = {}, skipped[3] = {}, reconnects = 0;
+  std::uint64_t watcher_frames[3] = {}, skipped[3] = {}, reconnects = 0, slow_max_lag = 0;
   double fps_min = 0.0, fps_mean = 0.0;
 };
 
@@ -72,6 +74,7 @@ Totals add_up(const std::vector<std::unique_ptr<SessionLoad>>& loads) {
       t.watcher_frames[k] += s.watchers[k].frames;
       t.skipped[k] += s.watchers[k].skipped;
       t.reconnects += s.watchers[k].reconnects;
+      t.slow_max_lag = std::max(t.slow_max_lag, s.watchers[k].max_lag);
     }
     fps_sum += s.fps;
     t.fps_min = std::min(t.fps_min, s.fps);
@@ -82,7 +85,7 @@ Totals add_up(const std::vector<std::unique_ptr<SessionLoad>>& loads) {
 
 void print_summary(const Options& o, double driven, const SoakMesh& mesh, std::size_t base_vertices, const Totals& t,
                    const std::vector<MalformedTally>& malformed, const MemoryVerdict& memory, double server_cores, int exit_status,
-                   const Failures& failures) {
+                   const CrashCycleSummary& crashes, const UploadPressureSummary& uploads, const Failures& failures) {
   std::printf("\n== filigree soak summary ==\n");
   std::printf("duration        %.1f s driven (asked %.0f s), %d sessions, poses at %.0f Hz\n", driven, o.seconds,
               o.sessions, o.rate_hz);
@@ -94,6 +97,8 @@ void print_summary(const Options& o, double driven, const SoakMesh& mesh, std::s
               static_cast<unsigned long long>(t.driver_frames), static_cast<unsigned long long>(t.watcher_frames[0]),
               static_cast<unsigned long long>(t.watcher_frames[1]), static_cast<unsigned long long>(t.skipped[1]),
               static_cast<unsigned long long>(t.watcher_frames[2]));
+  std::printf("slow watchers   at most %llu versions behind the driver when reading (default channel, Follow)\n",
+              static_cast<unsigned long long>(t.slow_max_lag));
   std::printf("reconnects      %llu (every %.0f s, resumed with after_version)\n",
               static_cast<unsigned long long>(t.reconnects), o.reconnect_every.count() / 1000.0);
   std::uint64_t sent = 0;
@@ -117,6 +122,15 @@ void print_summary(const Options& o, double driven, const SoakMesh& mesh, std::s
   std::printf("session fps     min %.1f, mean %.1f (frames computed per second per session)\n", t.fps_min, t.fps_mean);
   std::printf("server CPU      %.2f cores on average while driven\n", server_cores);
   std::printf("server exit     %d on SIGTERM (0: drained)\n", exit_status);
+  std::printf("crash cycles    %d SIGKILL/restart cycles, %llu acknowledged poses, %llu sessions checked after restarts; "
+              "slowest restart %.2f s\n",
+              crashes.cycles, static_cast<unsigned long long>(crashes.acknowledged),
+              static_cast<unsigned long long>(crashes.checks), crashes.slowest_restart_seconds);
+  if (uploads.uploads)
+    std::printf("upload burst    %d concurrent uploads of %d MiB under --max-memory %llu MiB: %d created, %d refused; "
+                "peak RSS %.1f MiB\n",
+                uploads.uploads, o.upload_mib, static_cast<unsigned long long>(uploads.limit_bytes >> 20), uploads.created,
+                uploads.refused, mib(uploads.peak_rss_bytes));
   const auto reasons = failures.reasons();
   if (failures.count() == 0) {
     std::printf("RESULT: PASS\n");
@@ -228,6 +242,19 @@ int run(const Options& o) {
   const int exit_status = terminate_within(server, std::chrono::seconds(60), failures);
   if (exit_status != 0) failures.add("filigree-server exited with " + std::to_string(exit_status) + " on SIGTERM (0: drained)");
 
+  CrashCycleSummary crashes;
+  if (o.crash_cycles > 0) {
+    std::printf("crash cycles: %d × (4 sessions driven at %.0f Hz, SIGKILL, restart, checks)\n", o.crash_cycles, o.rate_hz);
+    std::fflush(stdout);
+    crashes = run_crash_cycles(o.server, soak_mesh(3), 4, o.crash_cycles, o.rate_hz, 1.5, failures);
+  }
+  UploadPressureSummary uploads;
+  if (o.upload_mib > 0) {
+    std::printf("upload burst: 8 × %d MiB at once under --max-memory %d MiB\n", o.upload_mib, 4 * o.upload_mib);
+    std::fflush(stdout);
+    uploads = run_upload_pressure(o.server, 8, o.upload_mib, 4 * o.upload_mib, failures);
+  }
+
   const MemoryVerdict memory = judge_memory(rss.samples(), warmup_seconds(o.seconds));
   if (o.memory_check) {
     if (!memory.judged) {
@@ -241,7 +268,7 @@ int run(const Options& o) {
     }
   }
   print_summary(o, driven, mesh, sessions[0].mesh.base_vertex_count(), add_up(loads), malformed.tallies(), memory,
-                server_cores, exit_status, failures);
+                server_cores, exit_status, crashes, uploads, failures);
   return failures.count() == 0 ? 0 : 1;
 }
 

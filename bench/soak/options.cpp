@@ -7,13 +7,16 @@ namespace filigree::soak {
 
 std::string usage() {
   return "usage: filigree_soak [--seconds N] [--sessions N] [--server PATH] [--rate-hz HZ]\n"
-         "                     [--memory-check=on|off]\n"
+         "                     [--memory-check=on|off] [--crash-cycles N] [--upload-mib N]\n"
          "  --seconds N          how long to drive (default 600)\n"
          "  --sessions N         sessions, each with a driver and 3 watchers (default 16)\n"
          "  --server PATH        filigree-server binary (default: the one built beside this)\n"
          "  --rate-hz HZ         poses per second per driver (default 30)\n"
          "  --memory-check=off   do not judge the server's memory growth (for runs too short\n"
-         "                       to judge it); every other criterion still applies\n";
+         "                       to judge it); every other criterion still applies\n"
+         "  --crash-cycles N     then N SIGKILL/restart cycles under load (default 3; 0: none)\n"
+         "  --upload-mib N       then 8 concurrent uploads of N MiB each under --max-memory\n"
+         "                       of 4·N MiB (default 64; 0: none)\n";
 }
 
 namespace {
@@ -53,6 +56,10 @@ Options parse_options(int argc, char** argv) {
       if (o.sessions < 1) throw std::invalid_argument("--sessions wants at least 1");
     } else if (arg == "--server") {
       o.server = value;
+    } else if (arg == "--crash-cycles") {
+      o.crash_cycles = static_cast<int>(number(arg, value));
+    } else if (arg == "--upload-mib") {
+      o.upload_mib = static_cast<int>(number(arg, value));
     } else if (arg == "--rate-hz") {
       o.rate_hz = number(arg, value);
     } else if (arg == "--memory-check") {

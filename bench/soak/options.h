@@ -14,6 +14,10 @@ struct Options {
   // Off for runs too short to judge memory (the ctest smoke run); every other
   // criterion still applies.
   bool memory_check = true;
+  // After the load: SIGKILL/restart cycles (crash_cycles.h), and concurrent
+  // uploads of upload_mib MiB each under --max-memory (upload_pressure.h).
+  int crash_cycles = 3;
+  int upload_mib = 64;
 
   // The workload's shape (not options: the issue fixes them).
   int sphere_levels = 5;  // icosphere of 10242 vertices: 16 sessions × 30 Hz fit on 2 cores

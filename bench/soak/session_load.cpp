@@ -1,6 +1,7 @@
 #include "bench/soak/session_load.h"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 
 namespace filigree::soak {
@@ -25,12 +26,13 @@ std::string describe(const grpc::Status& status) {
   return std::string(status_code_name(status.error_code())) + ": " + status.error_message();
 }
 
-std::shared_ptr<grpc::Channel> small_window_channel(const std::string& address) {
-  grpc::ChannelArguments args;
-  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
-  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 64 * 1024);
-  args.SetMaxReceiveMessageSize(-1);
-  return grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args);
+// How far behind the driver a slow watcher may read: the frames in flight
+// (two) and those computed during three of its reads (the one in flight was
+// sent during the read before), plus a margin for a busy machine. Without
+// acknowledgements it reads hundreds to thousands behind.
+std::uint64_t slow_lag_limit(const Options& o) {
+  const double per_read = o.rate_hz * std::chrono::duration<double>(o.slow_reader_delay).count();
+  return 2 + 3 * static_cast<std::uint64_t>(std::ceil(per_read)) + 4;
 }
 
 }  // namespace
@@ -38,13 +40,16 @@ std::shared_ptr<grpc::Channel> small_window_channel(const std::string& address) 
 SessionLoad::SessionLoad(Client& client, const std::string& address, const SessionHandle& session, int index,
                          const Options& options, Failures& failures)
     : client_(client), session_(session), options_(options), failures_(failures),
-      slow_client_(small_window_channel(address)),
+      // A client of its own with the library's default channel: no small
+      // window needed, since its watcher acknowledges what it read.
+      slow_client_(address),
       // Phases spread over the sessions, so that they do not all bend in step.
       driver_(client, session, driver_name(index), options.rate_hz, 0.7 * index, failures) {
   for (WatcherKind kind : {WatcherKind::kNormal, WatcherKind::kSlow, WatcherKind::kReconnecting})
     watchers_[static_cast<int>(kind)] =
         std::make_unique<SoakWatcher>(kind == WatcherKind::kSlow ? slow_client_ : client, session, kind, driver_name(index),
-                                      options.slow_reader_delay, options.reconnect_every, failures);
+                                      options.slow_reader_delay, options.reconnect_every, failures,
+                                      [this] { return driver_.stats().last_version; }, slow_lag_limit(options));
 }
 
 SessionLoad::~SessionLoad() {

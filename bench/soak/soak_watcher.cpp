@@ -20,10 +20,12 @@ const char* to_string(WatcherKind kind) {
 }
 
 SoakWatcher::SoakWatcher(Client& client, const SessionHandle& session, WatcherKind kind, std::string driver_name,
-                         std::chrono::milliseconds slow_delay, std::chrono::milliseconds reconnect_every, Failures& failures)
+                         std::chrono::milliseconds slow_delay, std::chrono::milliseconds reconnect_every, Failures& failures,
+                         std::function<std::uint64_t()> newest_version, std::uint64_t lag_limit)
     : client_(client), session_(session), kind_(kind),
       name_(driver_name + "/" + to_string(kind) + " watcher"), driver_name_(std::move(driver_name)),
-      slow_delay_(slow_delay), reconnect_every_(reconnect_every), failures_(failures) {}
+      slow_delay_(slow_delay), reconnect_every_(reconnect_every), failures_(failures),
+      newest_version_(std::move(newest_version)), lag_limit_(lag_limit) {}
 
 SoakWatcher::~SoakWatcher() { stop(); }
 
@@ -113,6 +115,20 @@ bool SoakWatcher::take(const v1::Frame& f, FrameDecoder& decoder, std::uint64_t 
       stats_.newest_driver_pose = driver_pose;
     }
     changed_.notify_all();
+  }
+  // A slow reader must still read recent frames: how far behind the driver is this one?
+  if (kind_ == WatcherKind::kSlow && newest_version_ && !delay_ended_) {
+    const std::uint64_t newest = newest_version_();
+    const std::uint64_t lag = newest > f.version() ? newest - f.version() : 0;
+    bool over = false;
+    {
+      std::lock_guard lock(mutex_);
+      over = lag > lag_limit_ && lag > stats_.max_lag;  // reported once per new worst
+      stats_.max_lag = std::max(stats_.max_lag, lag);
+    }
+    if (over)
+      failures_.add(name_ + ": read version " + std::to_string(f.version()) + " when the driver had seen " +
+                    std::to_string(newest) + " (" + std::to_string(lag) + " behind, over " + std::to_string(lag_limit_) + ")");
   }
   // The workload: a slow reader's delay is what makes the server skip frames for it.
   if (kind_ == WatcherKind::kSlow && !delay_ended_) std::this_thread::sleep_for(slow_delay_);

@@ -20,6 +20,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -42,12 +43,18 @@ struct WatcherStats {
   std::uint64_t newest_version = 0;
   // The driver's pose named in the changes of the newest frame (0: none).
   std::uint64_t newest_driver_pose = 0;
+  std::uint64_t max_lag = 0;  // versions behind the driver when a frame was read (slow watcher)
 };
 
 class SoakWatcher {
  public:
+  // `newest_version`: the newest version the session's driver has seen; a
+  // slow watcher's frames may be at most `lag_limit` versions older when it
+  // reads them (the library's watcher follows with acknowledgements, on a
+  // channel of default settings).
   SoakWatcher(Client& client, const SessionHandle& session, WatcherKind kind, std::string driver_name,
-              std::chrono::milliseconds slow_delay, std::chrono::milliseconds reconnect_every, Failures& failures);
+              std::chrono::milliseconds slow_delay, std::chrono::milliseconds reconnect_every, Failures& failures,
+              std::function<std::uint64_t()> newest_version = {}, std::uint64_t lag_limit = 0);
   ~SoakWatcher();
 
   void start();
@@ -76,6 +83,8 @@ class SoakWatcher {
   const std::string name_, driver_name_;
   const std::chrono::milliseconds slow_delay_, reconnect_every_;
   Failures& failures_;
+  const std::function<std::uint64_t()> newest_version_;
+  const std::uint64_t lag_limit_;
   std::atomic<bool> delay_ended_{false};
 
   mutable std::mutex mutex_;
