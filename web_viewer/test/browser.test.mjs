@@ -477,6 +477,25 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await context.close();
   });
 
+  it('colours the stretch of a bent mesh, computed in the worker', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    const page = await open(viewerUrl(session.viewer_token));
+    await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
+    const plain = colouredFraction(png(await page.evaluate(() => window.__filigree.capture())));
+    await page.check('#overlay-stretch');
+    // Armed before the drive: the first frame whose stretch is clearly above rigid.
+    const stretched = waitFor(page, () => window.__filigree.stretchMax > 0.05);
+    await cli(driveArgs(grpcAddress, session, 'bend', 20, 20, 'browser-test-stretch'));
+    await stretched;
+    const { stretchMax } = await hookState(page);
+    const coloured = colouredFraction(png(await page.evaluate(() => window.__filigree.capture())));
+    assert.ok(coloured > 0.02 && coloured > 4 * plain, `the stretch map colours the mesh: ${(100 * coloured).toFixed(1)}% ` +
+      `of the pixels (${(100 * plain).toFixed(1)}% without it)`);
+    await page.uncheck('#overlay-stretch');
+    await waitFor(page, () => window.__filigree.stretchMax === 0);
+    t.diagnostic(`stretch: ${(100 * coloured).toFixed(1)}% coloured pixels at max |L2 − 1| = ${stretchMax.toFixed(3)}`);
+    await page.context().close();
+  });
+
   it('shows the regions, which the threshold turns on and off', { timeout: TEST_TIMEOUT_MS }, async (t) => {
     const page = await open(viewerUrl(session.editor_token));
     await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
