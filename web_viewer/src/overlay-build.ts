@@ -66,8 +66,10 @@ export function regionVertexColours(regionOf: ArrayLike<number>, colourOf: Uint8
   }
 }
 
-// The edges of the triangles whose two ends lie in different regions (a cut
-// vertex is its own side): the regions' outlines, as index pairs, each once.
+// The edges of the triangles whose two ends lie in two different regions:
+// where regions meet, as index pairs, each once. Edges to cut vertices are
+// left out (the grey already tells those apart; outlining thousands of small
+// regions against the cut would cover a dense mesh in dark specks).
 export function regionBoundaryEdges(regionOf: ArrayLike<number>, faces: ArrayLike<number>): Uint32Array {
   const n = regionOf.length;
   const seen = new Set<number>();
@@ -76,7 +78,7 @@ export function regionBoundaryEdges(regionOf: ArrayLike<number>, faces: ArrayLik
     for (let k = 0; k < 3; ++k) {
       const a = faces[f + k];
       const b = faces[f + ((k + 1) % 3)];
-      if (regionOf[a] === regionOf[b]) continue;
+      if (regionOf[a] === regionOf[b] || regionOf[a] === 0 || regionOf[b] === 0) continue;
       const key = edgeKey(a, b, n);
       if (seen.has(key)) continue;
       seen.add(key);
