@@ -258,12 +258,23 @@ export class MeshView {
     return { look: [d.x, d.y, d.z], up: [up.x, up.y, up.z] };
   }
 
+  // Things are still: full detail at the device's pixel ratio, however slow to show.
+  private settle(): void {
+    if (this.pixelRatio !== window.devicePixelRatio) {
+      this.pixelRatio = window.devicePixelRatio;
+      this.renderer.setPixelRatio(this.pixelRatio);
+      this.resize();
+    }
+    this.invalidate();
+  }
+
   // Drawing resolution: lower while draws are slow to show, back up when
   // they are quick; at most one step a second.
   private adapt(now: number): void {
     if (now - this.lastAdjust < 1000) return;
     let ratio = this.pixelRatio;
-    if (this.drawShowMs > SLOW_DRAW_MS) ratio = Math.max(MIN_PIXEL_RATIO, ratio * 0.75);
+    const busy = now - this.lastChange < REFINE_MS;  // lower only while things move: a still view stays sharp
+    if (this.drawShowMs > SLOW_DRAW_MS && busy) ratio = Math.max(MIN_PIXEL_RATIO, ratio * 0.75);
     else if (this.drawShowMs < FAST_DRAW_MS) ratio = Math.min(window.devicePixelRatio, ratio / 0.75);
     if (ratio === this.pixelRatio) return;
     this.lastAdjust = now;
@@ -307,7 +318,7 @@ export class MeshView {
       if (busy) {
         ++this.coarseDraws;
         clearTimeout(this.refineTimer);
-        this.refineTimer = setTimeout(() => this.invalidate(), REFINE_MS + 10 - (start - this.lastChange));
+        this.refineTimer = setTimeout(() => this.settle(), REFINE_MS + 10 - (start - this.lastChange));
       }
     }
     this.renderer.render(this.scene, this.camera);
