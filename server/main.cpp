@@ -20,6 +20,7 @@
 
 #include "server/api_keys.h"
 #include "server/bounded_status.h"
+#include "server/connection_guard.h"
 #include "server/filigree_service.h"
 #include "server/http/http_server.h"
 #include "server/listen_address.h"
@@ -116,6 +117,11 @@ int main(int argc, char** argv) {
   app.add_option("--max-streams-per-connection", max_streams_per_connection,
                  "Most calls one gRPC connection (HTTP/2) carries at once; more wait for one to end; 0: gRPC's default "
                  "(no limit)")
+      ->check(CLI::NonNegativeNumber);
+  std::size_t max_connections = 0;
+  app.add_option("--max-connections", max_connections,
+                 "Most connections to the gRPC port at once; more are closed as they come. 0: as many as the "
+                 "process's open-file limit allows (three descriptors each), with room for everything else")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--max-sessions", registry_limits.max_sessions, "Most sessions held at once");
   std::uint64_t max_memory_mib = 0;
@@ -282,7 +288,33 @@ int main(int argc, char** argv) {
     grpc::reflection::InitProtoReflectionServerBuilderPlugin();
     grpc::ServerBuilder builder;
     int port = 0;
-    builder.AddListeningPort(listen, server_credentials(tls, verified_tls.get()), &port);
+    // TCP connections reach gRPC through a ConnectionGuard (a cap, and
+    // accepting that survives running out of descriptors, which gRPC 1.51's
+    // own does not), relayed to gRPC on a unix socket in a private folder.
+    // A unix: --listen is local already and goes to gRPC directly.
+    std::unique_ptr<ConnectionGuard> guard;
+    std::unique_ptr<PrivateSocketDir> socket_dir;
+    if (listen.rfind("unix:", 0) == 0) {
+      builder.AddListeningPort(listen, server_credentials(tls, verified_tls.get()), &port);
+    } else {
+      socket_dir = std::make_unique<PrivateSocketDir>();
+      ConnectionGuardOptions guard_options;
+      guard_options.listen = listen;
+      guard_options.upstream = socket_dir->socket();
+      // Room for files, sessions' stores and the browser port's connections.
+      constexpr std::size_t kReservedDescriptors = 1024 + 512;
+      const std::size_t budget = connection_budget(kReservedDescriptors);
+      if (max_connections > budget)
+        spdlog::warn("event=max_connections_lowered asked={} allowed={} reason=\"the open-file limit (ulimit -n) leaves room "
+                     "for {} relayed connections\"",
+                     max_connections, budget, budget);
+      guard_options.max_connections = max_connections ? std::min(max_connections, budget) : budget;
+      guard = std::make_unique<ConnectionGuard>(guard_options);
+      port = guard->port();
+      int unix_port = 0;
+      builder.AddListeningPort("unix:" + socket_dir->socket().string(), server_credentials(tls, verified_tls.get()), &unix_port);
+      spdlog::info("event=connection_guard max_connections={}", guard_options.max_connections);
+    }
     // A wrong --peer-ca failed above (VerifiedTlsFiles), not on the first forwarded call.
     const std::shared_ptr<grpc::ChannelCredentials> peers = forwards ? peer_credentials(tls, verified_tls.get()) : nullptr;
     builder.SetMaxReceiveMessageSize(max_message_mib << 20);
@@ -304,6 +336,7 @@ int main(int argc, char** argv) {
       spdlog::error("event=listen_failed address={}", listen);
       return 1;
     }
+    if (guard) guard->start();
     // Browsers: static files and gRPC-Web, bridged in-process to the same service.
     std::unique_ptr<http::HttpServer> http_server;
     if (!http_listen.empty()) {
@@ -395,6 +428,7 @@ int main(int argc, char** argv) {
     }
     // Streams are already finished; this only bounds unary calls still in flight.
     server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+    if (guard) guard->stop();
     registry.shutdown();
     spdlog::info("event=stopped");
     return 0;

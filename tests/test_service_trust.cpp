@@ -25,6 +25,7 @@
 #include <openssl/sha.h>
 
 #include "filigree/v1/filigree.grpc.pb.h"
+#include "support/raw_socket.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
 
@@ -665,6 +666,60 @@ TEST_F(TrustTest, HierarchyFilesNoSessionUsesAreCollected) {
   close(made[0]);
   EXPECT_EQ(files_become(4), 4u);
   std::filesystem::remove_all(data);
+}
+
+}  // namespace
+}  // namespace filigree
+
+namespace filigree {
+namespace {
+
+bool lists_sessions(const std::string& address) {
+  auto stub = v1::Filigree::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  v1::ListSessionsResponse list;
+  return stub->ListSessions(&ctx, {}, &list).ok();
+}
+
+// gRPC 1.51 stops accepting for good once accept4() fails with EMFILE: new
+// connections to the gRPC port timed out after descriptors ran out and were
+// freed again. Its connections now come through a ConnectionGuard: a cap on
+// what it relays, and accepting that survives running out of descriptors.
+TEST_F(TrustTest, TheGrpcPortAcceptsAgainAfterDescriptorsRanOut) {
+  // 256 open files: the browser port's connections (bounded at 1000) can use
+  // them all up.
+  test::ServerProcess server(FILIGREE_SERVER_BINARY, {}, /*http=*/true, /*open_files=*/256);
+  ASSERT_TRUE(lists_sessions(server.address()));
+  {
+    std::vector<std::unique_ptr<test::RawSocket>> held;
+    for (int i = 0; i < 300; ++i) held.push_back(std::make_unique<test::RawSocket>(server.http_address()));
+    // With no descriptor left, connections to the gRPC port are accepted and
+    // closed (the guard's spare descriptor), not left waiting.
+    for (int i = 0; i < 20; ++i) held.push_back(std::make_unique<test::RawSocket>(server.address()));
+    EXPECT_TRUE(held.back()->read_until_closed(test::Clock::now() + std::chrono::seconds(5)));
+  }  // every connection goes: descriptors free
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  bool served = false;
+  while (!served && std::chrono::steady_clock::now() < deadline) served = lists_sessions(server.address());
+  EXPECT_TRUE(served) << "the gRPC port does not accept again";
+}
+
+// Beyond its cap the guard closes new connections at once: a flood cannot
+// hold the process's descriptors. (256 open files leave room for 8.)
+TEST_F(TrustTest, TheGrpcPortClosesConnectionsBeyondItsCap) {
+  test::ServerProcess server(FILIGREE_SERVER_BINARY, {"--max-connections", "8"});
+  std::vector<std::unique_ptr<test::RawSocket>> held;
+  for (int i = 0; i < 20; ++i) held.push_back(std::make_unique<test::RawSocket>(server.address()));
+  int closed = 0;
+  for (auto& s : held) closed += s->read_until_closed(test::Clock::now() + std::chrono::milliseconds(500)) ? 1 : 0;
+  EXPECT_EQ(closed, 12) << "20 connections against a cap of 8";
+  EXPECT_FALSE(lists_sessions(server.address())) << "a ninth connection was served";
+  held.clear();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  bool served = false;
+  while (!served && std::chrono::steady_clock::now() < deadline) served = lists_sessions(server.address());
+  EXPECT_TRUE(served);
 }
 
 }  // namespace

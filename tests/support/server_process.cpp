@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -22,7 +23,8 @@ std::string read_line(int fd) {
 
 }  // namespace
 
-ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http) {
+ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http,
+                             unsigned open_files) {
   int out[2];
   if (pipe(out) != 0) throw std::runtime_error("pipe failed");
   pid_ = fork();
@@ -31,6 +33,10 @@ ServerProcess::ServerProcess(const std::string& binary, const std::vector<std::s
     dup2(out[1], STDOUT_FILENO);
     close(out[0]);
     close(out[1]);
+    if (open_files != 0) {
+      const rlimit limit{open_files, open_files};
+      if (setrlimit(RLIMIT_NOFILE, &limit) != 0) _exit(126);
+    }
     std::vector<std::string> all = {binary, "--listen", "127.0.0.1:0", "--log-level", "warn"};
     if (http) all.insert(all.end(), {"--http", "127.0.0.1:0"});
     all.insert(all.end(), args.begin(), args.end());

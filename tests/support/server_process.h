@@ -13,7 +13,9 @@ class ServerProcess {
   // "listening on HOST:PORT" line. Throws std::runtime_error if it exits first.
   // With `http`, also passes `--http 127.0.0.1:0` and waits for the
   // "http on HOST:PORT" line that follows.
-  ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http = false);
+  // `open_files`: the child's limit on open files (RLIMIT_NOFILE, soft and
+  // hard); 0 keeps this process's.
+  ServerProcess(const std::string& binary, const std::vector<std::string>& args, bool http = false, unsigned open_files = 0);
   // Kills the server (SIGKILL) if it is still running.
   ~ServerProcess();
   ServerProcess(const ServerProcess&) = delete;
