@@ -1,4 +1,4 @@
-// The soak (`make soak`, README "Soak"): one filigree-server under a steady
+// The soak (`make soak`, docs/deploy.md "Soak"): one filigree-server under a steady
 // load for a set time, failing (exit 1, saying why) if it loses or reorders
 // anything, refuses a malformed request with an unexpected code, fails any
 // other call, or its memory grows after warm-up.

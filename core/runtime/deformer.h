@@ -23,7 +23,7 @@ struct DeformerOptions {
   // recovery only (fastest), ∞ = whole-mesh optimisation (the quality reference).
   // The default is 0: bench/runtime_bench measures direct recovery within
   // 0.1–0.4% RMS of the whole-mesh result on real meshes, and finite T buys
-  // little of the rest for its cost (README, "Runtime speed and quality").
+  // little of the rest for its cost (docs/performance.md, "Runtime speed and quality").
   double threshold = kDefaultThreshold;
   RotationMethod rotation = RotationMethod::kBestFit;
   // Local–global refinements (re-fit per-vertex rotations on the result, solve
