@@ -44,6 +44,9 @@ export class MeshView {
   pixelRatio: number;
   private lastFrameAt = -Infinity;
   private drewLastFrame = false;
+  // The last draw was full detail of a mesh with a stand-in, and how long such a draw took to show.
+  private lastDrawFull = false;
+  fullShowMs = 0;
   private lastDrawAt = -Infinity;
   private lastAdjust = 0;
   // Called after each draw with the version drawn, the draw's duration (the
@@ -258,6 +261,13 @@ export class MeshView {
     return { look: [d.x, d.y, d.z], up: [up.x, up.y, up.z] };
   }
 
+  // How long things must be still before full detail is drawn: REFINE_MS, or
+  // three times as long as the last full-detail draw took to show (a 1M-vertex
+  // mesh in software GL takes about a second: not between streamed frames).
+  private refineMs(): number {
+    return Math.max(REFINE_MS, 3 * this.fullShowMs);
+  }
+
   // Things are still: full detail at the device's pixel ratio, however slow to show.
   private settle(): void {
     if (this.pixelRatio !== window.devicePixelRatio) {
@@ -273,7 +283,7 @@ export class MeshView {
   private adapt(now: number): void {
     if (now - this.lastAdjust < 1000) return;
     let ratio = this.pixelRatio;
-    const busy = now - this.lastChange < REFINE_MS;  // lower only while things move: a still view stays sharp
+    const busy = now - this.lastChange < this.refineMs();  // lower only while things move: a still view stays sharp
     if (this.drawShowMs > SLOW_DRAW_MS && busy) ratio = Math.max(MIN_PIXEL_RATIO, ratio * 0.75);
     else if (this.drawShowMs < FAST_DRAW_MS) ratio = Math.min(window.devicePixelRatio, ratio / 0.75);
     if (ratio === this.pixelRatio) return;
@@ -297,8 +307,13 @@ export class MeshView {
     const now = performance.now();
     if (this.drewLastFrame) {
       // The previous animation frame drew: this one came once that draw was shown.
-      this.drawShowMs = this.drawShowMs === 0 ? now - this.lastFrameAt : 0.8 * this.drawShowMs + 0.2 * (now - this.lastFrameAt);
-      this.adapt(now);
+      const shown = now - this.lastFrameAt;
+      if (this.lastDrawFull) {
+        this.fullShowMs = shown;
+      } else {
+        this.drawShowMs = this.drawShowMs === 0 ? shown : 0.8 * this.drawShowMs + 0.2 * shown;
+        this.adapt(now);
+      }
     }
     this.lastFrameAt = now;
     this.drewLastFrame = false;
@@ -311,14 +326,17 @@ export class MeshView {
     this.drewLastFrame = true;
     this.lastDrawAt = now;
     const start = performance.now();
+    this.lastDrawFull = false;
     if (this.coarse) {
-      // Full detail once nothing has moved for REFINE_MS.
-      const busy = start - this.lastChange < REFINE_MS;
+      // Full detail once nothing has moved for refineMs().
+      const quiet = this.refineMs();
+      const busy = start - this.lastChange < quiet;
       this.geometry.setIndex(busy ? this.coarse : this.fullIndex);
+      this.lastDrawFull = !busy;
       if (busy) {
         ++this.coarseDraws;
         clearTimeout(this.refineTimer);
-        this.refineTimer = setTimeout(() => this.settle(), REFINE_MS + 10 - (start - this.lastChange));
+        this.refineTimer = setTimeout(() => this.settle(), quiet + 10 - (start - this.lastChange));
       }
     }
     this.renderer.render(this.scene, this.camera);
