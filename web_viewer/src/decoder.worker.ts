@@ -17,10 +17,11 @@ import wasmUrl from 'draco3d/draco_decoder.wasm?url';
 
 import { ConnectError } from '@connectrpc/connect';
 
-import { SessionClient } from './client';
+import { SessionClient, type Frame } from './client';
+import { frameBytes } from './stats';
 import {
-  applyDeltaRanges, applyDeltas, decodeChunk, decodeDeltas, FrameError, isKeyframe, KeyedDeltas, largestDelta,
-  type DracoDecoderModule,
+  applyDeltaRanges, applyDeltas, decodeChunk, decodeDeltas, FrameError, isChunked, isKeyframe, KeyedDeltas, largestDelta,
+  type ChunkedFrameData, type DracoDecoderModule,
 } from './frame';
 import { coarseIndex, frameMesh, vertexNormals } from './geometry';
 import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
@@ -146,7 +147,8 @@ function takeBuffers(): Buffers | null {
   return set;
 }
 
-type FrameIn = Extract<ToWorker, { type: 'frame' }>;
+// A frame off the Watch stream, read here: the chunked or the single format.
+interface FrameIn { stream: number; chunked?: ChunkedFrameData; single?: { version: bigint; vertexCount: number; deltas: Uint8Array } }
 const isKeyframeIn = (m: FrameIn) => m.chunked !== undefined && isKeyframe(m.chunked);
 // The frames not applied yet, in order. Frames come in bursts (the page's
 // thread reads the stream between its own tasks), and each is applied while
@@ -256,6 +258,43 @@ function output(): void {
   }, transfer);
 }
 
+// ------------------------------------------------------------------ the Watch stream
+
+// Read here, so that the page's thread never parses a frame (a 1M-vertex
+// keyframe is megabytes): the page gets what its panel shows of each frame.
+let watching: { stream: number; abort: AbortController } | null = null;
+
+async function watch(stream: number, afterVersion: bigint): Promise<void> {
+  watching?.abort.abort();
+  const abort = new AbortController();
+  watching = { stream, abort };
+  let opened = false;
+  const open = () => {
+    if (opened) return;
+    opened = true;
+    post({ type: 'streamOpened', stream });
+  };
+  let error: CallError | null = null;
+  try {
+    for await (const frame of client!.watch(afterVersion, abort.signal, open)) {
+      open();
+      arrived(stream, frame);
+    }
+  } catch (e) {
+    error = callError(e);
+  }
+  if (watching?.stream === stream) watching = null;
+  post({ type: 'streamEnded', stream, error, aborted: abort.signal.aborted });
+}
+
+function arrived(stream: number, frame: Frame): void {
+  const bytes = frameBytes(frame);
+  put(isChunked(frame) ? { stream, chunked: frame } : { stream, single: frame });
+  // The panel's copy without the delta bytes.
+  const light: Frame = { ...frame, deltas: new Uint8Array(0), chunks: frame.chunks.map((c) => ({ ...c, deltas: new Uint8Array(0) })) };
+  post({ type: 'frameArrived', stream, frame: light, bytes });
+}
+
 // ------------------------------------------------------------------ stretch
 
 // The ramp of stretch.ts in linear RGB (what a colour attribute holds), 256 steps.
@@ -345,8 +384,11 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
     case 'join':
       void join(message.serverUrl, message.sessionId, message.token);
       break;
-    case 'frame':
-      put(message);
+    case 'watch':
+      void watch(message.stream, message.afterVersion);
+      break;
+    case 'stopWatch':
+      if (watching?.stream === message.stream) watching.abort.abort();
       break;
     case 'clear':
       waiting = [];

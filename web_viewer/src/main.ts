@@ -46,7 +46,7 @@ class Viewer {
   private feed!: OverlayFeed<DrawableOverlays>;
   private handles: HandleEditor | null = null;
   private lastVersion = 0n;
-  private stream = { number: 0, abort: new AbortController() };  // the current Watch
+  private stream = 0;  // the current Watch stream's number
   private streamOpen = false;
   private resyncAsked = false;
   private resyncDelayMs = 0;
@@ -59,6 +59,8 @@ class Viewer {
   constructor(private readonly params: ViewerParams) {
     this.client = new SessionClient(params.serverUrl, params.sessionId, params.token);
     this.pipeline = new FramePipeline({
+      opened: (stream) => { if (stream === this.stream) this.opened(); },
+      arrived: (arrival) => { if (arrival.stream === this.stream) this.onFrame(arrival); },
       progress: (stage, loaded, total) => this.loading(stage, loaded, total),
       applied: (result) => this.applied(result),
       ready: (result) => this.ready(result),
@@ -294,22 +296,13 @@ class Viewer {
   // version 0 at once: the server sends the current frame again, keyframe first.
   private async follow(): Promise<void> {
     for (;;) {
-      const stream = { number: this.stream.number + 1, abort: new AbortController() };
-      this.stream = stream;
+      const stream = ++this.stream;
       this.streamOpen = false;
       const afterVersion = this.resyncAsked ? 0n : this.lastVersion;
       this.resyncAsked = false;
-      let ended: unknown = null;
-      try {
-        if (this.attempt > 0) setStatus(`Reconnecting (attempt ${this.attempt})…`);
-        for await (const frame of this.client.watch(afterVersion, stream.abort.signal, () => this.opened())) {
-          this.opened();
-          this.onFrame({ frame, stream: stream.number });
-        }
-      } catch (error) {
-        ended = error;
-      }
-      if (stream.abort.signal.aborted) {
+      if (this.attempt > 0) setStatus(`Reconnecting (attempt ${this.attempt})…`);
+      const end = await this.pipeline.watch(stream, afterVersion);
+      if (end.aborted) {
         // resync(): again at once the first time, then backing off, in
         // case the server's keyframe itself cannot be decoded here.
         ++hook.resyncs;
@@ -319,6 +312,7 @@ class Viewer {
         if (delay > 0) await new Promise((resolve) => window.setTimeout(resolve, delay));
         continue;
       }
+      const ended = end.error;
       if (ended !== null && isFinal(ended)) {
         if (isCode(ended, Code.NotFound) && this.lastVersion > 0n) {
           hook.state = 'closed';
@@ -377,16 +371,14 @@ class Viewer {
     if (this.resyncAsked) return;
     this.resyncAsked = true;
     this.pipeline.clear();  // relative to the lost keyframe, all of them
-    this.stream.abort.abort();
+    this.pipeline.stopWatch(this.stream);
   }
 
-  // Reads the stream as fast as it delivers and hands each frame on: a frame
-  // that arrives while the worker is busy replaces the one waiting, so a slow
-  // page skips frames instead of falling behind.
+  // A frame the worker read off the stream (and applies): the panel's part.
   private onFrame(arrival: Arrival): void {
     const start = performance.now();
     const { frame } = arrival;
-    this.stats.frameArrived(frame, start);
+    this.stats.frameArrived(frame, start, arrival.bytes);
     ++hook.framesReceived;
     if (frame.version > this.lastVersion) this.lastVersion = frame.version;
     hook.newestVersion = Number(this.lastVersion);
@@ -396,7 +388,6 @@ class Viewer {
       // From the first frame on, the count includes this page's own Watch.
       pollPresence(() => this.client.entry(), (text) => { byId('presence').textContent = text; }, (e) => this.describe(e));
     }
-    this.pipeline.put(arrival);
     this.pendingPageMs += performance.now() - start;
   }
 
@@ -443,7 +434,7 @@ class Viewer {
     // sparse frame is whole against its keyframe), unless the next ones
     // need the keyframe that failed or never came: then it is asked again.
     showError(`Frame ${result.version} could not be shown: ${result.message}`);
-    if (result.resync && result.stream === this.stream.number) this.resync();
+    if (result.resync && result.stream === this.stream) this.resync();
   }
 
   // Clips of a skinned upload: played by the server (PlayClip); the frames

@@ -1,7 +1,6 @@
 // The messages between the page (pipeline.ts) and its session worker
 // (session.worker.ts). Types only.
-import type { SessionInfo } from './client';
-import type { DeltaChunkData } from './frame';
+import type { Frame, SessionInfo } from './client';
 import type { Framing } from './geometry';
 
 // What the page draws from: positions and vertex normals (3 floats per
@@ -10,15 +9,12 @@ import type { Framing } from './geometry';
 // other; the page hands a set back as soon as a newer one replaced it.
 export interface Buffers { positions: Float32Array; normals: Float32Array; colors: Float32Array | null }
 
-export interface ChunkedFrameMessage {
-  version: bigint; keyframeVersion: bigint; vertexCount: number; chunks: DeltaChunkData[];
-}
-export interface SingleFrameMessage { version: bigint; vertexCount: number; deltas: Uint8Array }
-
 export type ToWorker =
   | { type: 'join'; serverUrl: string; sessionId: string; token: string }
-  // Every frame off the stream, at once; `stream` numbers the Watch stream it came on.
-  | { type: 'frame'; stream: number; chunked?: ChunkedFrameMessage; single?: SingleFrameMessage }
+  // Open the Watch stream `stream` (numbered by the page, from 1) after `afterVersion`, ending any other.
+  | { type: 'watch'; stream: number; afterVersion: bigint }
+  // End the Watch stream (a resync: it is opened again from version 0).
+  | { type: 'stopWatch'; stream: number }
   // Drop the frames waiting (they need a keyframe that was lost).
   | { type: 'clear' }
   | { type: 'recycle'; buffers: Buffers }
@@ -36,6 +32,12 @@ export type FromWorker =
     basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; joinMs: number; buildMs: number;
   }
   | { type: 'joinFailed'; error: CallError }
+  // The Watch stream is open (the server answered).
+  | { type: 'streamOpened'; stream: number }
+  // A frame arrived: what the panel shows of it (its delta bytes emptied; `bytes` counts them).
+  | { type: 'frameArrived'; stream: number; frame: Frame; bytes: number }
+  // The stream ended: OK (error null), failed, or stopped (aborted) by the page.
+  | { type: 'streamEnded'; stream: number; error: CallError | null; aborted: boolean }
   // A frame applied to the worker's state (every frame it gets, unless a newer one superseded it while it was busy).
   | { type: 'applied'; version: bigint; decodeMs: number; applyMs: number; skipped: number }
   // The state to draw, when the page has a buffer set free: the newest applied frame, with normals (and stretch colours).

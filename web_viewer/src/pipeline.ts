@@ -1,12 +1,12 @@
 // The page's side of the session worker (decoder.worker.ts): joins through
-// it, hands it every frame of the Watch stream at once (the worker applies
-// them, skipping to the newest when it falls behind), and receives the state
-// to draw whenever the page has a buffer set free; the page hands the set it
-// replaced back (recycle), which lets the worker send the next one.
+// it and has it read the Watch stream (the worker applies every frame,
+// skipping to the newest when it falls behind; the page gets what its panel
+// shows of each), and receives the state to draw whenever the page has a
+// buffer set free; the page hands the set it replaced back (recycle), which
+// lets the worker send the next one.
 import { Code, ConnectError } from '@connectrpc/connect';
 
 import type { Frame } from './client';
-import { isChunked } from './frame';
 import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
 
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
@@ -15,10 +15,15 @@ export type Ready = Extract<FromWorker, { type: 'ready' }>;
 export type Failed = Extract<FromWorker, { type: 'frameFailed' }>;
 export type DrawableOverlays = Extract<FromWorker, { type: 'overlays' }>;
 
-// A frame and the Watch stream it came on (streams are numbered from 1).
-export interface Arrival { frame: Frame; stream: number }
+// A frame (its delta bytes emptied; `bytes` counts them) and the Watch stream it came on (numbered from 1).
+export interface Arrival { frame: Frame; stream: number; bytes: number }
+
+// How a Watch stream ended: OK (error null), with an error, or stopped by the page.
+export interface StreamEnd { error: Error | null; aborted: boolean }
 
 export interface PipelineEvents {
+  opened(stream: number): void;
+  arrived(arrival: Arrival): void;
   progress(stage: 'download' | 'build', loaded: number, total: number | null): void;
   // A frame applied in the worker (not drawn yet).
   applied(result: Applied): void;
@@ -42,6 +47,7 @@ export class FramePipeline {
   private readonly worker = new Worker(new URL('./decoder.worker.ts', import.meta.url), { type: 'module' });
   private nextId = 1;
   private joinWaiter: { resolve(j: Joined): void; reject(e: Error): void } | null = null;
+  private readonly streamWaiters = new Map<number, (end: StreamEnd) => void>();
   private readonly overlayWaiters = new Map<number, { resolve(o: DrawableOverlays): void; reject(e: Error): void }>();
 
   constructor(private readonly events: PipelineEvents) {
@@ -61,22 +67,17 @@ export class FramePipeline {
     });
   }
 
-  // A frame off the Watch stream, handed on at once. Copies: the message's
-  // bytes are views into the response's buffer.
-  put({ frame, stream }: Arrival): void {
-    if (isChunked(frame)) {
-      const chunks = frame.chunks.map((c) => ({
-        firstVertex: c.firstVertex, vertexCount: c.vertexCount, runs: Uint32Array.from(c.runs), deltas: c.deltas.slice(),
-      }));
-      this.send({
-        type: 'frame', stream,
-        chunked: { version: frame.version, keyframeVersion: frame.keyframeVersion, vertexCount: frame.vertexCount, chunks },
-      }, chunks.flatMap((c) => [c.deltas.buffer, c.runs.buffer]));
-    } else {
-      const deltas = frame.deltas.slice();
-      this.send({ type: 'frame', stream, single: { version: frame.version, vertexCount: frame.vertexCount, deltas } },
-        [deltas.buffer]);
-    }
+  // Follows the session on Watch stream `stream` from after `afterVersion`
+  // (the worker reads it); resolves when that stream ends.
+  watch(stream: number, afterVersion: bigint): Promise<StreamEnd> {
+    return new Promise((resolve) => {
+      this.streamWaiters.set(stream, resolve);
+      this.send({ type: 'watch', stream, afterVersion });
+    });
+  }
+
+  stopWatch(stream: number): void {
+    this.send({ type: 'stopWatch', stream });
   }
 
   // Frames relative to a lost keyframe: all those waiting.
@@ -119,6 +120,18 @@ export class FramePipeline {
         this.overlayWaiters.delete(message.id);
         if (message.type === 'overlays') waiter?.resolve(message);
         else waiter?.reject(rebuild(message.error));
+        break;
+      }
+      case 'streamOpened':
+        this.events.opened(message.stream);
+        break;
+      case 'frameArrived':
+        this.events.arrived({ frame: message.frame, stream: message.stream, bytes: message.bytes });
+        break;
+      case 'streamEnded': {
+        const waiter = this.streamWaiters.get(message.stream);
+        this.streamWaiters.delete(message.stream);
+        waiter?.({ error: message.error ? rebuild(message.error) : null, aborted: message.aborted });
         break;
       }
       case 'colors':

@@ -97,12 +97,15 @@ export class StatsTracker {
   private worker: WorkerTimes | null = null;
   private skipped = 0;
   private last: Frame | null = null;
+  private lastBytes = 0;
   private newestArrived: bigint | null = null;
   private drawnVersion: bigint | null = null;
   private timed: Timed[] = [];
 
-  frameArrived(frame: Frame, now: number): void {
+  // `bytes`: its delta bytes, when the frame's own were left out (the worker keeps them).
+  frameArrived(frame: Frame, now: number, bytes = frameBytes(frame)): void {
     this.last = frame;
+    this.lastBytes = bytes;
     if (this.newestArrived === null || frame.version > this.newestArrived) this.newestArrived = frame.version;
     if (this.lastArrival !== null) this.lastInterval = now - this.lastArrival;
     this.lastArrival = now;
@@ -178,7 +181,7 @@ export class StatsTracker {
   snapshot(now: number): StatsSnapshot {
     const times = this.arrivals.list;
     const n = times.length;
-    const bytes = this.last ? frameBytes(this.last) : 0;
+    const bytes = this.last ? this.lastBytes : 0;
     const behind = this.newestArrived === null ? 0
       : Number(this.newestArrived - (this.drawnVersion ?? 0n));
     return {
