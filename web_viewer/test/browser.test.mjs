@@ -709,6 +709,22 @@ describe('the web viewer across server restarts (--data-dir, same ports)', { tim
   it('follows the session again after SIGTERM and a restart', { timeout: 2 * TEST_TIMEOUT_MS }, (t) => restart(t, 'SIGTERM'));
   it('follows the session again after SIGKILL and a restart', { timeout: 2 * TEST_TIMEOUT_MS }, (t) => restart(t, 'SIGKILL'));
 
+  it('is live again after a restart with nothing new to show (an idle session)', { timeout: TEST_TIMEOUT_MS }, async () => {
+    // Nothing drives the session: the stream opens again with no frame to
+    // send, and the page says it is live once the server answers.
+    const before = await hookState(page);
+    server.child.kill('SIGKILL');
+    await server.exited;
+    await page.waitForFunction(() => window.__filigree.state === 'reconnecting', null, { timeout: WAIT_MS });
+    server = startServer(dataDir, [], addresses);
+    await server.addresses;
+    await waitForHealth(addresses.grpc, WAIT_MS);
+    await page.waitForFunction(() => window.__filigree.state === 'live', null, { timeout: FOLLOW_MS });
+    const after = await hookState(page);
+    assert.equal(after.reconnects, before.reconnects + 1);
+    assert.match(await page.textContent('#status'), /^Live\.$/);
+  });
+
   it('stops, saying so, when the session is gone', { timeout: TEST_TIMEOUT_MS }, async () => {
     // CloseSession through gRPC-Web from another page (the CLI has no close):
     // CloseSessionRequest { session_id = 1 } in one uncompressed frame.
