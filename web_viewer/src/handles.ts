@@ -40,18 +40,6 @@ export interface HandleEvents {
   sent(): (acceptedAt: bigint) => void;
 }
 
-// The corner of the hit triangle nearest to the hit point.
-export function nearestCorner(hit: THREE.Intersection, positions: Float32Array): number | null {
-  if (!hit.face) return null;
-  let best: number | null = null;
-  let bestDistance = Infinity;
-  for (const v of [hit.face.a, hit.face.b, hit.face.c]) {
-    const d = hit.point.distanceToSquared(new THREE.Vector3().fromArray(positions, 3 * v));
-    if (d < bestDistance) [best, bestDistance] = [v, d];
-  }
-  return best;
-}
-
 export class HandleEditor {
   private readonly spheres = new Map<number, THREE.Mesh>();  // vertex → sphere at its target
   private readonly group = new THREE.Group();
@@ -128,8 +116,7 @@ export class HandleEditor {
   vertexAt(clientX: number, clientY: number): number | null {
     const handle = this.handleAt(clientX, clientY);
     if (handle !== null) return handle;
-    const hit = this.view.pick(clientX, clientY);
-    return hit && nearestCorner(hit, this.view.positions);
+    return this.view.pickVertex(clientX, clientY);
   }
 
   clear(): void {
@@ -155,8 +142,7 @@ export class HandleEditor {
     }
     let vertex = this.handleAt(event.clientX, event.clientY);
     if (vertex === null) {
-      const hit = this.view.pick(event.clientX, event.clientY);
-      vertex = hit && nearestCorner(hit, this.view.positions);
+      vertex = this.view.pickVertex(event.clientX, event.clientY);
       if (vertex === null) return;  // the background: an orbit
       if (this.refused) {
         this.events.status(EDITOR_NEEDED, true);
@@ -175,8 +161,7 @@ export class HandleEditor {
 
   private startPull(event: PointerEvent): void {
     if (this.pull) return;
-    const hit = this.view.pick(event.clientX, event.clientY);
-    const vertex = hit && nearestCorner(hit, this.view.positions);
+    const vertex = this.view.pickVertex(event.clientX, event.clientY);
     if (vertex === null) return;  // the background: an orbit
     if (this.refused) {
       this.events.status(EDITOR_NEEDED, true);

@@ -164,7 +164,7 @@ class Viewer {
       const s = this.stats.snapshot(performance.now());
       return { ...s, frame: null, drawnVersion: s.drawnVersion === null ? null : Number(s.drawnVersion) };
     };
-    showSession(info, this.params.serverUrl, CLIENT_NAME);
+    showSession(info, this.params.serverUrl, CLIENT_NAME, faces.length / 3, joined.originalIds.length);
     this.setupEditing(joined);
     this.setupOptions(info);
     this.setupClips(info);

@@ -31,15 +31,17 @@ export function setNote(id: string, text: string, bad = false): void {
   note.className = bad ? 'note bad' : 'note';
 }
 
-export function showSession(info: SessionInfo, serverUrl: string, clientName: string): void {
+// `triangles`, `baseVertices`: the counts (the worker keeps the arrays; info's are emptied).
+export function showSession(info: SessionInfo, serverUrl: string, clientName: string, triangles: number,
+  baseVertices: number): void {
   fillList(byId('session-info'), [
     ['session', info.sessionId],
     ['you are', clientName],
     ['server', serverUrl],
     ['mesh hash', info.meshHash],
     ['vertices', String(info.rest?.vertexCount ?? 0)],
-    ['triangles', String((info.rest?.faces.length ?? 0) / 3)],
-    ['base vertices', String((info.base?.positions.length ?? 0) / 3)],
+    ['triangles', String(triangles)],
+    ['base vertices', String(baseVertices)],
   ]);
 }
 

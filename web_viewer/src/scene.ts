@@ -197,16 +197,33 @@ export class MeshView {
     return raycaster;
   }
 
-  // The detailed mesh under the page point, as it is now (null: background).
-  pick(clientX: number, clientY: number): THREE.Intersection | null {
+  // The vertex a press at the page point takes: the corner nearest to the
+  // hit of the triangle under it (null: the background). On a mesh with a
+  // stand-in the ray is cast against the stand-in (tens of thousands of
+  // triangles, not millions: a press answers at once) and the vertex is the
+  // mesh's nearest to that hit.
+  pickVertex(clientX: number, clientY: number): number | null {
     // three.js skips meshes whose bounding sphere the ray misses, and frames
-    // move vertices out of the rest sphere: refresh it (one pass, per click).
+    // move vertices out of the rest sphere: refresh it (one pass, per press).
     this.geometry.computeBoundingSphere();
     const drawn = this.geometry.getIndex();
-    this.geometry.setIndex(this.fullIndex);  // pick the mesh itself, not the stand-in
+    this.geometry.setIndex(this.coarse ?? this.fullIndex);
     const hit = this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
     this.geometry.setIndex(drawn);
-    return hit;
+    if (!hit?.face) return null;
+    const p = this.positions;
+    const { x, y, z } = hit.point;
+    const distance = (v: number) => (p[3 * v] - x) ** 2 + (p[3 * v + 1] - y) ** 2 + (p[3 * v + 2] - z) ** 2;
+    const candidates = this.coarse ? null : [hit.face.a, hit.face.b, hit.face.c];
+    let best = -1;
+    let bestDistance = Infinity;
+    const count = candidates ? candidates.length : p.length / 3;
+    for (let k = 0; k < count; ++k) {
+      const v = candidates ? candidates[k] : k;
+      const d = distance(v);
+      if (d < bestDistance) [best, bestDistance] = [v, d];
+    }
+    return best < 0 ? null : best;
   }
 
   // Where a world point is drawn, in page coordinates.

@@ -160,6 +160,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     assert.equal(joined.state, 'live');
     assert.equal(joined.vertexCount, 1839);
     assert.equal(joined.error, null);
+    assert.match(await page.textContent('#session-info'), /vertices1839triangles3674base vertices[1-9]/);
 
     // The canvas as the browser composited it is not blank.
     const shot = png(await page.locator('#view canvas').screenshot());
