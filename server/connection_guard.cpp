@@ -10,6 +10,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include <fcntl.h>
@@ -22,6 +23,8 @@
 #include <boost/asio.hpp>
 #include <spdlog/spdlog.h>
 
+#include "server/descriptor_headroom.h"
+
 namespace filigree::server {
 
 namespace asio = boost::asio;
@@ -32,8 +35,9 @@ namespace {
 
 // Bytes a relay reads before writing them on: per direction and connection.
 constexpr std::size_t kRelayBuffer = 64 * 1024;
-// Descriptors that must be free before a connection is relayed (see room_to_relay).
-constexpr std::size_t kRelayDescriptors = 16;
+// Descriptors that must be free before a connection is relayed, beyond
+// those gRPC's pending accepts will take (see room_to_relay).
+constexpr std::size_t kRelayDescriptors = 8;
 
 // HOST:PORT, [V6]:PORT → host and port.
 std::pair<std::string, std::string> split_address(const std::string& address) {
@@ -50,9 +54,16 @@ std::pair<std::string, std::string> split_address(const std::string& address) {
 // bytes copied both ways; either side's end ends both.
 class Relay : public std::enable_shared_from_this<Relay> {
  public:
-  Relay(tcp::socket client, asio::io_context& io, std::atomic<std::size_t>& count)
-      : client_(std::move(client)), upstream_(io), count_(count) {}
-  ~Relay() { --count_; }
+  // `count`: relays alive; `unaccepted`: relays whose connection gRPC has not
+  // accepted yet (it speaks first, its HTTP/2 settings, once it has).
+  Relay(tcp::socket client, asio::io_context& io, std::atomic<std::size_t>& count, std::atomic<std::size_t>& unaccepted)
+      : client_(std::move(client)), upstream_(io), count_(count), unaccepted_(unaccepted) {
+    ++unaccepted_;
+  }
+  ~Relay() {
+    accepted();
+    --count_;
+  }
 
   void start(const std::filesystem::path& path) {
     upstream_.async_connect(unix_socket::endpoint(path.string()), [self = shared_from_this()](boost::system::error_code ec) {
@@ -78,6 +89,7 @@ class Relay : public std::enable_shared_from_this<Relay> {
   void pump(From& from, To& to, std::array<char, kRelayBuffer>& buffer) {
     from.async_read_some(asio::buffer(buffer), [self = shared_from_this(), &from, &to, &buffer](boost::system::error_code ec,
                                                                                                  std::size_t n) {
+      if constexpr (std::is_same_v<From, unix_socket::socket>) self->accepted();  // gRPC spoke, or went
       if (ec) {
         boost::system::error_code ignored;
         if (ec == asio::error::eof) {
@@ -96,9 +108,18 @@ class Relay : public std::enable_shared_from_this<Relay> {
     });
   }
 
+  void accepted() {
+    if (!accepted_) {
+      accepted_ = true;
+      --unaccepted_;
+    }
+  }
+
   tcp::socket client_;
   unix_socket::socket upstream_;
   std::atomic<std::size_t>& count_;
+  std::atomic<std::size_t>& unaccepted_;
+  bool accepted_ = false;  // the io thread's only
   std::array<char, kRelayBuffer> to_upstream_, to_client_;
   std::atomic<int> ended_{0};
 };
@@ -128,23 +149,16 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
       return;
     }
     ++count;
-    auto relay = std::make_shared<Relay>(std::move(socket), io, count);
+    auto relay = std::make_shared<Relay>(std::move(socket), io, count, unaccepted);
     track(relay);
     relay->start(options.upstream);
   }
 
-  // Whether kRelayDescriptors more descriptors can be opened now: the
-  // relay's unix socket, gRPC's accepted end, and a margin for gRPC's
-  // accepts still pending of the relays just before (they take their
-  // descriptor a moment after the relay connects).
+  // Whether this relay's descriptors (its unix socket, gRPC's accepted end)
+  // and a margin fit, beside those still promised to gRPC: relays connected
+  // whose connection gRPC has not accepted yet (it has not spoken).
   bool room_to_relay() const {
-    if (spare < 0) return false;
-    std::array<int, kRelayDescriptors> probe{};
-    bool room = true;
-    for (int& fd : probe) room = room && (fd = ::dup(spare)) >= 0;
-    for (const int fd : probe)
-      if (fd > 0) ::close(fd);
-    return room;
+    return spare >= 0 && descriptors_free(spare, kRelayDescriptors + unaccepted.load());
   }
 
   // Out of descriptors: give back the spare, take the waiting connection
@@ -189,7 +203,7 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
   asio::steady_timer retry{io};
   std::optional<asio::executor_work_guard<asio::io_context::executor_type>> work;
   std::vector<std::thread> threads;
-  std::atomic<std::size_t> count{0};
+  std::atomic<std::size_t> count{0}, unaccepted{0};
   std::mutex relays_mutex;
   std::vector<std::weak_ptr<Relay>> relays;
   int spare = -1;

@@ -1197,8 +1197,15 @@ grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerConte
                                                        grpc::ByteBuffer* response) {
   v1::JoinSessionRequest r;
   if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finish_unary(context, parsed);
-  return unary_on_session(context, r.session_id(), Role::kViewer, [response](Session& s) {
-    *response = s.info_wire();
+  return unary_on_session(context, r.session_id(), Role::kViewer, [context, response](Session& s) {
+    // The mesh's bytes, shared by every join, and then the caller's role:
+    // one more field, which protobuf merges into the same SessionInfo.
+    v1::SessionInfo role;
+    role.set_role(s.authorize(metadata(*context, "x-filigree-token")) == Role::kEditor ? v1::ROLE_EDITOR : v1::ROLE_VIEWER);
+    std::vector<grpc::Slice> slices;
+    (void)s.info_wire().Dump(&slices);
+    slices.emplace_back(role.SerializeAsString());
+    *response = grpc::ByteBuffer(slices.data(), slices.size());
     return grpc::Status::OK;
   });
 }

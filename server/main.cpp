@@ -345,6 +345,12 @@ int main(int argc, char** argv) {
       http_options.web_root = web_root(web_root_flag);
       http_options.grpc_web_services = {filigree::v1::Filigree::service_full_name()};
       http_options.cors_origins = cors_origins;
+      // Browsers upload through the page: CreateSession's messages in one
+      // body, up to --max-mesh-bytes (and its framing), two at a time.
+      http_options.upload_paths = {"/" + std::string(filigree::v1::Filigree::service_full_name()) + "/CreateSession"};
+      http_options.max_upload_bytes = service_limits.max_mesh_bytes + (1u << 20);
+      if (service_limits.upload_seconds > 0)
+        http_options.upload_timeout = std::chrono::milliseconds(static_cast<long long>(service_limits.upload_seconds * 1000));
       // HTTPS with the gRPC port's files, mutual TLS included: otherwise --http
       // would reach the same service around --tls-client-ca.
       http_options.tls = {tls.cert, tls.key, tls.client_ca, std::chrono::seconds(tls.refresh_seconds)};

@@ -356,7 +356,7 @@ TEST_F(GrpcWebTest, ErrorsComeAsTrailerStatusCodes) {
 }
 
 TEST_F(GrpcWebTest, StreamingRequestMethodsAndUnknownOnesAreUnimplemented) {
-  for (const char* method : {"CreateSession", "Drive"}) {
+  for (const char* method : {"Drive", "Follow"}) {
     const Reply r = call(method, v1::DriveRequest(), {});
     EXPECT_EQ(r.http_status, 200u);
     EXPECT_TRUE(r.one_trailer_last);
@@ -369,6 +369,52 @@ TEST_F(GrpcWebTest, StreamingRequestMethodsAndUnknownOnesAreUnimplemented) {
   auto req = grpc_web_request("ListSessions", frame_bytes(0, ""), {});
   req.set(bhttp::field::content_type, "application/json");
   EXPECT_EQ(client.exchange(req).result_int(), 415u);
+}
+
+// A page uploads a mesh: CreateSession's messages (begin, then chunks) in
+// one body; the answer streams the progress and then the session. Other
+// methods keep the 4 MiB body bound and their one message.
+TEST_F(GrpcWebTest, ABrowserUploadsAMeshInOneBodyAndGetsProgressAndItsSession) {
+  const std::string bytes = file_bytes(test::shipped_path("bunny_small.obj"));
+  v1::CreateSessionRequest begin;
+  begin.mutable_begin()->set_format("obj");
+  begin.mutable_begin()->set_total_bytes(bytes.size());
+  begin.mutable_begin()->mutable_options()->set_base_vertices(150);
+  std::string body = frame_bytes(0, begin.SerializeAsString());
+  for (std::size_t at = 0; at < bytes.size(); at += bytes.size() / 2 + 1) {
+    v1::CreateSessionRequest chunk;
+    chunk.set_chunk(bytes.substr(at, bytes.size() / 2 + 1));
+    body += frame_bytes(0, chunk.SerializeAsString());
+  }
+  HttpClient client(server_->http_address());
+  const Reply r = to_reply(client.exchange(grpc_web_request("CreateSession", body, {})));
+  EXPECT_EQ(r.grpc_status(), 0) << r.grpc_message();
+  EXPECT_TRUE(r.one_trailer_last);
+  int progress = 0;
+  v1::CreateSessionResponse::Created created;
+  for (const std::string& m : r.messages) {
+    v1::CreateSessionResponse response;
+    ASSERT_TRUE(response.ParseFromString(m));
+    progress += response.has_progress();
+    if (response.has_created()) created = response.created();
+  }
+  EXPECT_GE(progress, 1);
+  ASSERT_FALSE(created.editor_token().empty());
+  EXPECT_EQ(created.info().base().original_ids_size(), 150);
+  // The session is a session like any: native clients join it with its token.
+  v1::JoinSessionRequest join;
+  join.set_session_id(created.info().session_id());
+  EXPECT_EQ(call("JoinSession", join, auth(created.info().session_id(), created.editor_token())).grpc_status(), 0);
+
+  // A unary method takes one message, within the ordinary bound.
+  // (A streamed answer ends its connection: a new one.)
+  EXPECT_EQ(to_reply(HttpClient(server_->http_address())
+                         .exchange(grpc_web_request("JoinSession", frame_bytes(0, "") + frame_bytes(0, ""), {})))
+                .grpc_status(),
+            3);
+  const Reply big = to_reply(HttpClient(server_->http_address())
+                                 .exchange(grpc_web_request("JoinSession", frame_bytes(0, std::string(5u << 20, 'x')), {})));
+  EXPECT_EQ(big.grpc_status(), 8) << big.grpc_message();  // RESOURCE_EXHAUSTED
 }
 
 TEST_F(GrpcWebTest, CorsPreflightAllowsTheGrpcWebHeaders) {

@@ -395,6 +395,11 @@ TEST_F(ServiceTest, TokensAreChecked) {
   EXPECT_EQ(said, unknown.error_message());
   EXPECT_TRUE(stub_->JoinSession(context(id, c.created.viewer_token()).get(), jr, &info).ok());
   EXPECT_EQ(info.base().original_ids_size(), 150);
+  EXPECT_EQ(info.role(), v1::ROLE_VIEWER);  // what the page may show
+  v1::SessionInfo as_editor;
+  EXPECT_TRUE(stub_->JoinSession(context(id, c.created.editor_token()).get(), jr, &as_editor).ok());
+  EXPECT_EQ(as_editor.role(), v1::ROLE_EDITOR);
+  EXPECT_EQ(as_editor.base().original_ids_size(), 150);
 
   // A viewer may not drive.
   auto ctx = context(id, c.created.viewer_token());

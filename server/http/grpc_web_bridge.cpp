@@ -103,24 +103,30 @@ std::string encode_trailer_frame(const grpc::Status& status,
   return encode_frame(kTrailerFrame, lines);
 }
 
-grpc::Status parse_request_body(std::string_view body, std::string_view* message) {
+grpc::Status parse_request_body(std::string_view body, std::vector<std::string_view>* messages) {
+  messages->clear();
   if (body.size() < kFrameHeader)
     return {grpc::StatusCode::INVALID_ARGUMENT,
-            "malformed gRPC-Web request: the body must be one length-prefixed message (" + std::to_string(body.size()) +
+            "malformed gRPC-Web request: the body must be length-prefixed messages (" + std::to_string(body.size()) +
                 " bytes is too short)"};
-  const auto flags = static_cast<std::uint8_t>(body[0]);
-  if (flags == 0x01)
-    return {grpc::StatusCode::UNIMPLEMENTED, "compressed gRPC-Web request messages are not supported"};
-  if (flags != kDataFrame)
-    return {grpc::StatusCode::INVALID_ARGUMENT,
-            "malformed gRPC-Web request: frame flag " + std::to_string(flags) + " (expected 0, a data frame)"};
-  std::uint64_t n = 0;
-  for (int i = 1; i < 5; ++i) n = (n << 8) | static_cast<std::uint8_t>(body[i]);
-  if (n != body.size() - kFrameHeader)
-    return {grpc::StatusCode::INVALID_ARGUMENT, "malformed gRPC-Web request: the frame announces " + std::to_string(n) +
-                                                    " bytes, the body holds " + std::to_string(body.size() - kFrameHeader) +
-                                                    " (exactly one message is expected)"};
-  *message = body.substr(kFrameHeader);
+  while (!body.empty()) {
+    if (body.size() < kFrameHeader)
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "malformed gRPC-Web request: " + std::to_string(body.size()) + " bytes after the last message"};
+    const auto flags = static_cast<std::uint8_t>(body[0]);
+    if (flags == 0x01)
+      return {grpc::StatusCode::UNIMPLEMENTED, "compressed gRPC-Web request messages are not supported"};
+    if (flags != kDataFrame)
+      return {grpc::StatusCode::INVALID_ARGUMENT,
+              "malformed gRPC-Web request: frame flag " + std::to_string(flags) + " (expected 0, a data frame)"};
+    std::uint64_t n = 0;
+    for (int i = 1; i < 5; ++i) n = (n << 8) | static_cast<std::uint8_t>(body[i]);
+    if (n > body.size() - kFrameHeader)
+      return {grpc::StatusCode::INVALID_ARGUMENT, "malformed gRPC-Web request: a frame announces " + std::to_string(n) +
+                                                      " bytes, the body holds " + std::to_string(body.size() - kFrameHeader)};
+    messages->push_back(body.substr(kFrameHeader, n));
+    body.remove_prefix(kFrameHeader + n);
+  }
   return grpc::Status::OK;
 }
 
@@ -179,21 +185,37 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
 
   grpc::ClientContext& context() { return context_; }
 
-  static void start(const std::shared_ptr<BridgeCall>& self, grpc::GenericStub& stub, std::string_view message) {
+  // Writes `messages` (views into `body`, which the call keeps until it is
+  // done: they are written from it in place), half-closes, and reads.
+  static void start(const std::shared_ptr<BridgeCall>& self, grpc::GenericStub& stub,
+                    std::shared_ptr<const std::string> body, const std::vector<std::string_view>& messages) {
     self->self_ = self;  // released in OnDone
     {
       std::lock_guard lock(self->inflight_->mutex);
       self->id_ = self->inflight_->next_id++;
       self->inflight_->calls.emplace(self->id_, self);
     }
-    grpc::Slice slice(message.data(), message.size());
-    self->request_ = grpc::ByteBuffer(&slice, 1);
+    self->body_ = std::move(body);
+    for (const std::string_view m : messages) {
+      grpc::Slice slice(m.data(), m.size(), grpc::Slice::STATIC_SLICE);  // body_ outlives the call
+      self->requests_.emplace_back(&slice, 1);
+    }
     stub.PrepareBidiStreamingCall(&self->context_, self->method_, grpc::StubOptions(), self.get());
     self->AddHold();
-    self->StartWriteLast(&self->request_, grpc::WriteOptions());
+    self->write_next();
     self->reading_ = true;
     self->StartRead(&self->response_);
     self->StartCall();
+  }
+
+  // The next request message; the last goes with the half-close.
+  void write_next() {
+    const std::size_t i = written_++;
+    if (i + 1 == requests_.size()) return StartWriteLast(&requests_[i], grpc::WriteOptions());
+    StartWrite(&requests_[i]);
+  }
+  void OnWriteDone(bool ok) override {
+    if (ok && written_ < requests_.size()) write_next();  // not ok: the call ends, OnDone says why
   }
 
   void read_more() override {
@@ -290,7 +312,10 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
   GrpcWebEvents events_;
   std::shared_ptr<BridgeCall> self_;
   grpc::ClientContext context_;
-  grpc::ByteBuffer request_, response_;
+  std::shared_ptr<const std::string> body_;   // what requests_ point into
+  std::vector<grpc::ByteBuffer> requests_;
+  std::size_t written_ = 0;
+  grpc::ByteBuffer response_;
   std::mutex mutex_;
   bool reading_ = false, read_finished_ = false, cancelled_ = false;
 };
@@ -298,8 +323,10 @@ class BridgeCall final : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
 }  // namespace
 
 GrpcWebBridge::GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services,
-                             std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route)
-    : channel_(std::move(channel)), route_(std::move(route)), inflight_(std::make_shared<Inflight>()) {
+                             std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route,
+                             std::vector<std::string> request_streams)
+    : channel_(std::move(channel)), route_(std::move(route)), request_streams_(request_streams.begin(), request_streams.end()),
+      inflight_(std::make_shared<Inflight>()) {
   const auto* pool = google::protobuf::DescriptorPool::generated_pool();
   for (const std::string& name : services) {
     const google::protobuf::ServiceDescriptor* service = pool->FindServiceByName(name);
@@ -332,16 +359,22 @@ GrpcWebBridge::Started GrpcWebBridge::start(const GrpcWebRequest& request, GrpcW
   };
   const auto it = methods_.find(request.path);
   if (it == methods_.end()) return refuse(grpc::StatusCode::UNIMPLEMENTED, "unknown method " + request.path);
-  if (it->second == Kind::kClientStreaming || it->second == Kind::kBidiStreaming)
+  const bool streams_requests = it->second == Kind::kClientStreaming || it->second == Kind::kBidiStreaming;
+  if (streams_requests && !request_streams_.count(request.path))
     return refuse(grpc::StatusCode::UNIMPLEMENTED,
                   request.path.substr(1) + " streams requests, which gRPC-Web cannot carry: browsers send poses with " +
-                      "SubmitPose (unary) and receive frames with Watch; sessions are created by native gRPC clients");
+                      "SubmitPose (unary) and receive frames with Watch; an upload (CreateSession) sends its messages " +
+                      "in one body");
   if (!is_grpc_web_binary(request.content_type))
     return refuse(grpc::StatusCode::UNIMPLEMENTED,
                   "content type '" + request.content_type + "' is not served: use application/grpc-web+proto");
-  std::string_view message;
-  if (grpc::Status s = parse_request_body(request.body, &message); !s.ok())
-    return refuse(s.error_code(), s.error_message());
+  const std::shared_ptr<const std::string> body = request.body ? request.body : std::make_shared<const std::string>();
+  std::vector<std::string_view> messages;
+  if (grpc::Status s = parse_request_body(*body, &messages); !s.ok()) return refuse(s.error_code(), s.error_message());
+  if (!streams_requests && messages.size() != 1)
+    return refuse(grpc::StatusCode::INVALID_ARGUMENT, "malformed gRPC-Web request: " + request.path.substr(1) +
+                                                          " takes exactly one message, the body holds " +
+                                                          std::to_string(messages.size()));
 
   auto call = std::make_shared<BridgeCall>(inflight_, request.path, std::move(events));
   grpc::ClientContext& context = call->context();
@@ -361,9 +394,9 @@ GrpcWebBridge::Started GrpcWebBridge::start(const GrpcWebRequest& request, GrpcW
     context.AddMetadata(name, value);
   }
   grpc::GenericStub stub(channel);
-  BridgeCall::start(call, stub, message);
+  BridgeCall::start(call, stub, body, messages);
   out.call = std::move(call);
-  out.server_streaming = it->second == Kind::kServerStreaming;
+  out.server_streaming = it->second == Kind::kServerStreaming || it->second == Kind::kBidiStreaming;
   return out;
 }
 

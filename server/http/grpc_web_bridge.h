@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <set>
 #include <memory>
 #include <optional>
 #include <string>
@@ -53,9 +54,10 @@ std::string encode_trailer_frame(const grpc::Status& status,
 // '%' become %XX.
 std::string percent_encode(std::string_view message);
 
-// A request body must be exactly one uncompressed data frame. Returns OK and
-// the message, or INVALID_ARGUMENT (UNIMPLEMENTED for a compressed frame).
-grpc::Status parse_request_body(std::string_view body, std::string_view* message);
+// A request body is one or more uncompressed data frames, back to back.
+// Returns OK and the messages (views into `body`), or INVALID_ARGUMENT
+// (UNIMPLEMENTED for a compressed frame).
+grpc::Status parse_request_body(std::string_view body, std::vector<std::string_view>* messages);
 
 // "grpc-timeout" (1–8 digits and a unit H M S m u n); nullopt when malformed.
 std::optional<std::chrono::nanoseconds> parse_grpc_timeout(std::string_view value);
@@ -89,7 +91,9 @@ struct GrpcWebEvents {
 struct GrpcWebRequest {
   std::string path;  // "/filigree.v1.Filigree/Watch"
   std::string content_type;
-  std::string body;
+  // Shared: a request-streaming call's messages are written from it in
+  // place, without a copy (an upload's body is the mesh).
+  std::shared_ptr<const std::string> body;
   std::vector<std::pair<std::string, std::string>> headers;  // lower-case names
 };
 
@@ -100,8 +104,13 @@ class GrpcWebBridge {
   // (throws std::invalid_argument for an unknown service).
   // `route` (may be empty): the channel for a session's calls, or nullptr
   // for `channel` (replicas: the one that serves the session).
+  // `request_streams`: paths of request-streaming methods served all the
+  // same, from a body of several length-prefixed messages sent in order
+  // before the half-close (gRPC-Web has no request streaming; an upload is
+  // its messages at once: "/filigree.v1.Filigree/CreateSession").
   GrpcWebBridge(std::shared_ptr<grpc::Channel> channel, const std::vector<std::string>& services,
-                std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route = {});
+                std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route = {},
+                std::vector<std::string> request_streams = {});
   // Cancels the calls still running and waits for them (bounded).
   ~GrpcWebBridge();
   GrpcWebBridge(const GrpcWebBridge&) = delete;
@@ -132,6 +141,7 @@ class GrpcWebBridge {
   enum class Kind { kUnary, kServerStreaming, kClientStreaming, kBidiStreaming };
   std::shared_ptr<grpc::Channel> channel_;
   std::function<std::shared_ptr<grpc::Channel>(const std::string&)> route_;
+  std::set<std::string, std::less<>> request_streams_;
   std::map<std::string, Kind, std::less<>> methods_;  // "/pkg.Service/Method"
   std::shared_ptr<Inflight> inflight_;
 };

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cctype>
 #include <condition_variable>
 #include <cstdio>
@@ -29,6 +30,7 @@
 #include <boost/beast/ssl/ssl_stream.hpp>
 #include <spdlog/spdlog.h>
 
+#include "server/descriptor_headroom.h"
 #include "server/http/grpc_web_bridge.h"
 #include "server/http/log_redaction.h"
 #include "server/http/static_files.h"
@@ -125,7 +127,8 @@ class ConnectionBase {
 struct HttpServer::Impl {
   Impl(HttpOptions o, std::shared_ptr<grpc::Channel> channel)
       : options(std::move(o)), files(options.web_root),
-        bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services, options.route)),
+        bridge(std::make_shared<GrpcWebBridge>(std::move(channel), options.grpc_web_services, options.route,
+                                               options.upload_paths)),
         tls(options.tls.enabled() ? std::make_unique<HttpsContextSource>(options.tls) : nullptr),
         acceptor(net::make_strand(ioc)), accept_retry(acceptor.get_executor()) {}
 
@@ -141,6 +144,7 @@ struct HttpServer::Impl {
   HttpOptions options;
   StaticFiles files;
   std::shared_ptr<GrpcWebBridge> bridge;
+  std::atomic<unsigned> uploads{0};         // upload bodies being read or running (options.upload_paths)
   std::unique_ptr<HttpsContextSource> tls;  // null: plaintext
   std::string address;
 
@@ -242,8 +246,11 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     if (closed_) return;
     if (stopping_) return close();
     idle_ = true;
+    upload_slot_.reset();
+    upload_ = false;
     parser_.emplace();
-    parser_->body_limit(server_.options.max_request_bytes);
+    // The larger limit until the header says which request this is (on_header).
+    parser_->body_limit(std::max(server_.options.max_request_bytes, server_.options.max_upload_bytes));
     parser_->header_limit(static_cast<std::uint32_t>(
         std::min<std::size_t>(server_.options.max_header_bytes, std::numeric_limits<std::uint32_t>::max())));
     if (buffer_.size() > 0) return read_header();  // pipelined: the next request has begun already
@@ -281,7 +288,18 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     // Redacted: the viewer's address carries the session's token.
     request_line_ = std::string(sv(req.method_string())) + " " + redacted_target(sv(req.target()));
     origin_ = std::string(sv(req[bhttp::field::origin]).substr(0, 1024));
+    const std::string_view target = sv(req.target());
+    const auto& uploads = server_.options.upload_paths;
+    upload_ = req.method() == bhttp::verb::post &&
+              std::find(uploads.begin(), uploads.end(), target.substr(0, target.find('?'))) != uploads.end();
+    if (!too_large && !upload_) {
+      // Not an upload: the ordinary limit, for a body announced or chunked.
+      const auto announced = parser_->content_length();
+      if (announced && *announced > server_.options.max_request_bytes) return refuse_too_large();
+      parser_->body_limit(server_.options.max_request_bytes);
+    }
     if (too_large) return refuse_too_large();
+    if (upload_ && !take_upload_slot()) return refuse_busy_uploads();
     if (lower(sv(req[bhttp::field::expect])) == "100-continue") {
       auto res = std::make_shared<bhttp::response<bhttp::empty_body>>(bhttp::status::continue_, version_);
       lowest().expires_after(server_.options.write_timeout);
@@ -294,7 +312,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   }
 
   void read_body() {
-    lowest().expires_after(server_.options.body_timeout);
+    lowest().expires_after(upload_ ? server_.options.upload_timeout : server_.options.body_timeout);
     bhttp::async_read(stream_, buffer_, *parser_,
                       [self = this->shared_from_this()](beast::error_code ec, std::size_t) { self->on_request(ec); });
   }
@@ -386,7 +404,7 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
                        "(application/grpc-web-text is not served)\n"));
     const std::string_view target = sv(req.target());
     request.path = std::string(target.substr(0, target.find('?')));
-    request.body = std::move(req.body());
+    request.body = std::make_shared<const std::string>(std::move(req.body()));
     for (const auto& field : req) request.headers.emplace_back(lower(sv(field.name_string())), std::string(sv(field.value())));
 
     const auto self = this->shared_from_this();
@@ -437,10 +455,28 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
     send(std::move(res));
   }
 
+  // One of the options.max_concurrent_uploads places, held until the next
+  // request begins or the connection goes.
+  bool take_upload_slot() {
+    unsigned now = server_.uploads.load();
+    do {
+      if (now >= server_.options.max_concurrent_uploads) return false;
+    } while (!server_.uploads.compare_exchange_weak(now, now + 1));
+    upload_slot_ = std::shared_ptr<void>(nullptr, [&uploads = server_.uploads](void*) { --uploads; });
+    return true;
+  }
+
+  void refuse_busy_uploads() {
+    keep_alive_ = false;  // the body is never read
+    send_grpc_web_body(encode_trailer_frame(
+        {grpc::StatusCode::RESOURCE_EXHAUSTED, "the server reads " + std::to_string(server_.options.max_concurrent_uploads) +
+                                                   " browser uploads at once; try again in a moment"}));
+  }
+
   void refuse_too_large() {
     keep_alive_ = false;  // the rest of the body is never read
     const auto& req = parser_->get();
-    const std::size_t limit = server_.options.max_request_bytes;
+    const std::size_t limit = upload_ ? server_.options.max_upload_bytes : server_.options.max_request_bytes;
     if (req.method() == bhttp::verb::post && is_grpc_web_binary(sv(req[bhttp::field::content_type])))
       return send_grpc_web_body(GrpcWebBridge::too_large(limit));
     send(text(bhttp::status::payload_too_large, "request body over the limit of " + std::to_string(limit) + " bytes\n"));
@@ -608,6 +644,8 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   std::string origin_;        // the request's Origin header; empty: none
   bool keep_alive_ = true, head_ = false, idle_ = false, stopping_ = false, closed_ = false;
   unsigned requests_ = 0;  // begun on this connection
+  bool upload_ = false;    // this request's body is an upload (options.upload_paths)
+  std::shared_ptr<void> upload_slot_;
   // gRPC-Web
   std::shared_ptr<GrpcWebCall> call_;
   std::string unary_body_;
@@ -616,6 +654,10 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   std::string wire_;
   std::array<char, 4096> discard_{};
 };
+
+// Descriptors left free when a browser connection is accepted: more than
+// the gRPC port's relays keep, so the browser port never takes the last ones.
+constexpr std::size_t kDescriptorHeadroom = 32;
 
 void HttpServer::Impl::accept() {
   acceptor.async_accept(net::make_strand(ioc), [this](beast::error_code ec, tcp::socket socket) {
@@ -637,7 +679,9 @@ void HttpServer::Impl::accept() {
     bool full = false;
     {
       std::lock_guard lock(mutex);
-      full = options.max_connections != 0 && connections.size() >= options.max_connections;
+      // A headroom of descriptors stays free for the gRPC port (descriptor_headroom.h).
+      full = (options.max_connections != 0 && connections.size() >= options.max_connections) ||
+             !descriptors_free(socket.native_handle(), kDescriptorHeadroom);
       if (!shut_down && !full) {
         const std::uint64_t id = next_connection++;
         using TlsConnection = Connection<beast::ssl_stream<beast::tcp_stream>>;

@@ -83,6 +83,17 @@ struct HttpOptions {
   // room for the gRPC port. 1000; 0: no limit.
   std::size_t max_connections = 1000;
 
+  // gRPC-Web methods whose request is an upload ("/filigree.v1.Filigree/
+  // CreateSession": its messages in one body, GrpcWebBridge's request
+  // streams): their body may hold up to max_upload_bytes and take
+  // upload_timeout to arrive, and at most max_concurrent_uploads are read or
+  // running at once (another is refused RESOURCE_EXHAUSTED before its body
+  // is read): what browsers can make the server hold is bounded by them.
+  std::vector<std::string> upload_paths;
+  std::size_t max_upload_bytes = 0;
+  std::chrono::milliseconds upload_timeout = std::chrono::seconds(300);
+  unsigned max_concurrent_uploads = 2;
+
   int threads = 1;
   // Where a gRPC-Web call that names a session (x-session-id) goes: a
   // channel to the replica that serves it, or nullptr for the in-process

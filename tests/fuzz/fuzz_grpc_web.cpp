@@ -2,6 +2,7 @@
 
 #include <exception>
 #include <string_view>
+#include <vector>
 
 #include "fuzz_input.h"
 #include "server/http/grpc_web_bridge.h"
@@ -9,10 +10,11 @@
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
   try {
-    std::string_view message;
-    (void)filigree::server::http::parse_request_body(bytes, &message);
-    if (!message.empty() && (message.data() < bytes.data() || message.data() + message.size() > bytes.data() + size))
-      __builtin_trap();  // the message must lie inside the body
+    std::vector<std::string_view> messages;
+    (void)filigree::server::http::parse_request_body(bytes, &messages);
+    for (const std::string_view message : messages)
+      if (!message.empty() && (message.data() < bytes.data() || message.data() + message.size() > bytes.data() + size))
+        __builtin_trap();  // every message must lie inside the body
     (void)filigree::server::http::parse_grpc_timeout(bytes.substr(0, 16));
     (void)filigree::server::http::is_grpc_web_binary(bytes);
   } catch (const std::exception&) {
