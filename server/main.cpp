@@ -35,6 +35,18 @@
 
 namespace {
 
+// /server.json on the browser port: how a program reaches the gRPC port
+// (grpc_host empty: the page's own host, for a wildcard --listen), whether
+// it speaks TLS and whether creating sessions needs an API key.
+std::string server_json(const std::string& listen, int port, bool tls, bool api_keys) {
+  std::string host = listen.rfind("unix:", 0) == 0 ? "" : listen.substr(0, listen.rfind(':'));
+  if (host == "0.0.0.0" || host == "[::]" ||
+      host.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789.-:[]") != std::string::npos)
+    host.clear();
+  return "{\"grpc_host\":\"" + host + "\",\"grpc_port\":" + std::to_string(port) + ",\"tls\":" + (tls ? "true" : "false") +
+         ",\"api_keys\":" + (api_keys ? "true" : "false") + "}";
+}
+
 // --web-root, or by default the viewer built next to the build tree
 // (<dir of the executable>/../../web_viewer/dist) when it exists.
 std::optional<std::filesystem::path> web_root(const std::string& flag) {
@@ -348,6 +360,7 @@ int main(int argc, char** argv) {
       // Browsers upload through the page: CreateSession's messages in one
       // body, up to --max-mesh-bytes (and its framing), two at a time.
       http_options.upload_paths = {"/" + std::string(filigree::v1::Filigree::service_full_name()) + "/CreateSession"};
+      http_options.server_json = server_json(listen, port, tls.enabled(), !api_keys_path.empty());
       http_options.max_upload_bytes = service_limits.max_mesh_bytes + (1u << 20);
       if (service_limits.upload_seconds > 0)
         http_options.upload_timeout = std::chrono::milliseconds(static_cast<long long>(service_limits.upload_seconds * 1000));

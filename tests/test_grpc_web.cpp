@@ -306,6 +306,9 @@ TEST_F(GrpcWebTest, JoinSessionReturnsTheSessionInfoAndStatusOk) {
   EXPECT_EQ(info.session_id(), id);
   EXPECT_EQ(info.base().original_ids_size(), 150);
   EXPECT_EQ(info.rest().vertex_count(), 1839u);
+  // What CreateSession answered, and the caller's role.
+  EXPECT_EQ(info.role(), v1::ROLE_VIEWER);
+  info.clear_role();
   EXPECT_EQ(info.SerializeAsString(), created.info().SerializeAsString());
 
   // No token in the request message either: the x-session-id header names the session.
@@ -627,6 +630,12 @@ TEST_F(GrpcWebTest, ServesTheWebViewerFilesAndNothingElse) {
   EXPECT_EQ(get("/").result_int(), 200u);  // that HEAD answer had no body: the connection is still in step
   EXPECT_EQ(get("/missing.html").result_int(), 404u);
   EXPECT_EQ(get("/assets/").result_int(), 404u);  // a directory without index.html
+
+  // What a page tells its user about reaching this server from a program.
+  res = get("/server.json");
+  EXPECT_EQ(std::string(res[bhttp::field::content_type]), "application/json");
+  const std::string port = server_->address().substr(server_->address().rfind(':') + 1);
+  EXPECT_EQ(res.body(), "{\"grpc_host\":\"127.0.0.1\",\"grpc_port\":" + port + ",\"tls\":false,\"api_keys\":false}");
   for (const char* escape : {"/../secret.txt", "/assets/../../secret.txt", "/%2e%2e/secret.txt", "/..%2fsecret.txt",
                              "/../../../../etc/passwd", "/assets/%2E%2E/%2E%2E/etc/passwd"}) {
     res = get(escape);

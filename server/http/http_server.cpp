@@ -370,7 +370,16 @@ class Connection final : public ConnectionBase, public std::enable_shared_from_t
   }
 
   void serve_file(const bhttp::request<bhttp::string_body>& req) {
-    const StaticFiles::Result found = server_.files.resolve(sv(req.target()));
+    const std::string_view target = sv(req.target());
+    if (target.substr(0, target.find('?')) == "/server.json" && !server_.options.server_json.empty()) {
+      bhttp::response<bhttp::string_body> res{bhttp::status::ok, version_};
+      res.set(bhttp::field::content_type, "application/json");
+      res.set(bhttp::field::cache_control, "no-cache");
+      if (req.method() != bhttp::verb::head) res.body() = server_.options.server_json;
+      res.content_length(server_.options.server_json.size());
+      return send(std::move(res));
+    }
+    const StaticFiles::Result found = server_.files.resolve(target);
     if (found.status != 200) return send(text(static_cast<bhttp::status>(found.status), found.message));
     beast::error_code ec;
     bhttp::file_body::value_type body;

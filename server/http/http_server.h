@@ -38,6 +38,9 @@ struct HttpOptions {
   std::string listen;  // HOST:PORT; port 0 picks a free one
   // Directory of the built viewer; nullopt: "/" and every file answer 404 with a note.
   std::optional<std::filesystem::path> web_root;
+  // Served at /server.json (application/json; empty: 404): what a page
+  // tells its user about this server (how programs reach it). No secret.
+  std::string server_json;
   // Services answered over gRPC-Web (full names, e.g. "filigree.v1.Filigree").
   std::vector<std::string> grpc_web_services;
   // Largest request body; over it, gRPC-Web answers RESOURCE_EXHAUSTED, anything else 413.
