@@ -409,6 +409,13 @@ TEST_F(CApiServer, JointPosesAndClipsOfASkinnedUpload) {
   const float bend[] = {values[20], values[21], values[22], 0.0f, 0.0f, 0.5f, 0.8660254f, 1.0f, 1.0f, 1.0f};
   EXPECT_EQ(filigree_driver_send_joints(driver, 2, FILIGREE_JOINTS_LOCAL_TRS, one, 1, bend, 9),
             FILIGREE_INVALID_ARGUMENT);  // 9 values for one joint: refused here, the stream goes on
+  // A zero rotation quaternion: refused here, naming the joint (2), not its
+  // place in the message (0).
+  const float zero_rotation[] = {values[20], values[21], values[22], 0.0f, 0.0f, 0.0f, 0.0f, 1.0f, 1.0f, 1.0f};
+  EXPECT_EQ(filigree_driver_send_joints(driver, 2, FILIGREE_JOINTS_LOCAL_TRS, one, 1, zero_rotation, 10),
+            FILIGREE_INVALID_ARGUMENT);
+  EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("joint 2 has a zero rotation quaternion"), std::string::npos)
+      << filigree_driver_last_error(driver);
   ASSERT_EQ(filigree_driver_send_joints(driver, 2, FILIGREE_JOINTS_LOCAL_TRS, one, 1, bend, 10), FILIGREE_OK)
       << filigree_driver_last_error(driver);
   poll_until(driver, 2, positions);
@@ -547,6 +554,17 @@ TEST_F(CApiServer, BuffersAndIndicesAreChecked) {
   const uint32_t good_index = 0;
   EXPECT_EQ(filigree_driver_send_partial(driver, 1, &good_index, 1, base_.data(), 2), FILIGREE_INVALID_ARGUMENT);
   EXPECT_EQ(filigree_driver_send_partial(driver, 1, &good_index, 0, base_.data(), 0), FILIGREE_INVALID_ARGUMENT);
+  // A NaN (as physics may give one) is an error of that send, naming the
+  // base vertex; the server never sees it, so the stream goes on.
+  std::vector<float> nan_pose = base_;
+  nan_pose[3 * 7 + 1] = std::nanf("");
+  EXPECT_EQ(filigree_driver_send_positions(driver, 1, nan_pose.data(), nan_pose.size()), FILIGREE_INVALID_ARGUMENT);
+  EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("base vertex 7's y is not finite"), std::string::npos)
+      << filigree_driver_last_error(driver);
+  const uint32_t seventh = 7;
+  EXPECT_EQ(filigree_driver_send_partial(driver, 1, &seventh, 1, nan_pose.data() + 21, 3), FILIGREE_INVALID_ARGUMENT);
+  EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("base vertex 7's y"), std::string::npos)
+      << filigree_driver_last_error(driver);
   EXPECT_EQ(filigree_driver_send_positions(driver, 1, base_.data(), base_.size()), FILIGREE_OK)
       << filigree_driver_last_error(driver);
   poll_until(driver, 1, frame);

@@ -3,6 +3,7 @@
 #include <stdexcept>
 
 #include "filigree/call_metadata.h"
+#include "pose_check.h"
 
 namespace filigree {
 namespace {
@@ -86,6 +87,7 @@ bool Driver::write() {
 }
 
 bool Driver::send(std::uint64_t pose_id, std::span<const float> positions) {
+  check_positions("send", {}, positions);
   request_.set_pose_id(pose_id);
   request_.clear_indices();
   request_.clear_joints();
@@ -98,6 +100,7 @@ bool Driver::send_partial(std::uint64_t pose_id, std::span<const std::uint32_t> 
   if (positions.size() != 3 * indices.size())
     throw std::invalid_argument("send_partial: " + std::to_string(positions.size()) + " coordinates for " +
                                 std::to_string(indices.size()) + " indices (3 per index expected)");
+  check_positions("send_partial", indices, positions);
   request_.set_pose_id(pose_id);
   request_.clear_joints();
   request_.mutable_indices()->Assign(indices.begin(), indices.end());
@@ -115,6 +118,7 @@ bool Driver::send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std:
   if (joints.empty() && values.size() % per_joint != 0)
     throw std::invalid_argument("send_joints: " + std::to_string(values.size()) + " values is not a multiple of " +
                                 std::to_string(per_joint));
+  check_joints("send_joints", space, joints, values);
   request_.set_pose_id(pose_id);
   request_.clear_indices();
   request_.clear_positions();

@@ -199,3 +199,17 @@ def test_a_half_closed_drive_still_gets_the_frame_of_its_last_pose(session, diag
     offset = np.float32(0.05 * diagonal)
     assert np.abs(frame.positions - (session.rest_positions + offset)).max() <= frame.max_error + 1e-4 * diagonal
     driver.free()
+
+
+def test_a_bad_pose_raises_at_send_and_the_driver_goes_on(session):
+    # An engine that gets one NaN from physics keeps its link: the pose is
+    # refused at send (naming the base vertex), the next one is answered.
+    with session.drive("nan-once") as driver:
+        bad = np.array(session.base_positions, dtype=np.float32, copy=True)
+        bad[5, 2] = np.nan
+        with pytest.raises(filigree.InvalidArgument, match="base vertex 5's z is not finite"):
+            driver.send(bad)
+        good = np.array(session.base_positions, dtype=np.float32, copy=True)
+        good[5, 2] += 0.01
+        frame = driver.wait_for_pose(driver.send(good), TIMEOUT)
+        assert frame.pose_id >= driver.last_pose_id

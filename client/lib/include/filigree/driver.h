@@ -42,16 +42,21 @@ class Driver {
   // while the transport is flow-controlled. Returns false when the stream
   // has ended for good (the server refused a pose, the session closed, the
   // call was cancelled, reconnection gave up): finish() then says why.
+  // Throws std::invalid_argument, sending nothing, for a coordinate that is
+  // not finite (naming the base vertex): the stream goes on.
   bool send(std::uint64_t pose_id, std::span<const float> positions);
 
   // Sends a partial pose: the base vertices `indices` move to `positions`
-  // (3 floats per index). Throws std::invalid_argument if the sizes disagree.
+  // (3 floats per index). Throws std::invalid_argument if the sizes disagree
+  // or a coordinate is not finite.
   bool send_partial(std::uint64_t pose_id, std::span<const std::uint32_t> indices, std::span<const float> positions);
   // Sends a skeletal pose (sessions with a skeleton, SessionMesh::skeleton):
   // `values` holds 10 floats per joint for kLocalTrs (translation xyz,
   // rotation quaternion xyzw, scale xyz) or 16 for kModelMatrix (column-major);
   // `joints` names which joints (empty: all, in skeleton order). The server
-  // skins the base mesh. Throws std::invalid_argument if the sizes disagree.
+  // skins the base mesh. Throws std::invalid_argument if the sizes disagree,
+  // a value is not finite, a rotation quaternion is zero or a model matrix
+  // is not affine, naming the joint (its index in the skeleton).
   bool send_joints(std::uint64_t pose_id, v1::JointPose::Space space, std::span<const std::uint32_t> joints,
                    std::span<const float> values);
 
