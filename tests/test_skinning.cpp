@@ -98,6 +98,45 @@ TEST(Skinning, DualQuaternionsKeepVolumeWhereLinearBlendCollapses) {
   EXPECT_NEAR(dqs[0].x(), 1.0, 1e-9);
 }
 
+// Joints twisted +100° and −100° about x: the quaternions of their matrices
+// (w > 0 for both: cos 50°, ±sin 50°) lie in opposite hemispheres (dot
+// cos 100° < 0). Blended without bringing them to one hemisphere they
+// cancel to no rotation at all (equal weights) or to the long way round; the
+// right blend goes through ±180° (the short arc between them), and LBS
+// averages the two rotated points. (At ±170° a matrix's quaternion already
+// comes out in one hemisphere, so that case does not tell.) Expected values
+// are computed here, independently.
+TEST(Skinning, OppositeTwistsBlendThroughTheShortArc) {
+  const Vec3 p(1, 1, 0);
+  for (const float w : {0.5f, 0.25f}) {
+    const Rig rig = two_bone_rig({p}, {w});
+    SkeletonPose pose = SkeletonPose::rest(rig);
+    const double twist = 100.0 * M_PI / 180.0;
+    pose.model[0] = rotation_about(Vec3::UnitX(), twist);
+    // Joint b's skinning matrix M·B is the −170° twist itself (its B is T(−1,0,0)).
+    pose.model[1] = rotation_about(Vec3::UnitX(), -twist) * translation(Vec3(1, 0, 0));
+    const std::vector<Mat4> model = model_transforms(rig, pose);
+    std::vector<Vec3> lbs(1), dqs(1);
+    skin(rig, model, SkinningMethod::kLinearBlend, lbs);
+    skin(rig, model, SkinningMethod::kDualQuaternion, dqs);
+
+    const Eigen::AngleAxisd a(twist, Vec3::UnitX()), b(-twist, Vec3::UnitX());
+    const Vec3 lbs_expected = (1.0 - w) * (a * p) + double{w} * (b * p);
+    EXPECT_LT((lbs[0] - lbs_expected).norm(), 1e-6) << "w " << w;
+
+    Eigen::Quaterniond qa(a), qb(b);
+    if (qa.dot(qb) < 0) qb.coeffs() = -qb.coeffs();  // one hemisphere: the short arc
+    Eigen::Quaterniond blend;
+    blend.coeffs() = (1.0 - w) * qa.coeffs() + double{w} * qb.coeffs();
+    blend.normalize();
+    const Vec3 dqs_expected = blend * p;
+    EXPECT_LT((dqs[0] - dqs_expected).norm(), 1e-6) << "w " << w << ": got " << dqs[0].transpose();
+    // The point keeps its distance from the axis, and has turned past 90°.
+    EXPECT_NEAR(Vec3(0, dqs[0].y(), dqs[0].z()).norm(), 1.0, 1e-6);
+    EXPECT_LT(dqs[0].y(), -0.5) << "w " << w << ": blended through the long arc";
+  }
+}
+
 TEST(Skinning, DualQuaternionsOfOneRigidInfluenceApplyItExactly) {
   const Rig rig = two_bone_rig({Vec3(0.3, -0.4, 2.0)}, {1.0f});
   SkeletonPose pose = SkeletonPose::rest(rig);
