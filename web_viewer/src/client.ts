@@ -72,21 +72,6 @@ export class SessionClient {
     return response.acceptedAtVersion;
   }
 
-  // Whether the token is the session's editor token. The server has no call
-  // that says so; SubmitPose checks the token before the pose, and a pose of
-  // one coordinate is never valid (a base vertex takes 3), so an editor gets
-  // INVALID_ARGUMENT and nothing changes, a viewer PERMISSION_DENIED.
-  async canEdit(): Promise<boolean> {
-    try {
-      await this.client.submitPose({ sessionId: this.sessionId, poseId: 0n, positions: [0], clientName: 'role-probe' });
-    } catch (error) {
-      if (isCode(error, Code.InvalidArgument)) return true;
-      if (isCode(error, Code.PermissionDenied) || isCode(error, Code.Unauthenticated)) return false;
-      throw error;
-    }
-    throw new Error('the server accepted a pose of one coordinate');
-  }
-
   // Replaces this client's handles (empty: none); resolves with the version
   // they were accepted at (the frame including them has a larger one) and
   // all participants' handle count after the merge.

@@ -67,8 +67,14 @@ export interface TestHook {
   draws: number;            // every draw (frames, orbits, overlays)
   coarseTriangles: number;  // of the stand-in drawn while busy (0: none, the mesh is small)
   coarseDraws: number;      // draws of the stand-in
+  lastDrawFull: boolean;    // the last draw was full detail of a mesh that has a stand-in
   pixelRatio: number;       // drawing resolution now (lowered while draws are slow to show)
   drawShowMs: number;       // how long a draw takes to be shown (smoothed)
+  // The front door (no session in the address):
+  frontState: '' | 'needs-key' | 'listed' | 'creating' | 'created' | 'error';
+  apiKeysNeeded: boolean;   // the server lists and creates only with an API key (/server.json)
+  sessionsListed: string[]; // the ids ListSessions gave this visitor
+  createStages: string[];   // the upload's stages seen: 'sending', then the server's ('validating', …)
 }
 
 declare global {
@@ -84,5 +90,6 @@ export const hook: TestHook = window.__filigree = {
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
   loadStage: '', joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
   editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
-  framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0, coarseTriangles: 0, coarseDraws: 0, pixelRatio: 1, drawShowMs: 0,
+  framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0, coarseTriangles: 0, coarseDraws: 0, lastDrawFull: false, pixelRatio: 1, drawShowMs: 0,
+  frontState: '', apiKeysNeeded: false, sessionsListed: [], createStages: [],
 };

@@ -8,7 +8,10 @@
 // geometry and draws on requestAnimationFrame when something changed.
 import { ChangeLog } from './changes';
 import { Code, describeError, isCode, SessionClient, type SessionInfo } from './client';
+import { Role } from './gen/filigree/v1/filigree_pb';
 import { HandleEditor, type EditMode } from './handles';
+import { connectLines } from './connect';
+import { FrontDoor, rememberedTokens, serverJson } from './front';
 import { FRAME_EVENT, hook } from './hook';
 import { CutWireframe } from './overlay-cut';
 import { OverlayFeed } from './overlay-feed';
@@ -94,7 +97,8 @@ class Viewer {
     this.show(joined);
     byId('loading').hidden = true;
     hook.loadStage = 'done';
-    void this.findRole();
+    this.applyRole(joined.info.role);
+    void this.showShare();
     await this.follow();
   }
 
@@ -144,6 +148,7 @@ class Viewer {
     Object.defineProperties(hook, {
       framesRendered: { get: () => this.view.framesRendered, enumerable: true },
       coarseDraws: { get: () => this.view.coarseDraws, enumerable: true },
+      lastDrawFull: { get: () => this.view.lastDrawFull, enumerable: true },
       pixelRatio: { get: () => this.view.pixelRatio, enumerable: true },
       drawShowMs: { get: () => this.view.drawShowMs, enumerable: true },
       roundTripMs: { get: () => this.stats.snapshot(performance.now()).roundTripMs, enumerable: true },
@@ -205,13 +210,10 @@ class Viewer {
   }
 
   // Editor controls only for the editor token: a viewer page shows none.
-  private async findRole(): Promise<void> {
-    let editor: boolean;
-    try {
-      editor = await this.client.canEdit();
-    } catch {
-      editor = true;  // unknown (the server did not answer): the controls stay, the server still refuses
-    }
+  // JoinSession says which token this is (ROLE_UNSPECIFIED from an older
+  // server: the controls stay, and the server still refuses a viewer's edits).
+  private applyRole(role: Role): void {
+    const editor = role !== Role.VIEWER;
     hook.canEdit = editor;
     if (!editor) {
       document.body.classList.add('read-only');
@@ -219,6 +221,41 @@ class Viewer {
       this.handles?.detach();
       this.handles = null;
     }
+  }
+
+  // Share links (tokens in the fragment): the viewer's always when known,
+  // the editor's on an editor's page; and how a program drives this session.
+  private async showShare(): Promise<void> {
+    const { sessionId, token, serverUrl } = this.params;
+    const here = new URL(window.location.href);
+    const viewerToken = hook.canEdit === false ? token
+      : new URLSearchParams(here.hash.replace(/^#/, '')).get('viewer') ?? rememberedTokens(sessionId)?.viewerToken ?? '';
+    const link = (t: string, viewer?: string) => {
+      const url = new URL(here.href);
+      const fragment = new URLSearchParams(url.hash.replace(/^#/, ''));
+      fragment.set('token', t);
+      fragment.delete('viewer');
+      if (viewer) fragment.set('viewer', viewer);
+      url.hash = fragment.toString();
+      return url.href;
+    };
+    byId('share').hidden = false;
+    byId('share-viewer-row').hidden = viewerToken === '';
+    byId<HTMLInputElement>('share-viewer').value = viewerToken ? link(viewerToken) : '';
+    byId<HTMLInputElement>('share-editor').value = hook.canEdit ? link(token, viewerToken || undefined) : '';
+    for (const button of document.querySelectorAll<HTMLButtonElement>('#share button[data-copy]')) {
+      button.addEventListener('click', () => {
+        const input = byId<HTMLInputElement>(button.dataset.copy!);
+        input.select();
+        void navigator.clipboard?.writeText(input.value).then(() => { button.textContent = 'Copied'; }, () => {});
+      });
+    }
+    if (!hook.canEdit) return;
+    const server = await serverJson(serverUrl);
+    if (server === null) return;
+    const lines = connectLines(server, new URL(serverUrl).hostname, { id: sessionId, editorToken: token });
+    byId('session-connect-cli').textContent = `# gRPC at ${lines.address}\n${lines.drive}`;
+    byId('session-connect-python').textContent = lines.python;
   }
 
   private setupEditing(joined: Joined): void {
@@ -530,17 +567,24 @@ class Viewer {
   }
 }
 
-function main(): void {
+// Starts the viewer for the page's address.
+function openSession(): void {
   const result = readParams(window.location.search, window.location.origin, window.location.hash);
   if (result.kind === 'usage') {
     hook.state = 'usage';
     setStatus('No session named.');
-    byId('usage').hidden = false;
+    // The front door; a session made there opens in this page, no reload.
+    void new FrontDoor(window.location.origin, (href) => {
+      window.history.pushState(null, '', href);
+      document.body.classList.remove('front');
+      byId('front').hidden = true;
+      openSession();
+    }).start();
     return;
   }
   if (result.kind === 'error') {
     fail(result.message);
-    byId('usage').hidden = false;
+    askForToken();
     return;
   }
   // A token in the query is moved to the fragment: reloads and bookmarks then keep it off the wire.
@@ -551,4 +595,24 @@ function main(): void {
   });
 }
 
-main();
+// A session named without a token (a link from the session list): ask for one.
+function askForToken(): void {
+  const form = byId<HTMLFormElement>('token-form');
+  form.hidden = false;
+  form.addEventListener('submit', (event) => {
+    event.preventDefault();
+    const token = byId<HTMLInputElement>('token-input').value.trim();
+    if (token === '') return;
+    const url = new URL(window.location.href);
+    const fragment = new URLSearchParams(url.hash.replace(/^#/, ''));
+    fragment.set('token', token);
+    url.hash = fragment.toString();
+    window.location.replace(url.href);
+    window.location.reload();
+  });
+}
+
+// Back from a session opened by the front door: show the address's page afresh.
+window.addEventListener('popstate', () => window.location.reload());
+
+openSession();

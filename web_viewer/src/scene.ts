@@ -45,7 +45,7 @@ export class MeshView {
   private lastFrameAt = -Infinity;
   private drewLastFrame = false;
   // The last draw was full detail of a mesh with a stand-in, and how long such a draw took to show.
-  private lastDrawFull = false;
+  lastDrawFull = false;
   fullShowMs = 0;
   private lastDrawAt = -Infinity;
   private lastAdjust = 0;
