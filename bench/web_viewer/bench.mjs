@@ -23,13 +23,13 @@
 //   load                    page open → first frame drawn; the longest task meanwhile
 
 import { spawn } from 'node:child_process';
-import { mkdtempSync, openSync, rmSync, writeSync, closeSync } from 'node:fs';
+import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join } from 'node:path';
 
 import { chromium } from '../../web_viewer/node_modules/playwright-core/index.mjs';
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, startServer, stopServer, upload,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, startServer, stopServer, upload, writeBumpySphere,
 } from '../../web_viewer/test/harness.mjs';
 
 const args = process.argv.slice(2);
@@ -40,49 +40,6 @@ const option = (name, fallback) => {
 const SIZES = { '134k': [260, 516], '1m': [708, 1416] };  // rings, segments: (rings − 1)·segments + 2 vertices
 const sizes = option('sizes', '134k,1m').split(',');
 const SECONDS = Number(option('seconds', '10'));
-
-// A bumpy UV sphere as binary PLY (smaller and faster to parse than OBJ).
-function writeBumpySphere(path, rings, segments) {
-  const n = (rings - 1) * segments + 2;
-  const faces = 2 * segments * (rings - 1);
-  const header = `ply\nformat binary_little_endian 1.0\nelement vertex ${n}\nproperty float x\nproperty float y\n` +
-    `property float z\nelement face ${faces}\nproperty list uchar uint vertex_indices\nend_header\n`;
-  const vertices = new Float32Array(3 * n);
-  const put = (i, theta, phi) => {
-    const r = 1 + 0.04 * Math.sin(7 * theta) * Math.cos(5 * phi) + 0.008 * Math.sin(41 * theta) * Math.cos(37 * phi);
-    vertices[3 * i] = r * Math.sin(theta) * Math.cos(phi);
-    vertices[3 * i + 1] = r * Math.cos(theta) * 1.6;  // taller than wide: a body standing along y
-    vertices[3 * i + 2] = r * Math.sin(theta) * Math.sin(phi);
-  };
-  put(0, 0, 0);
-  for (let r = 1; r < rings; ++r) for (let k = 0; k < segments; ++k) put(1 + (r - 1) * segments + k, (Math.PI * r) / rings, (2 * Math.PI * k) / segments);
-  put(n - 1, Math.PI, 0);
-  const at = (r, k) => 1 + (r - 1) * segments + (k % segments);
-  const face = Buffer.alloc(13);
-  const fd = openSync(path, 'w');
-  writeSync(fd, header);
-  writeSync(fd, Buffer.from(vertices.buffer));
-  const chunk = [];
-  const flush = () => { writeSync(fd, Buffer.concat(chunk)); chunk.length = 0; };
-  const tri = (a, b, c) => {
-    const f = Buffer.from(face);
-    f[0] = 3;
-    f.writeUInt32LE(a, 1); f.writeUInt32LE(b, 5); f.writeUInt32LE(c, 9);
-    chunk.push(f);
-    if (chunk.length >= 65536) flush();
-  };
-  for (let k = 0; k < segments; ++k) {
-    tri(0, at(1, k + 1), at(1, k));
-    for (let r = 1; r < rings - 1; ++r) {
-      tri(at(r, k), at(r, k + 1), at(r + 1, k + 1));
-      tri(at(r, k), at(r + 1, k + 1), at(r + 1, k));
-    }
-    tri(at(rings - 1, k), at(rings - 1, k + 1), n - 1);
-  }
-  flush();
-  closeSync(fd);
-  return n;
-}
 
 // Installed before the page's own scripts: long tasks, and the delay of clicks and pointer moves.
 function instrument() {

@@ -23,12 +23,13 @@ export function connectLines(server: ServerJson, pageHost: string, session?: { i
     drive: `FILIGREE_TOKEN=${token} filigree drive --server ${address} --session ${id} --motion bend`,
     python: [
       'import os, filigree',
-      `client = filigree.Client("${address}")`,
-      `session = client.join("${id}", os.environ["FILIGREE_TOKEN"])`,
-      'driver = session.drive("my-script")',
-      'pose = session.base_positions.copy()  # (m, 3) float32',
-      'pose[:, 1] += 0.05 * (pose[:, 1] - pose[:, 1].min())  # stretch it upwards',
-      'driver.send(pose)',
+      '',
+      `with filigree.Client("${address}") as client:`,
+      `    session = client.join("${id}", os.environ["FILIGREE_TOKEN"])`,
+      '    with session.drive("python") as driver:',
+      '        pose = session.base_positions.copy()  # (m, 3) float32',
+      '        pose[:, 1] += 0.05 * (pose[:, 1] - pose[:, 1].min())',
+      '        driver.wait_for_pose(driver.send(pose))',
     ].join('\n'),
   };
 }

@@ -130,12 +130,12 @@ export class FrontDoor {
         const link = document.createElement('a');
         link.href = tokens ? sessionHref(window.location.href, s.sessionId, tokens.editorToken, tokens.viewerToken)
           : sessionHref(window.location.href, s.sessionId, '').replace(/#.*$/, '');
-        link.textContent = tokens?.name ? `${tokens.name} · ${s.sessionId.slice(0, 8)}` : s.sessionId;
+        link.textContent = tokens?.name ? `${tokens.name} · ${s.sessionId}` : s.sessionId;
         const who = `${s.watchers} watching${s.drivers ? `, ${s.drivers} driving` : ''}`;
         const detail = document.createElement('span');
         detail.className = 'note';
-        detail.textContent = ` ${s.vertexCount.toLocaleString('en')} vertices · version ${s.version} · ${who}` +
-          (tokens ? ' · made here (editor)' : ' · needs its token');
+        detail.textContent = `${s.vertexCount.toLocaleString('en')} vertices · version ${s.version} · ${who}` +
+          (tokens ? ' · made in this browser: opens as editor' : ' · opens with its token');
         item.append(link, detail);
         return item;
       }));

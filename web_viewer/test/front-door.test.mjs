@@ -85,6 +85,7 @@ describe('the front door (no API keys)', { timeout: 4 * TEST_TIMEOUT_MS }, () =>
     await waitFor(page, () => window.__filigree?.state === 'usage' && window.__filigree.frontState === 'listed');
     assert.ok(await page.isVisible('#create'), 'the create box is shown');
     assert.ok(await page.isVisible('#demo'), 'the demo button is shown');
+    assert.equal(await page.isVisible('#api-key'), false, 'no API key asked for on a server without keys');
     // The connect box: the gRPC port (not the page's), the token in FILIGREE_TOKEN.
     assert.equal(await page.textContent('#grpc-address'), s.grpc);
     const cliText = await page.textContent('#connect-cli');

@@ -1,31 +1,42 @@
 // The viewer's screenshots in ../docs (run by hand, not a test):
 //   docs/viewer-regions.png  a session bent part-way by the CLI, T = 1e6, the regions overlay on
 //   docs/viewer-handles.png  a handle being dragged (two anchoring), the stretch map on
+//   docs/images/front-door.png  the root page: create, the sessions (one made here), connect a program
+//   docs/images/live-two-participants.png  two pages on one session side by side, each pulling; the change lists name both
+//   docs/images/million-vertices.png  a 1,001,114-vertex bumpy sphere bent by the CLI
 //
-//   node test/screenshots.mjs [MESH]     (after npm run build; MESH default: data/armadillo.off)
+//   node test/screenshots.mjs [MESH] [--only regions,handles,front,two,million]
+//   (after npm run build; MESH default: data/armadillo.off)
 //
 // Same server and upload as browser.test.mjs (harness.mjs); the environment
 // variables are the same. Waits on page conditions, never on sleeps.
 
-import { mkdirSync, mkdtempSync, rmSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, rmSync, statSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
 import { spawn } from 'node:child_process';
 
 import { chromium } from 'playwright-core';
+import { PNG } from 'pngjs';
 
 import {
   checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, upload,
+  writeBumpySphere,
 } from './harness.mjs';
 
-const MESH = resolve(process.argv[2] ?? join(ROOT, 'data', 'armadillo.off'));
+const args = process.argv.slice(2);
+const onlyAt = args.indexOf('--only');
+const ONLY = new Set(onlyAt >= 0 ? args[onlyAt + 1].split(',') : ['regions', 'handles', 'front', 'two', 'million']);
+const MESH = resolve(args.find((a, i) => !a.startsWith('--') && i !== onlyAt + 1 || (onlyAt < 0 && !a.startsWith('--')))
+  ?? join(ROOT, 'data', 'armadillo.off'));
 const DOCS = join(ROOT, 'docs');
+const IMAGES = join(DOCS, 'images');
 const VIEWPORT = { width: 1280, height: 800 };
 const WAIT_MS = 60_000;
 const THRESHOLD = 1e6;  // regions of a useful size on the armadillo
 
 checkTools();
-mkdirSync(DOCS, { recursive: true });
+mkdirSync(IMAGES, { recursive: true });
 const meshDiagonal = diagonal(MESH);
 const dataDir = mkdtempSync(join(tmpdir(), 'filigree-screenshots-'));
 const server = startServer(dataDir);
@@ -52,7 +63,7 @@ try {
   }, selector);
 
   // ---- regions: bend with T = 1e6, stop the drive part-way, wait for that frame's overlays.
-  {
+  if (ONLY.has('regions')) {
     const session = await upload(grpc, MESH, 'screenshots');
     const page = await open(session);
     await page.check('#overlay-regions');
@@ -74,7 +85,7 @@ try {
   }
 
   // ---- handles: both feet anchored by a click, the head dragged sideways and held.
-  {
+  if (ONLY.has('handles')) {
     const session = await upload(grpc, MESH, 'screenshots-handles');
     const page = await open(session);
     await page.selectOption('#edit-mode', 'handles');
@@ -116,6 +127,110 @@ try {
     await page.screenshot({ path: join(DOCS, 'viewer-handles.png') });
     console.log('docs/viewer-handles.png:', JSON.stringify(await hookState(page)));
     await page.mouse.up();
+    await page.context().close();
+  }
+
+  const saved = (path) => console.log(`${path.slice(ROOT.length + 1)}: ${Math.round(statSync(path).size / 1024)} KB`);
+
+  // ---- the front door: a session made with the demo button in this browser, another by the CLI.
+  if (ONLY.has('front')) {
+    await upload(grpc, MESH, 'cli-upload');
+    const context = await browser.newContext({ viewport: { width: 1280, height: 760 } });
+    const page = await context.newPage();
+    page.on('pageerror', (error) => { throw error; });
+    await page.goto(`http://${http}/`);
+    await waitFor(page, () => window.__filigree?.frontState === 'listed');
+    await page.click('#demo');
+    await waitFor(page, () => window.__filigree.state === 'live' && window.__filigree.framesApplied >= 1);
+    await page.goto(`http://${http}/`);
+    await waitFor(page, () => window.__filigree?.frontState === 'listed' && window.__filigree.sessionsListed.length >= 2);
+    const path = join(IMAGES, 'front-door.png');
+    await page.screenshot({ path });
+    saved(path);
+    await context.close();
+  }
+
+  // ---- two participants: two editor pages side by side, one pulling, one holding a handle; the change lists name both.
+  if (ONLY.has('two')) {
+    const session = await upload(grpc, MESH, 'two-participants');
+    const size = { width: 720, height: 520 };  // over 700 px: the panel beside the canvas, not a drawer
+    const pages = [];
+    for (let k = 0; k < 2; ++k) {
+      const page = await (await browser.newContext({ viewport: size })).newPage();
+      page.on('pageerror', (error) => { throw error; });
+      await page.goto(`http://${http}/?session=${session.session_id}#token=${session.editor_token}&viewer=${session.viewer_token}`);
+      await page.waitForFunction(() => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1, null, { timeout: WAIT_MS });
+      pages.push(page);
+    }
+    const [a, b] = pages;
+    // A point on the mesh near the middle of a page's canvas.
+    const pointOn = (page, fx, fy) => page.evaluate(([fx, fy]) => {
+      const rect = document.querySelector('#view canvas').getBoundingClientRect();
+      for (let r = 0; r < 200; r += 4) {
+        for (const [dx, dy] of [[0, -r], [r, 0], [0, r], [-r, 0]]) {
+          const x = rect.left + fx * rect.width + dx;
+          const y = rect.top + fy * rect.height + dy;
+          if (window.__filigree.vertexAt(x, y) !== null) return { x, y };
+        }
+      }
+      return null;
+    }, [fx, fy]);
+    // A pulls (proportional editing) an arm sideways; wait for its frame.
+    const pa = await pointOn(a, 0.35, 0.35);
+    await a.mouse.move(pa.x, pa.y);
+    await a.mouse.down();
+    await a.mouse.move(pa.x - 60, pa.y - 40, { steps: 12 });
+    await a.mouse.up();
+    await waitFor(a, () => window.__filigree.pulledVertices > 0);
+    // B pulls the other side and holds it (the sphere of influence shown while dragging).
+    const pb = await pointOn(b, 0.62, 0.3);
+    await b.mouse.move(pb.x, pb.y);
+    await b.mouse.down();
+    await b.mouse.move(pb.x + 45, pb.y - 35, { steps: 12 });
+    await waitFor(b, () => window.__filigree.pulledVertices > 0);
+    // Both pages show the frame after both edits, and each change list names both pages.
+    const names = await Promise.all(pages.map((p) => p.evaluate(() => window.__filigree.clientName)));
+    for (const page of pages) {
+      await waitFor(page, (n) => n.every((name) => document.querySelector('#changes').textContent.includes(name))
+        && window.__filigree.drawnVersion === window.__filigree.newestVersion
+        && window.__filigree.framesReceived === window.__filigree.framesApplied + window.__filigree.framesSkipped, names);
+      await showPanelAt(page, '#changes');
+    }
+    const shots = await Promise.all(pages.map((p) => p.screenshot().then((data) => PNG.sync.read(data))));
+    const gap = 8;
+    const out = new PNG({ width: 2 * size.width + gap, height: size.height });
+    out.data.fill(0x10);
+    shots.forEach((shot, k) => PNG.bitblt(shot, out, 0, 0, size.width, size.height, k * (size.width + gap), 0));
+    const path = join(IMAGES, 'live-two-participants.png');
+    // Kept small for the repository: RGB without alpha, each channel to 6 bits (deflate then finds runs).
+    for (let i = 0; i < out.data.length; ++i) if (i % 4 !== 3) out.data[i] = Math.min(255, out.data[i] + 2) & 0xfc;
+    writeFileSync(path, PNG.sync.write(out, { colorType: 2, inputHasAlpha: true }));
+    saved(path);
+    await b.mouse.up();
+    for (const page of pages) await page.context().close();
+  }
+
+  // ---- a million vertices: a bumpy sphere (binary PLY in a temp dir), bent by the CLI part-way.
+  if (ONLY.has('million')) {
+    const file = join(dataDir, 'sphere-1m.ply');
+    const n = writeBumpySphere(file, 708, 1416);
+    const session = await upload(grpc, file, 'million', []);
+    const page = await (await browser.newContext({ viewport: { width: 1200, height: 720 } })).newPage();
+    page.on('pageerror', (error) => { throw error; });
+    await page.goto(`http://${http}/?session=${session.session_id}#token=${session.editor_token}&viewer=${session.viewer_token}`);
+    await page.waitForFunction(() => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1, null, { timeout: 3 * WAIT_MS });
+    const drive = spawn(CLI, driveArgs(grpc, session, 'bend', 60, 10, 'cli-bend'), { stdio: 'ignore' });
+    await waitFor(page, () => window.__filigree.displacement > 0.3);
+    drive.kill('SIGTERM');
+    await new Promise((done) => drive.on('exit', done));
+    // The last frame applied and drawn in full detail (not the stand-in drawn while busy).
+    await waitFor(page, () => window.__filigree.framesReceived === window.__filigree.framesApplied + window.__filigree.framesSkipped
+      && window.__filigree.drawnVersion === window.__filigree.version);
+    await waitFor(page, () => window.__filigree.lastDrawFull);
+    const path = join(IMAGES, 'million-vertices.png');
+    await page.screenshot({ path });
+    saved(path);
+    console.log(`  ${n} vertices:`, JSON.stringify(await hookState(page)));
     await page.context().close();
   }
 } finally {
