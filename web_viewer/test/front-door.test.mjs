@@ -214,6 +214,19 @@ describe('the front door on a server with --api-keys', { timeout: 3 * TEST_TIMEO
     await waitFor(page, (id) => window.__filigree?.frontState === 'listed' && window.__filigree.sessionsListed.includes(id),
       mine.session_id);
 
+    // The listed session opens by its link; made elsewhere, it asks for a token (none in the link).
+    await page.click(`#sessions li[data-session="${mine.session_id}"] a`);
+    await waitFor(page, () => window.__filigree?.state === 'error' && !document.querySelector('#token-form').hidden);
+    assert.equal(new URL(page.url()).searchParams.get('session'), mine.session_id);
+    await page.fill('#token-input', mine.viewer_token);
+    await page.click('#token-form button[type=submit]');
+    await live(page);
+    assert.equal(await page.evaluate(() => window.__filigree.sessionId), mine.session_id);
+    assert.equal(await page.evaluate(() => window.__filigree.canEdit), false, 'opened with the viewer token');
+    assert.equal(await page.isVisible('#token-form'), false);
+    await page.goto(`${s.baseUrl}/`);
+    await waitFor(page, () => window.__filigree?.frontState === 'listed');
+
     // A wrong key: refused, nothing listed.
     await page.fill('#api-key', 'fgk_not_a_key');
     await page.click('#api-key-form button[type=submit]');
