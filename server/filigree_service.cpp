@@ -929,11 +929,26 @@ class DriveReactor final : public FrameStreamReactor<DriveReactor, grpc::ServerB
       std::lock_guard lock(ending_->mutex);
       if (pose) ending_->submitted = std::max(ending_->submitted, request_.pose_id());
     } catch (const PoseError& e) {
-      return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT, e.what()});
+      // That pose is refused, not the stream: the client hears which and
+      // why, the session is unchanged, and the next good pose is answered.
+      refuse(request_.pose_id(), e.what());
     } catch (const StoreUnavailable& e) {  // not journaled, so not acknowledged: the client resends
       return stream_->writer().finish({grpc::StatusCode::UNAVAILABLE, e.what()});
     }
     StartRead(&request_bytes_);
+  }
+
+  // A message answering pose `pose_id` as refused (Frame.refused), queued
+  // like a keyframe: it is never dropped for a newer frame.
+  void refuse(std::uint64_t pose_id, const std::string& why) {
+    v1::Frame answer;
+    answer.set_pose_id(pose_id);
+    answer.mutable_refused()->set_code(static_cast<std::uint32_t>(grpc::StatusCode::INVALID_ARGUMENT));
+    answer.mutable_refused()->set_message(why);
+    auto out = std::make_shared<OutgoingFrame>();
+    grpc::Slice bytes(answer.SerializeAsString());
+    out->bytes = grpc::ByteBuffer(&bytes, 1);
+    stream_->writer().send(std::move(out), /*droppable=*/false);
   }
 
   // The newest pose id submitted and the newest a frame has answered.

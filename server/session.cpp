@@ -309,25 +309,29 @@ void Session::submit_joints(const PoseOrigin& origin, const v1::JointPose& joint
     seen[j] = true;
   }
   for (int i = 0; i < joints.values_size(); ++i)
-    if (!std::isfinite(joints.values(i)))
-      throw PoseError("joint pose value " + std::to_string(i) + " (joint " + std::to_string(static_cast<std::size_t>(i) / per) +
-                      ") is not finite (NaN or Inf)");
+    if (!std::isfinite(joints.values(i))) {
+      const std::size_t entry = static_cast<std::size_t>(i) / per;
+      const std::size_t joint = joints.joint_indices().empty() ? entry : joints.joint_indices(static_cast<int>(entry));
+      throw PoseError("joint pose value " + std::to_string(i) + " (joint " + std::to_string(joint) + ") is not finite (NaN or Inf)");
+    }
   // Parse all joints before changing the state: a bad one changes nothing.
   std::vector<JointTransform> locals(model ? 0 : count);
   std::vector<Mat4> matrices(model ? count : 0);
   for (std::size_t k = 0; k < count; ++k) {
     const float* v = joints.values().data() + per * k;
+    // Errors name the joint (its index in the skeleton), not the entry.
+    const std::size_t joint = joints.joint_indices().empty() ? k : joints.joint_indices(static_cast<int>(k));
     if (model) {
       Mat4 m;
       for (int c = 0; c < 16; ++c) m(c % 4, c / 4) = v[c];  // column-major
       if (std::abs(m(3, 0)) > 1e-6 || std::abs(m(3, 1)) > 1e-6 || std::abs(m(3, 2)) > 1e-6 || std::abs(m(3, 3) - 1.0) > 1e-6)
-        throw PoseError("joint matrix " + std::to_string(k) + " is not affine (its last row must be 0 0 0 1)");
+        throw PoseError("joint " + std::to_string(joint) + "'s matrix is not affine (its last row must be 0 0 0 1)");
       matrices[k] = m;
     } else {
       JointTransform& t = locals[k];
       t.translation = Vec3(v[0], v[1], v[2]);
       const Eigen::Quaterniond q(v[6], v[3], v[4], v[5]);  // given x y z w
-      if (!(q.norm() > 1e-6)) throw PoseError("joint " + std::to_string(k) + " of the pose has a zero rotation quaternion");
+      if (!(q.norm() > 1e-6)) throw PoseError("joint " + std::to_string(joint) + " has a zero rotation quaternion");
       t.rotation = q.normalized();
       t.scale = Vec3(v[7], v[8], v[9]);
     }

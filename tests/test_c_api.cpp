@@ -59,7 +59,7 @@ const std::set<std::string> kApi = {
     "filigree_session_clip_duration", "filigree_set_handles", "filigree_set_threshold", "filigree_close_session", "filigree_session_last_error",
     "filigree_session_free", "filigree_driver_open", "filigree_driver_send_positions",
     "filigree_driver_send_partial", "filigree_driver_send_joints", "filigree_driver_poll",
-    "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
+    "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_wait_for_pose", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
     "filigree_watcher_open", "filigree_play_clip", "filigree_watcher_poll", "filigree_watcher_frame_info",
     "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
 
@@ -567,7 +567,18 @@ TEST_F(CApiServer, BuffersAndIndicesAreChecked) {
       << filigree_driver_last_error(driver);
   EXPECT_EQ(filigree_driver_send_positions(driver, 1, base_.data(), base_.size()), FILIGREE_OK)
       << filigree_driver_last_error(driver);
-  poll_until(driver, 1, frame);
+  // Waiting for a pose: none of pose 2 can come (it was never sent), pose 1's does.
+  EXPECT_EQ(filigree_driver_wait_for_pose(driver, 2, 50), FILIGREE_DEADLINE_EXCEEDED);
+  EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("pose 2"), std::string::npos);
+  ASSERT_EQ(filigree_driver_wait_for_pose(driver, 1, 30000), FILIGREE_OK) << filigree_driver_last_error(driver);
+  uint64_t answered = 0;
+  int updated = 0;
+  ASSERT_EQ(filigree_driver_poll(driver, frame.data(), frame.size(), nullptr, &answered, &updated), FILIGREE_OK);
+  EXPECT_EQ(updated, 1);
+  EXPECT_EQ(answered, 1u);
+  EXPECT_EQ(filigree_driver_wait_for_pose(driver, 1, 0), FILIGREE_OK);  // polled already: at once
+  EXPECT_EQ(filigree_driver_send_positions(driver, 3, base_.data(), base_.size()), FILIGREE_OK);
+  poll_until(driver, 3, frame);
   EXPECT_EQ(filigree_driver_frame_info(driver, nullptr), FILIGREE_ERROR_NULL_ARGUMENT);
   EXPECT_EQ(filigree_driver_close(driver), FILIGREE_OK) << filigree_driver_last_error(driver);
   EXPECT_EQ(filigree_driver_close(driver), FILIGREE_OK);  // idempotent

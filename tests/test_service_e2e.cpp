@@ -424,37 +424,50 @@ TEST_F(ServiceTest, MalformedPosesAreRejectedAndTheSessionKeepsWorking) {
   const Created c = upload(file_bytes(kBunny), "obj");
   ASSERT_TRUE(c.status.ok());
   const std::string id = c.created.info().session_id(), editor = c.created.editor_token();
-  auto try_pose = [&](const v1::DriveRequest& r) {
+  // A bad pose is refused as that pose (Frame.refused naming it), not by
+  // ending the stream: the same stream's next good pose gets its frame.
+  auto try_pose = [&](v1::DriveRequest bad, std::uint64_t pose_id) {
     auto ctx = context(id, editor);
     auto drive = stub_->Drive(ctx.get());
-    drive->Write(r);
+    bad.set_session_id(id);
+    bad.set_pose_id(pose_id);
+    EXPECT_TRUE(drive->Write(bad));
+    v1::DriveRequest good;
+    good.set_pose_id(pose_id + 1);
+    good.add_indices(3);
+    good.add_positions(0.1f), good.add_positions(0.2f), good.add_positions(0.3f);
+    EXPECT_TRUE(drive->Write(good));
     drive->WritesDone();
     v1::Frame f;
+    std::string refused;
     std::uint64_t answered = 0;
-    while (drive->Read(&f)) answered = std::max(answered, f.pose_id());
-    return std::make_pair(drive->Finish(), answered);
+    while (drive->Read(&f)) {
+      if (f.has_refused()) {
+        EXPECT_EQ(f.pose_id(), pose_id);
+        EXPECT_EQ(f.refused().code(), static_cast<std::uint32_t>(grpc::StatusCode::INVALID_ARGUMENT));
+        refused = f.refused().message();
+      } else {
+        answered = std::max(answered, f.pose_id());
+      }
+    }
+    EXPECT_TRUE(drive->Finish().ok());
+    EXPECT_EQ(answered, pose_id + 1) << "the good pose after the bad one was not answered";
+    return refused;
   };
   v1::DriveRequest short_pose;
-  short_pose.set_session_id(id);
-  short_pose.set_pose_id(1);
   for (int i = 0; i < 30; ++i) short_pose.add_positions(0.0f);
-  auto [status, answered] = try_pose(short_pose);
-  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_NE(status.error_message().find("30 coordinates"), std::string::npos) << status.error_message();
+  const std::string short_refusal = try_pose(short_pose, 1);
+  EXPECT_NE(short_refusal.find("30 coordinates"), std::string::npos) << short_refusal;
 
   v1::DriveRequest bad_index;
-  bad_index.set_session_id(id);
   bad_index.add_indices(150);
   bad_index.add_positions(0.0f), bad_index.add_positions(0.0f), bad_index.add_positions(0.0f);
-  EXPECT_EQ(try_pose(bad_index).first.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(try_pose(bad_index, 10).find("out of range"), std::string::npos);
 
   v1::DriveRequest nan_pose;
-  nan_pose.set_session_id(id);
   nan_pose.add_indices(3);
   nan_pose.add_positions(std::nanf("")), nan_pose.add_positions(0.0f), nan_pose.add_positions(0.0f);
-  const auto nan_status = try_pose(nan_pose).first;
-  EXPECT_EQ(nan_status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_NE(nan_status.error_message().find("not finite"), std::string::npos);
+  EXPECT_NE(try_pose(nan_pose, 20).find("not finite"), std::string::npos);
 
   expect_pose_answered(id, editor, 42);  // a good pose still gets its frame
 }

@@ -123,10 +123,16 @@ class SkeletalTest : public ::testing::Test {
     *request.mutable_joints() = pose;
     stream->Write(request);
     stream->WritesDone();
+    // The pose is refused as that pose (Frame.refused): the stream goes on and
+    // ends OK on the half-close.
     v1::Frame frame;
-    while (stream->Read(&frame)) {
-    }
-    return stream->Finish();
+    grpc::Status refusal;
+    while (stream->Read(&frame))
+      if (frame.has_refused())
+        refusal = grpc::Status(static_cast<grpc::StatusCode>(frame.refused().code()), frame.refused().message());
+    const grpc::Status ended = stream->Finish();
+    EXPECT_TRUE(ended.ok()) << ended.error_message();
+    return refusal;
   }
 
   std::filesystem::path dir_;
@@ -394,6 +400,21 @@ TEST_F(SkeletalTest, SessionsWithoutASkeletonRefuseJointsAndClips) {
   const grpc::Status status = refused(s, pose);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(status.error_message().find("no skeleton"), std::string::npos) << status.error_message();
+  // Through the library's Driver: read() goes past the refusal, which
+  // last_refusal() tells, and the next pose is answered on the same stream.
+  auto driver = client_->drive(s.session_id, s.editor_token, "refused");
+  const std::vector<float> values(10, 0.5f);
+  ASSERT_TRUE(driver->send_joints(1, v1::JointPose::SPACE_LOCAL_TRS, {}, values));
+  ASSERT_TRUE(driver->send(2, s.mesh.base_positions));
+  std::optional<v1::Frame> frame;
+  while ((frame = driver->read()) && frame->pose_id() < 2) {
+  }
+  ASSERT_TRUE(frame) << driver->finish().error_message();
+  const auto refusal = driver->last_refusal();
+  ASSERT_TRUE(refusal);
+  EXPECT_EQ(refusal->pose_id, 1u);
+  EXPECT_NE(refusal->message.find("no skeleton"), std::string::npos) << refusal->message;
+  driver->cancel();
   auto clip = client_->play_clip(s.session_id, s.editor_token, "bend");
   EXPECT_EQ(clip->finish().error_code(), grpc::StatusCode::FAILED_PRECONDITION);
 }

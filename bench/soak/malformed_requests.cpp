@@ -30,7 +30,8 @@ void prepare(grpc::ClientContext& context, const std::string& session_id, const 
   set_session_metadata(context, session_id, token);
 }
 
-// A Drive stream with one pose: its status once the server ends it.
+// A Drive stream with one pose: the status its refusal names (Frame.refused:
+// the stream goes on), else the stream's own once the server ends it.
 grpc::Status drive_once(v1::Filigree::Stub& stub, const SessionHandle& s, const v1::DriveRequest& request) {
   grpc::ClientContext context;
   prepare(context, s.session_id, s.editor_token);
@@ -38,9 +39,13 @@ grpc::Status drive_once(v1::Filigree::Stub& stub, const SessionHandle& s, const 
   stream->Write(request);
   stream->WritesDone();
   v1::Frame frame;
-  while (stream->Read(&frame)) {  // a frame of another driver may come before the refusal
-  }
-  return stream->Finish();
+  std::optional<grpc::Status> refused;
+  while (stream->Read(&frame))  // a frame of another driver may come before the refusal
+    if (frame.has_refused())
+      refused = grpc::Status(static_cast<grpc::StatusCode>(frame.refused().code()), frame.refused().message());
+  const grpc::Status ended = stream->Finish();
+  if (refused && !ended.ok()) return {grpc::StatusCode::INTERNAL, "a refused pose ended the stream: " + ended.error_message()};
+  return refused ? *refused : ended;
 }
 
 grpc::Status upload(v1::Filigree::Stub& stub, const std::vector<v1::CreateSessionRequest>& requests) {

@@ -139,6 +139,14 @@ std::optional<v1::Frame> Driver::read() {
     }
     v1::Frame frame;
     if (stream->Read(&frame)) {
+      if (frame.has_refused()) {
+        // A pose the server refused (the stream goes on): never resent, and
+        // told by last_refusal(); no frame to return.
+        std::lock_guard lock(mutex_);
+        std::erase_if(unacknowledged_, [&](const v1::DriveRequest& r) { return r.pose_id() == frame.pose_id(); });
+        last_refusal_ = Refusal{frame.pose_id(), frame.refused().message()};
+        continue;
+      }
       // Only a frame that answers a pose shows the link works: a server that
       // sends its current frame and fails again must not reset the backoff.
       if (frame.pose_id() != 0) reconnect_.reset();

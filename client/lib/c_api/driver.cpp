@@ -157,6 +157,13 @@ int filigree_driver_wait_frame(filigree_driver* driver, int64_t timeout_ms) {
   });
 }
 
+int filigree_driver_wait_for_pose(filigree_driver* driver, uint64_t pose_id, int64_t timeout_ms) {
+  constexpr const char* kFunction = "filigree_driver_wait_for_pose";
+  return with_handle(driver, kFunction, [&](filigree_driver& d) -> int {
+    return d.stream->wait_for_pose(d.error, kFunction, pose_id, timeout_of(timeout_ms));
+  });
+}
+
 int filigree_driver_reconnects(const filigree_driver* driver, uint64_t* count) {
   constexpr const char* kFunction = "filigree_driver_reconnects";
   return with_handle(driver, kFunction, [&](const filigree_driver& d) -> int {

@@ -179,6 +179,21 @@ int FrameStream::wait_frame(ErrorSlot& slot, const char* function,
   return report_end(slot, function, end);
 }
 
+int FrameStream::wait_for_pose(ErrorSlot& slot, const char* function, std::uint64_t pose_id,
+                               std::optional<std::chrono::milliseconds> timeout) const {
+  std::unique_lock lock(mutex_);
+  const auto included = [&] { return polled_info_.pose_id >= pose_id || (fresh_ && latest_info_.pose_id >= pose_id); };
+  const auto ready = [&] { return included() || ended_; };
+  if (!timeout) changed_cv_.wait(lock, ready);
+  else if (!changed_cv_.wait_for(lock, *timeout, ready))
+    return fail(&slot, FILIGREE_DEADLINE_EXCEEDED,
+                std::string(function) + ": no frame includes pose " + std::to_string(pose_id) + " yet");
+  if (included()) return FILIGREE_OK;
+  const End end = end_;
+  lock.unlock();
+  return report_end(slot, function, end);
+}
+
 std::string FrameStream::changes() const {
   std::lock_guard lock(mutex_);
   std::string out;

@@ -59,6 +59,10 @@ class FrameStream {
   // polled one (FILIGREE_OK), the stream ended without one (why it ended) or
   // `timeout` passed (FILIGREE_DEADLINE_EXCEEDED; nullopt: no limit).
   int wait_frame(ErrorSlot& slot, const char* function, std::optional<std::chrono::milliseconds> timeout) const;
+  // filigree_driver_wait_for_pose: as wait_frame, for a frame (waiting or
+  // polled already) whose pose_id is at least `pose_id`.
+  int wait_for_pose(ErrorSlot& slot, const char* function, std::uint64_t pose_id,
+                    std::optional<std::chrono::milliseconds> timeout) const;
   // filigree_*_changes: who changed what in the frames up to the latest one
   // polled (since the poll before) or handed to the callback, one line per
   // client: "name\tpose_id\tvertex_count\n" (tabs and newlines in names become

@@ -87,6 +87,7 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_driver_poll": ([_P, _F, c_size_t, POINTER(c_uint64), POINTER(c_uint64), POINTER(c_int)], c_int),
     "filigree_driver_frame_info": ([_P, POINTER(FrameInfo)], c_int),
     "filigree_driver_wait_frame": ([_P, c_int64], c_int),
+    "filigree_driver_wait_for_pose": ([_P, c_uint64, c_int64], c_int),
     "filigree_driver_reconnects": ([_P, POINTER(c_uint64)], c_int),
     "filigree_driver_changes": ([_P, c_char_p, c_size_t, _SIZE], c_int),
     "filigree_driver_close": ([_P], c_int),

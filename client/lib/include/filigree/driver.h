@@ -61,8 +61,21 @@ class Driver {
                    std::span<const float> values);
 
   // Blocks for the next frame; nullopt once the stream has ended for good
-  // (with Reconnect, UNAVAILABLE is not the end: read() reconnects).
+  // (with Reconnect, UNAVAILABLE is not the end: read() reconnects). A pose
+  // the server refused (Frame.refused: beyond the mesh's reach, a joint the
+  // skeleton lacks…) is no frame: read() goes on past it, and
+  // last_refusal() tells which pose and why. The stream goes on.
   std::optional<v1::Frame> read();
+
+  struct Refusal {
+    std::uint64_t pose_id = 0;
+    std::string message;
+  };
+  // The newest pose the server refused, if any (thread-safe).
+  std::optional<Refusal> last_refusal() const {
+    std::lock_guard lock(mutex_);
+    return last_refusal_;
+  }
 
   // Tells the server no more poses come (it then ends the stream). Idempotent.
   bool writes_done();
@@ -107,6 +120,7 @@ class Driver {
   bool cancelled_ = false;
   std::unique_ptr<grpc::ClientReaderWriter<v1::DriveRequest, v1::Frame>> stream_;
   std::deque<v1::DriveRequest> unacknowledged_;  // in pose_id order
+  std::optional<Refusal> last_refusal_;
   std::vector<v1::DriveRequest> spare_;           // acknowledged, for request_ to reuse
   bool broken_ = false;       // the current stream failed; poses wait for the next one
   bool writes_done_ = false;  // asked by the caller; repeated on every new stream

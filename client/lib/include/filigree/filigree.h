@@ -356,6 +356,18 @@ FILIGREE_API int filigree_driver_frame_info(const filigree_driver* driver, filig
  * stream has ended without one, why it ended (as poll). */
 FILIGREE_API int filigree_driver_wait_frame(filigree_driver* driver, int64_t timeout_ms);
 
+/* Waits up to timeout_ms (negative: without limit; 0: just checks) for a
+ * frame that includes this driver's pose `pose_id` (or a later pose of it):
+ * FILIGREE_OK when filigree_driver_poll will return it, or returned it
+ * already; FILIGREE_DEADLINE_EXCEEDED when none came in time; once the
+ * stream has ended without one, why it ended (as poll). Newer frames that
+ * do not include it yet are left for poll. The usual loop of an engine that
+ * must see its pose before it goes on:
+ *   filigree_driver_send_positions(driver, id, pose, 3 * m);
+ *   if (filigree_driver_wait_for_pose(driver, id, 1000) == FILIGREE_OK)
+ *     filigree_driver_poll(driver, vertices, 3 * n, NULL, NULL, NULL); */
+FILIGREE_API int filigree_driver_wait_for_pose(filigree_driver* driver, uint64_t pose_id, int64_t timeout_ms);
+
 /* Who changed the session in the frames up to the latest one polled (since
  * the poll before it): one line per participant, by name,
  * "client_name<TAB>newest pose_id<TAB>base vertices moved<LF>" (tabs and line
