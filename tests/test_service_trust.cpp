@@ -724,3 +724,38 @@ TEST_F(TrustTest, TheGrpcPortClosesConnectionsBeyondItsCap) {
 
 }  // namespace
 }  // namespace filigree
+
+namespace filigree {
+namespace {
+
+// Sessions evicted for idleness were not counted by --max-sessions: six were
+// created under a limit of two, and all restored after a restart.
+TEST_F(TrustTest, SessionsEvictedFromMemoryStillCountAgainstMaxSessions) {
+  const std::filesystem::path data = temp("data");
+  std::filesystem::remove_all(data);
+  MemoryServer server({"--data-dir", data.string(), "--max-sessions", "2", "--idle-timeout", "0.2"});
+  const Created first = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  const Created second = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  ASSERT_TRUE(first.status.ok() && second.status.ok());
+  // Both leave memory once idle (ListSessions shows the loaded ones).
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  v1::ListSessionsResponse list;
+  do {
+    list.Clear();
+    ASSERT_TRUE(server.stub->ListSessions(with({}).get(), {}, &list).ok());
+  } while (list.sessions_size() > 0 && std::chrono::steady_clock::now() < deadline);
+  ASSERT_EQ(list.sessions_size(), 0) << "the sessions were not evicted";
+  const Created third = upload(*server.stub, test::file_bytes(kBunny), "obj");
+  EXPECT_EQ(third.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << third.status.error_message();
+  EXPECT_NE(third.status.error_message().find("--max-sessions"), std::string::npos) << third.status.error_message();
+  // Closing one (loaded again to be closed) gives its place back.
+  v1::CloseSessionRequest close;
+  close.set_session_id(first.id());
+  v1::CloseSessionResponse closed;
+  ASSERT_TRUE(server.stub->CloseSession(with(first.created.editor_token()).get(), close, &closed).ok());
+  EXPECT_TRUE(upload(*server.stub, test::file_bytes(kBunny), "obj").status.ok());
+  std::filesystem::remove_all(data);
+}
+
+}  // namespace
+}  // namespace filigree
