@@ -68,6 +68,10 @@ expect_error "threshold" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.o
 expect_error "motion" "$FILIGREE" animate "$OUT/bunny.fgh" --motion dance -o "$OUT/x.glb"
 # Skinned input: rig → preprocess (writes H.rig) → animate a clip; a rig that is not one is refused.
 "$FILIGREE" rig "$DATA/bunny_small.obj" -o "$OUT/rigged.glb" --joints 3 > /dev/null
+# inspect of an upload lists its joints and clips (what `play --clip` names).
+"$FILIGREE" inspect "$OUT/rigged.glb" > "$OUT/inspect_glb.txt"
+grep -q "skeleton      3 joints" "$OUT/inspect_glb.txt" || fail "inspect glb: $(cat "$OUT/inspect_glb.txt")"
+grep -q "clip        bend, 2.000 s" "$OUT/inspect_glb.txt" || fail "inspect glb clips: $(cat "$OUT/inspect_glb.txt")"
 "$FILIGREE" preprocess "$OUT/rigged.glb" -o "$OUT/rigged.fgh" > "$OUT/rigged.txt"
 [ -f "$OUT/rigged.rig" ] || fail "preprocess of a skinned glTF wrote no .rig: $(cat "$OUT/rigged.txt")"
 "$FILIGREE" animate "$OUT/rigged.fgh" --clip bend --frames 4 -o "$OUT/clip.glb" > "$OUT/clip.txt"

@@ -1,8 +1,11 @@
-// `filigree inspect H.fgh`: what a hierarchy file holds.
+// `filigree inspect H.fgh`: what a hierarchy file holds; `filigree inspect
+// MESH`: what an upload holds (its size and, for a skinned glTF/GLB, its
+// joints and clips: what `filigree play --clip` names).
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 
 #include <CLI/CLI.hpp>
 
@@ -10,15 +13,38 @@
 #include "hierarchy/hierarchy.h"
 #include "hierarchy/hierarchy_file.h"
 #include "hierarchy/node_graph.h"
+#include "mesh/mesh_io.h"
+#include "skinning/rig.h"
 #include "util/content_hash.h"
 
 namespace filigree::cli {
+namespace {
+
+void inspect_mesh(const std::string& path) {
+  const RiggedMesh m = read_rigged_mesh(path);
+  std::printf("file          %s\n", path.c_str());
+  std::printf("mesh          %zu vertices, %zu faces\n", m.mesh.vertex_count(), m.mesh.face_count());
+  if (!m.rig) {
+    std::printf("skeleton      none (not a skinned glTF/GLB): pose it by positions\n");
+    return;
+  }
+  std::printf("skeleton      %zu joints\n", m.rig->joints.size());
+  for (std::size_t j = 0; j < m.rig->joints.size(); ++j)
+    std::printf("  joint %-4zu  %s (parent %d)\n", j, m.rig->joints[j].name.c_str(), m.rig->joints[j].parent);
+  std::printf("clips         %zu (filigree play --clip NAME)\n", m.rig->clips.size());
+  for (const AnimationClip& c : m.rig->clips) std::printf("  clip        %s, %.3f s\n", c.name.c_str(), c.duration());
+}
+
+}  // namespace
 
 void add_inspect_command(CLI::App& app) {
   auto path = std::make_shared<std::string>();
-  CLI::App* cmd = app.add_subcommand("inspect", "Print what a hierarchy file holds (and check it fully)");
-  cmd->add_option("hierarchy", *path, "Hierarchy file (.fgh)")->required()->check(CLI::ExistingFile);
+  CLI::App* cmd = app.add_subcommand("inspect",
+                                     "Print what a hierarchy file holds (and check it fully), or what a mesh file holds: "
+                                     "its size and a skinned glTF/GLB's joints and animation clips");
+  cmd->add_option("file", *path, "Hierarchy file (.fgh), or a mesh (.obj .ply .off .gltf .glb)")->required()->check(CLI::ExistingFile);
   cmd->callback([path] {
+    if (std::filesystem::path(*path).extension() != ".fgh") return inspect_mesh(*path);
     const HierarchyFileInfo info = read_hierarchy_file_info(*path);
     const auto start = std::chrono::steady_clock::now();
     const Hierarchy h = load_hierarchy(*path);

@@ -432,7 +432,7 @@ void add_service_commands(CLI::App& app) {
   auto pl = std::make_shared<PlayArgs>();
   CLI::App* pc = app.add_subcommand("play", "Play one of a skinned session's animation clips on the server, and record its frames");
   add_session_options(pc, *pl, "Write the received frames: .glb animation, other formats the last frame");
-  pc->add_option("--clip", pl->clip, "Clip name (SessionInfo.skeleton.clips; `filigree inspect` of the upload lists them)")->required();
+  pc->add_option("--clip", pl->clip, "Clip name (SessionInfo.skeleton.clips; `filigree inspect UPLOAD.glb` lists them)")->required();
   pc->add_option("--speed", pl->speed, "Playback rate")->check(CLI::PositiveNumber);
   pc->add_option("--fps", pl->fps, "Samples per second at most, and the .glb frame rate")->check(CLI::Range(1.0, 60.0));
   pc->add_option("--frames", pl->frames, "Stop after N frames")->check(CLI::Range(1, 1000000));
