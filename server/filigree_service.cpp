@@ -663,9 +663,19 @@ class FrameStream : public FrameSink {
   FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
     writer_.on_start_write([this](const OutgoingFrame& f) {
       if (f.keyframe) written_keyframe_ = *f.keyframe;
+      // Only a stream that acknowledges keeps what it wrote: on Drive and
+      // Watch nothing would ever take it off again.
+      if (!acknowledged_) return;
       std::lock_guard lock(unread_mutex_);
       unread_.push_back(f.version);
     });
+  }
+
+  // Set once, before the stream subscribes (Follow): at most `window`
+  // frames written and not acknowledged.
+  void acknowledged_within(std::size_t window) {
+    acknowledged_ = true;
+    writer_.set_window(window);
   }
 
   // The client read every frame up to `version` (Follow): the frames written
@@ -758,6 +768,7 @@ class FrameStream : public FrameSink {
   std::uint64_t queued_keyframe_ = kNone;  // offer_mutex_
   bool offered_any_ = false;               // offer_mutex_
   std::uint64_t offered_version_ = 0;
+  std::atomic<bool> acknowledged_{false};  // a Follow stream
   std::mutex unread_mutex_;
   std::deque<std::uint64_t> unread_;  // versions written and not acknowledged (Follow)
 };
@@ -1032,7 +1043,7 @@ class FollowReactor final : public FrameStreamReactor<FollowReactor, grpc::Serve
         return stream_->writer().finish({grpc::StatusCode::INVALID_ARGUMENT,
                                          "max_in_flight is at most " + std::to_string(kMostInFlight) + ", not " +
                                              std::to_string(request_.max_in_flight())});
-      stream_->writer().set_window(request_.max_in_flight() == 0 ? kDefaultInFlight : request_.max_in_flight());
+      stream_->acknowledged_within(request_.max_in_flight() == 0 ? kDefaultInFlight : request_.max_in_flight());
       watch_ = request_.watch();
       return open(*context_, watch_->session_id(), Role::kViewer);
     }
