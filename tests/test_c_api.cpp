@@ -463,15 +463,23 @@ TEST_F(CApiServer, UnknownSessionAndBadTokenGiveTheGrpcCodes) {
   EXPECT_EQ(required, 1u);  // empty for a joined session: just the NUL
   filigree_driver* driver = nullptr;
   ASSERT_EQ(filigree_driver_open(joined, nullptr, "viewer", &driver), FILIGREE_OK);
-  // The refusal shows in a send or a poll, then in close.
+  // The session knows its token is a viewer's (JoinSession says so): every
+  // send is refused at once, and nothing reaches the server.
   std::vector<float> frame(3 * n_);
+  EXPECT_EQ(filigree_driver_send_positions(driver, 1, base_.data(), base_.size()), FILIGREE_PERMISSION_DENIED);
+  EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("viewer token, which cannot drive"), std::string::npos)
+      << filigree_driver_last_error(driver);
+  EXPECT_EQ(filigree_driver_send_positions(driver, 2, base_.data(), base_.size()), FILIGREE_PERMISSION_DENIED);
+  EXPECT_EQ(filigree_driver_free(driver), FILIGREE_OK);
+  // Given the viewer token explicitly, the server refuses it: in a send or a
+  // poll, then in close.
+  ASSERT_EQ(filigree_driver_open(joined, viewer.c_str(), "viewer", &driver), FILIGREE_OK);
   int rc = filigree_driver_send_positions(driver, 1, base_.data(), base_.size());
   if (rc == FILIGREE_OK) rc = filigree_driver_wait_frame(driver, 30000);  // the stream ends without a frame
   EXPECT_EQ(rc, FILIGREE_PERMISSION_DENIED) << filigree_driver_last_error(driver);
   EXPECT_EQ(filigree_driver_poll(driver, frame.data(), frame.size(), nullptr, nullptr, nullptr),
             FILIGREE_PERMISSION_DENIED);
   EXPECT_NE(std::string(filigree_driver_last_error(driver)).find("PERMISSION_DENIED"), std::string::npos);
-  EXPECT_EQ(filigree_driver_send_positions(driver, 2, base_.data(), base_.size()), FILIGREE_PERMISSION_DENIED);
   EXPECT_EQ(filigree_driver_close(driver), FILIGREE_PERMISSION_DENIED);
   EXPECT_EQ(filigree_driver_free(driver), FILIGREE_OK);
   // Closing needs the editor token.

@@ -116,8 +116,10 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
   guard.finished = true;
   throw_if_error(stream->Finish());
   if (!created) throw ClientError(grpc::StatusCode::DATA_LOSS, "the server ended the upload without creating a session");
+  SessionMesh mesh = to_session_mesh(created->info());
+  mesh.role = v1::ROLE_EDITOR;  // its creator holds the editor token
   return SessionHandle{created->info().session_id(), created->editor_token(), created->viewer_token(),
-                       created->cached(), to_session_mesh(created->info())};
+                       created->cached(), std::move(mesh)};
 }
 
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {

@@ -33,6 +33,7 @@ SessionMesh to_session_mesh(const v1::SessionInfo& info) {
   m.uploaded_ids = copy(info.rest().uploaded_ids());
   m.options = info.options();
   m.skeleton = info.skeleton();
+  m.role = info.role();
   m.quantization_bits = info.options().quantization_bits() != 0 ? info.options().quantization_bits() : 14;
   m.version = info.version();
 

@@ -110,10 +110,10 @@ def test_errors_carry_the_grpc_status(client, session, server):
         assert viewer.editor_token == "" and viewer.vertex_count == session.vertex_count
         with pytest.raises(filigree.PermissionDenied):
             viewer.set_threshold(0.5)
+        # Refused at send: the joined session knows its token is a viewer's.
         driver = viewer.drive("viewer")
-        driver.send(viewer.base_positions)
-        with pytest.raises(filigree.PermissionDenied):
-            driver.next_frame(TIMEOUT)
+        with pytest.raises(filigree.PermissionDenied, match="viewer token"):
+            driver.send(viewer.base_positions)
         driver.free()
     # Wrong pose sizes and NaN are refused before they are sent; the stream goes on.
     with session.drive("pytest") as driver:

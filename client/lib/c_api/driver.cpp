@@ -13,6 +13,10 @@ namespace {
 // finishes the call, and the status says why.
 template <class Write>
 int send(filigree_driver& d, const char* function, Write&& write) {
+  if (d.viewer_only)
+    return fail(&d.error, FILIGREE_PERMISSION_DENIED,
+                std::string(function) + ": the session was joined with a viewer token, which cannot drive (join with "
+                                        "its editor token, or give one to filigree_driver_open)");
   {
     std::lock_guard lock(d.send_mutex);
     if (!d.stream->wait(std::chrono::milliseconds(0)) && write()) return FILIGREE_OK;
@@ -41,6 +45,9 @@ int filigree_driver_open(filigree_session* session, const char* token, const cha
     auto handle = std::make_unique<filigree_driver>();
     handle->connection = s.connection;
     handle->base_vertex_count = s.mesh.base_vertex_count();
+    // Driving with the token the session was joined with, a viewer's: every
+    // send says so at once, rather than the stream ending at the first frame.
+    handle->viewer_only = !token && s.mesh.role == filigree::v1::ROLE_VIEWER;
     handle->joint_count = static_cast<std::size_t>(s.mesh.skeleton.joints_size());
     filigree::Reconnect reconnect;
     reconnect.on_reconnect = [d = handle.get()](const grpc::Status&, int) { ++d->reconnects; };

@@ -120,6 +120,7 @@ struct filigree_driver {
   static constexpr const char* kName = "filigree_driver";
   std::shared_ptr<filigree::c_api::Connection> connection;
   std::size_t base_vertex_count = 0, joint_count = 0;  // for checking poses here
+  bool viewer_only = false;  // opened with the viewer token a session was joined with: sends are refused here
   // Serialises the writes of several sending threads and the reader
   // thread's finish() (gRPC allows one writer at a time).
   std::mutex send_mutex;

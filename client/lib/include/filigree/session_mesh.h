@@ -28,6 +28,9 @@ struct SessionMesh {
   // The skeleton of a skinned upload (joints and clips), empty otherwise:
   // what Driver::send_joints() poses and Client::play_clip() plays.
   v1::Skeleton skeleton;
+  // What the token it was joined with may do (JoinSession tells it); a
+  // session created here: ROLE_EDITOR.
+  v1::Role role = v1::ROLE_UNSPECIFIED;
 
   std::size_t vertex_count() const { return rest_positions.size() / 3; }
   std::size_t base_vertex_count() const { return base_positions.size() / 3; }
