@@ -13,7 +13,7 @@ targets=(obj ply off gltf glb hierarchy_file rig_file pose_file frame grpc_web s
 # FUZZ_TARGETS="ply frame": only those (e.g. again after a fix).
 if [ -n "${FUZZ_TARGETS:-}" ]; then read -r -a targets <<<"$FUZZ_TARGETS"; fi
 # Limits that turn a runaway allocation or a hang into a finding, not a stall.
-limits=(-rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=20)
+limits=(-rss_limit_mb=2048 -malloc_limit_mb=1024 -timeout=20 -report_slow_units=60)
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 
