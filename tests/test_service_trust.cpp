@@ -97,9 +97,10 @@ std::vector<std::string> listed(v1::Filigree::Stub& stub, const std::string& api
   return ids;
 }
 
-// A server with no --data-dir (the default: sessions in memory only).
-struct MemoryServer {
-  explicit MemoryServer(std::vector<std::string> args = {}) : process(FILIGREE_SERVER_BINARY, args) {
+// A filigree-server child: sessions in memory only (the default) unless
+// `args` give a --data-dir.
+struct ChildServer {
+  explicit ChildServer(std::vector<std::string> args = {}) : process(FILIGREE_SERVER_BINARY, args) {
     channel = grpc::CreateChannel(process.address(), grpc::InsecureChannelCredentials());
     stub = v1::Filigree::NewStub(channel);
   }
@@ -132,7 +133,7 @@ class TrustTest : public ::testing::Test {
 // tinygltf's recursive JSON conversion overflowed the preprocessing
 // thread's stack on 15,000 nested arrays (30 KB): every session went down.
 TEST_F(TrustTest, ADeeplyNestedGltfIsRefusedAndTheServerLivesOn) {
-  MemoryServer server;
+  ChildServer server;
   const Created before = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(before.status.ok()) << before.status.error_message();
   for (const std::size_t levels : {std::size_t{15000}, std::size_t{200000}}) {
@@ -148,7 +149,7 @@ TEST_F(TrustTest, ADeeplyNestedGltfIsRefusedAndTheServerLivesOn) {
 // Without --data-dir a proposed id of an existing session answered with that
 // session's tokens. A proposed id names a new session only.
 TEST_F(TrustTest, AProposedIdOfAnExistingSessionIsRefusedAndRevealsNoToken) {
-  MemoryServer server;
+  ChildServer server;
   const Created victim = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(victim.status.ok()) << victim.status.error_message();
   const Created attacker = upload(*server.stub, test::file_bytes(kBunny), "obj",
@@ -173,7 +174,7 @@ TEST_F(TrustTest, AnotherKeysSessionIsInvisibleAndUnreachable) {
   const std::string bob = "fgk_bob_0123456789abcdef0123456789abcdef0123456789ab";
   const std::filesystem::path keys = temp("keys");
   std::ofstream(keys) << "alice " << hex_sha256(alice) << "\nbob " << hex_sha256(bob) << "\n";
-  MemoryServer server({"--api-keys", keys.string()});
+  ChildServer server({"--api-keys", keys.string()});
   const Created mine = upload(*server.stub, test::file_bytes(kBunny), "obj", {}, alice);
   ASSERT_TRUE(mine.status.ok()) << mine.status.error_message();
 
@@ -200,7 +201,7 @@ TEST_F(TrustTest, AnotherKeysSessionIsInvisibleAndUnreachable) {
 
 // LocateSession told anyone whether an id exists; it needs credentials now.
 TEST_F(TrustTest, LocatingNeedsATokenOfTheSession) {
-  MemoryServer server;
+  ChildServer server;
   const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(s.status.ok());
   EXPECT_EQ(locate(*server.stub, s.id(), "").error_code(), grpc::StatusCode::NOT_FOUND);
@@ -211,7 +212,7 @@ TEST_F(TrustTest, LocatingNeedsATokenOfTheSession) {
 // Finite but huge coordinates were acknowledged and never made a frame; one
 // such vertex stalled every later partial pose.
 TEST_F(TrustTest, APoseBeyondTheMeshsReachIsRefusedAndLaterPosesAreAnswered) {
-  MemoryServer server;
+  ChildServer server;
   const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(s.status.ok());
   for (const float huge : {1e30f, -3.4e38f, 1e9f}) {
@@ -248,7 +249,7 @@ TEST_F(TrustTest, APoseBeyondTheMeshsReachIsRefusedAndLaterPosesAreAnswered) {
 // message: over gRPC's default 8 KB metadata limit, the client heard
 // RESOURCE_EXHAUSTED instead, and the channel's next call could fail.
 TEST_F(TrustTest, ErrorMessagesAreBoundedAndTheChannelKeepsWorking) {
-  MemoryServer server;
+  ChildServer server;
   const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(s.status.ok());
   const std::string long_id(1 << 20, 'a');
@@ -268,7 +269,7 @@ TEST_F(TrustTest, ErrorMessagesAreBoundedAndTheChannelKeepsWorking) {
 // base_ratio NaN or −1 was silently ignored; a mesh of degenerate faces only
 // became a session.
 TEST_F(TrustTest, InvalidOptionsAndMeshesWithoutATriangleAreRefused) {
-  MemoryServer server;
+  ChildServer server;
   for (const double ratio : {std::nan(""), -1.0, 1.5, std::numeric_limits<double>::infinity()}) {
     const Created c = upload(*server.stub, test::file_bytes(kBunny), "obj",
                              [&](v1::CreateSessionRequest::Begin& b) { b.mutable_options()->set_base_ratio(ratio); });
@@ -290,11 +291,6 @@ TEST_F(TrustTest, InvalidOptionsAndMeshesWithoutATriangleAreRefused) {
   EXPECT_TRUE(degenerate.created.editor_token().empty());
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 // With --data-dir, SIGKILL while driving lost acknowledged poses (records
 // were written on a timer) and the version went back, so frames after the
@@ -369,11 +365,6 @@ TEST_F(TrustTest, ASigkillLosesNoAcknowledgedPoseAndVersionsNeverRepeat) {
   std::filesystem::remove_all(data);
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 // One flat polygon of `corners` corners: fan-triangulated, its first corner
 // gets a valence of `corners` (2,000 took 21 s to preprocess, 8,000 minutes).
@@ -437,7 +428,7 @@ struct UploadInFlight {
 // in flight the server had not stopped after 45 s. Preprocessing stops at
 // its next check; the upload (not yet a session) hears UNAVAILABLE.
 TEST_F(TrustTest, ShutdownDoesNotWaitForPreprocessing) {
-  MemoryServer server;
+  ChildServer server;
   UploadInFlight upload(*server.stub, polygon_obj(8000));
   ASSERT_TRUE(upload.wait_until_simplifying());
   const auto start = std::chrono::steady_clock::now();
@@ -456,7 +447,7 @@ TEST_F(TrustTest, AnUploadCancelledWhilePreprocessingLeavesNoSession) {
   std::filesystem::remove_all(data);
   // One preprocessing slot: the second upload is preprocessed only after the
   // first has finished (and made its session, or not).
-  MemoryServer server({"--preprocessing-slots", "1", "--data-dir", data.string()});
+  ChildServer server({"--preprocessing-slots", "1", "--data-dir", data.string()});
   {
     UploadInFlight cancelled(*server.stub, polygon_obj(3000));
     ASSERT_TRUE(cancelled.wait_until_simplifying());
@@ -474,17 +465,12 @@ TEST_F(TrustTest, AnUploadCancelledWhilePreprocessingLeavesNoSession) {
   std::filesystem::remove_all(data);
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 // --max-memory was checked only when an upload started: 8 concurrent
 // 100 MiB uploads under --max-memory 300 all passed (peak RSS 969 MiB). An
 // upload's declared bytes are reserved when it begins, under one lock.
 TEST_F(TrustTest, UploadsReserveTheirDeclaredBytesAgainstMaxMemory) {
-  MemoryServer server({"--max-memory", "420"});
+  ChildServer server({"--max-memory", "420"});
   // Two uploads that declare 200 MiB each and send nothing more: one fits
   // beside the idle server, not both.
   auto begin = [&](grpc::ClientContext& ctx, grpc::Status& status) {
@@ -533,18 +519,13 @@ TEST_F(TrustTest, UploadsReserveTheirDeclaredBytesAgainstMaxMemory) {
   EXPECT_NE(over.error_message().find("more than the 10 bytes"), std::string::npos) << over.error_message();
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 // A watcher reading 5 frames/s of a 30 Hz session on a default channel was
 // minutes behind: frames waited in the HTTP/2 window, where the server's
 // newest-wins mailbox cannot reach them. Follow acknowledges what was read;
 // the server keeps at most max_in_flight frames on the wire.
 TEST_F(TrustTest, AFollowerReadingSlowlyOnADefaultChannelStaysOnTheNewestFrame) {
-  MemoryServer server;
+  ChildServer server;
   const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(s.status.ok());
   // A driver at about 50 poses a second until the follower is done.
@@ -600,7 +581,7 @@ TEST_F(TrustTest, AFollowerReadingSlowlyOnADefaultChannelStaysOnTheNewestFrame) 
 
 // Follow's first message is checked like any request.
 TEST_F(TrustTest, FollowRefusesAnOversizedWindowAndUnknownSessions) {
-  MemoryServer server;
+  ChildServer server;
   const Created s = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(s.status.ok());
   auto status_of = [&](const v1::FollowRequest& first, const std::string& token) {
@@ -622,11 +603,6 @@ TEST_F(TrustTest, FollowRefusesAnOversizedWindowAndUnknownSessions) {
   EXPECT_EQ(status_of(unknown, s.created.viewer_token()).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 std::size_t hierarchy_files(const std::filesystem::path& data) {
   std::size_t n = 0;
@@ -640,7 +616,7 @@ std::size_t hierarchy_files(const std::filesystem::path& data) {
 TEST_F(TrustTest, HierarchyFilesNoSessionUsesAreCollected) {
   const std::filesystem::path data = temp("data");
   std::filesystem::remove_all(data);
-  MemoryServer server({"--data-dir", data.string()});
+  ChildServer server({"--data-dir", data.string()});
   std::vector<Created> made;
   for (std::uint32_t base = 100; base < 160; base += 10) {  // six keys: one mesh, six base sizes
     made.push_back(upload(*server.stub, test::file_bytes(kBunny), "obj",
@@ -668,11 +644,6 @@ TEST_F(TrustTest, HierarchyFilesNoSessionUsesAreCollected) {
   std::filesystem::remove_all(data);
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 bool lists_sessions(const std::string& address) {
   auto stub = v1::Filigree::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()));
@@ -722,18 +693,13 @@ TEST_F(TrustTest, TheGrpcPortClosesConnectionsBeyondItsCap) {
   EXPECT_TRUE(served);
 }
 
-}  // namespace
-}  // namespace filigree
-
-namespace filigree {
-namespace {
 
 // Sessions evicted for idleness were not counted by --max-sessions: six were
 // created under a limit of two, and all restored after a restart.
 TEST_F(TrustTest, SessionsEvictedFromMemoryStillCountAgainstMaxSessions) {
   const std::filesystem::path data = temp("data");
   std::filesystem::remove_all(data);
-  MemoryServer server({"--data-dir", data.string(), "--max-sessions", "2", "--idle-timeout", "0.2"});
+  ChildServer server({"--data-dir", data.string(), "--max-sessions", "2", "--idle-timeout", "0.2"});
   const Created first = upload(*server.stub, test::file_bytes(kBunny), "obj");
   const Created second = upload(*server.stub, test::file_bytes(kBunny), "obj");
   ASSERT_TRUE(first.status.ok() && second.status.ok());
