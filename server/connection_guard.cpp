@@ -149,6 +149,10 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
       return;
     }
     ++count;
+    // As gRPC sets on its own sockets: a small frame or pose goes out at once,
+    // not after the peer's delayed ACK (40 ms a frame of a small mesh, seen).
+    boost::system::error_code ignored;
+    socket.set_option(tcp::no_delay(true), ignored);
     auto relay = std::make_shared<Relay>(std::move(socket), io, count, unaccepted);
     track(relay);
     relay->start(options.upstream);
