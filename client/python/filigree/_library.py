@@ -7,6 +7,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+from typing import Optional
 from ctypes import POINTER, c_char_p, c_double, c_float, c_int, c_int32, c_int64, c_size_t, c_uint32, c_uint64, c_void_p
 
 _SONAME = "libfiligree.so.0"
@@ -146,6 +147,11 @@ def check(status: int) -> None:
         from .errors import error_for
 
         raise error_for(status, (lib.filigree_last_error() or b"").decode("utf-8", "replace"))
+
+
+def token_bytes(token: Optional[str]) -> Optional[bytes]:
+    """A token for the C API: UTF-8, or None for the session's own."""
+    return token.encode() if token is not None else None
 
 
 def read_string(function, handle, *leading) -> str:

@@ -4,15 +4,13 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
 from . import _library
-from ._library import check, lib, read_string
-
-if TYPE_CHECKING:
-    from .streams import Driver, Watcher
+from ._library import check, lib, read_string, token_bytes
+from .streams import Driver, Watcher
 
 
 @dataclass(frozen=True)
@@ -45,10 +43,6 @@ def _array(function, handle, ctype, dtype, columns: int) -> np.ndarray:
     out = out.reshape(-1, columns) if columns > 1 else out
     out.flags.writeable = False  # the session's copy: users copy before editing
     return out
-
-
-def _token(token: Optional[str]) -> Optional[bytes]:
-    return token.encode() if token is not None else None
 
 
 class Session:
@@ -111,23 +105,17 @@ class Session:
 
     def drive(self, client_name: str = "filigree-python", token: Optional[str] = None) -> "Driver":
         """Opens a Drive stream (editor token; None: the session's)."""
-        from .streams import Driver
-
         return Driver(self, client_name, token)
 
     def watch(self, after_version: int = 0, token: Optional[str] = None) -> "Watcher":
         """Opens a Watch stream (either token): frames newer than `after_version`.
         It reconnects by itself when the server restarts or fails over (for up
         to 60 s), from the last frame it decoded."""
-        from .streams import Watcher
-
         return Watcher.open(self, after_version, token)
 
     def play_clip(self, clip: str, speed: float = 1.0, loop: bool = False, token: Optional[str] = None) -> "Watcher":
         """Plays one of `clips` on the server: a Watcher over its frames,
         which ends after the last sample unless `loop`."""
-        from .streams import Watcher
-
         return Watcher.play(self, clip, speed, loop, token)
 
     # ------------------------------------------------------------ editing
@@ -140,7 +128,7 @@ class Session:
         ids = np.ascontiguousarray(vertices, dtype=np.uint32).reshape(-1)
         points = np.ascontiguousarray(targets, dtype=np.float32).reshape(-1)
         total = ctypes.c_uint32(0)
-        check(lib.filigree_set_handles(self.handle, _token(token), client_name.encode(),
+        check(lib.filigree_set_handles(self.handle, token_bytes(token), client_name.encode(),
                                        ids.ctypes.data_as(_library._U32) if ids.size else None, ids.size,
                                        points.ctypes.data_as(_library._F) if points.size else None, points.size,
                                        ctypes.byref(total)))
@@ -148,11 +136,11 @@ class Session:
 
     def set_threshold(self, threshold: float, whole_mesh: bool = False, token: Optional[str] = None) -> None:
         """Sets the cut's performance threshold T (whole_mesh: T = ∞)."""
-        check(lib.filigree_set_threshold(self.handle, _token(token), float(threshold), int(bool(whole_mesh))))
+        check(lib.filigree_set_threshold(self.handle, token_bytes(token), float(threshold), int(bool(whole_mesh))))
 
     def end(self, token: Optional[str] = None) -> None:
         """Ends the session on the server for everyone (editor token)."""
-        check(lib.filigree_close_session(self.handle, _token(token)))
+        check(lib.filigree_close_session(self.handle, token_bytes(token)))
 
     # ------------------------------------------------------------ lifetime
 

@@ -7,14 +7,16 @@ from __future__ import annotations
 import ctypes
 import time
 from dataclasses import dataclass, field
-from typing import Iterator, Optional, Sequence
+from typing import TYPE_CHECKING, Iterator, Optional, Sequence
 
 import numpy as np
 
 from . import _library
-from ._library import FrameInfo, check, lib, read_string
+from ._library import FrameInfo, check, lib, read_string, token_bytes
 from .errors import DeadlineExceeded, FiligreeError, StreamEnded
-from .session import Session, _token
+
+if TYPE_CHECKING:  # only for annotations: session.py imports this module
+    from .session import Session
 
 JOINTS_LOCAL_TRS = 0  # 10 floats per joint: translation xyz, quaternion xyzw, scale xyz
 JOINTS_MODEL_MATRIX = 1  # 16 floats per joint: 4×4 model matrix, column-major
@@ -201,7 +203,7 @@ class Driver(_Stream):
 
     def __init__(self, session: Session, client_name: str, token: Optional[str]) -> None:
         handle = ctypes.c_void_p()
-        check(lib.filigree_driver_open(session.handle, _token(token), client_name.encode(), ctypes.byref(handle)))
+        check(lib.filigree_driver_open(session.handle, token_bytes(token), client_name.encode(), ctypes.byref(handle)))
         super().__init__(session, handle)
         self._m = session.base_vertex_count
         self.last_pose_id = 0
@@ -263,14 +265,14 @@ class Watcher(_Stream):
     @classmethod
     def open(cls, session: Session, after_version: int, token: Optional[str]) -> "Watcher":
         handle = ctypes.c_void_p()
-        check(lib.filigree_watcher_open(session.handle, _token(token), int(after_version), _library.NULL_CALLBACK,
+        check(lib.filigree_watcher_open(session.handle, token_bytes(token), int(after_version), _library.NULL_CALLBACK,
                                         None, ctypes.byref(handle)))
         return cls(session, handle)
 
     @classmethod
     def play(cls, session: Session, clip: str, speed: float, loop: bool, token: Optional[str]) -> "Watcher":
         handle = ctypes.c_void_p()
-        check(lib.filigree_play_clip(session.handle, _token(token), clip.encode(), float(speed), int(bool(loop)),
+        check(lib.filigree_play_clip(session.handle, token_bytes(token), clip.encode(), float(speed), int(bool(loop)),
                                      _library.NULL_CALLBACK, None, ctypes.byref(handle)))
         return cls(session, handle)
 
