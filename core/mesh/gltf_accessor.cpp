@@ -7,7 +7,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "mesh/mesh_io.h"
+#include "mesh/rigged_mesh.h"  // MeshIoError
 
 namespace filigree {
 namespace {

@@ -22,7 +22,6 @@
 #include "mesh/gltf_accessor.h"
 #include "mesh/gltf_skin.h"
 #include "mesh/json_nesting.h"
-#include "mesh/mesh_io.h"
 
 namespace filigree {
 namespace {

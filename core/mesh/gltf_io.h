@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "mesh/mesh_io.h"  // RiggedMesh
+#include "mesh/rigged_mesh.h"
 #include "mesh/tri_mesh.h"
 
 namespace filigree {

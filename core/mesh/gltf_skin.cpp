@@ -16,7 +16,6 @@
 
 #include "mesh/gltf_accessor.h"
 #include "mesh/gltf_io.h"
-#include "mesh/mesh_io.h"
 #include "skinning/skinning.h"
 
 namespace filigree {

@@ -7,18 +7,10 @@
 #include <string>
 #include <vector>
 
-#include <optional>
-
+#include "mesh/rigged_mesh.h"  // MeshIoError, RiggedMesh
 #include "mesh/tri_mesh.h"
-#include "skinning/rig.h"
 
 namespace filigree {
-
-// Thrown for unreadable, unsupported or malformed files; what() names the file
-// and what is wrong with it.
-struct MeshIoError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
 
 // Reads a mesh as it is stored: no vertex is welded, no face dropped, polygons
 // with more than three corners are fan-triangulated. Indices are NOT checked
@@ -35,12 +27,6 @@ TriMesh read_mesh(const std::filesystem::path& path);
 // Same as read_mesh, from bytes in memory; `format` is an extension such as
 // "obj" or ".glb".
 TriMesh read_mesh_from_memory(const std::string& bytes, const std::string& format);
-
-// A mesh and, for a skinned glTF/GLB, its rig (one entry per mesh vertex).
-struct RiggedMesh {
-  TriMesh mesh;
-  std::optional<Rig> rig;
-};
 
 // read_mesh / read_mesh_from_memory keeping the skin of a glTF/GLB: every
 // skinned primitive's vertices are placed by skinning at the joints' rest
