@@ -73,10 +73,11 @@ for _ in $(seq 300); do
 done
 [ -n "$ADDRESS" ] || { echo "FAIL: filigree-server did not start: $(cat "$TMP/server.err")" >&2; exit 1; }
 
-# Both builds of engine_loop_c upload tests/data/bunny_small.obj, drive 30
-# poses and must receive frames. The pkg-config build finds libfiligree.so
-# through LD_LIBRARY_PATH (the CMake build has it in its RPATH).
-for exe in "$TMP/examples/engine_loop_c" "$TMP/engine_loop_c_pc"; do
+# Both builds of engine_loop_c and the C++ engine_loop upload
+# tests/data/bunny_small.obj, drive 30 poses (the same flags) and must
+# receive frames. The pkg-config build finds libfiligree.so through
+# LD_LIBRARY_PATH (the CMake builds have it in their RPATH).
+for exe in "$TMP/examples/engine_loop_c" "$TMP/engine_loop_c_pc" "$TMP/examples/engine_loop"; do
   if ! LD_LIBRARY_PATH="$LIBDIR" timeout 120 "$exe" --server "$ADDRESS" --mesh "$SRC/tests/data/bunny_small.obj" \
          --frames 30 --rate 60 > "$TMP/run.txt" 2>&1; then
     echo "FAIL: $exe: $(cat "$TMP/run.txt")" >&2

@@ -1,7 +1,7 @@
 // engine_loop: what a game engine does with Filigree, in one file.
 //
-//   engine_loop --server 127.0.0.1:50051 --mesh armadillo.obj [--seconds 5] [--rate 60]
-//   FILIGREE_TOKEN=EDITOR_TOKEN engine_loop --server 127.0.0.1:50051 --session ID [--seconds 5]
+//   engine_loop --server 127.0.0.1:50051 --mesh armadillo.obj [--frames 300 | --seconds 5] [--rate 60]
+//   FILIGREE_TOKEN=EDITOR_TOKEN engine_loop --server 127.0.0.1:50051 --session ID [--frames 300]
 //
 // It uploads a mesh (or joins a session), then for --seconds drives a
 // procedural bend of the base mesh at --rate Hz from a writer thread (the
@@ -37,11 +37,12 @@ struct Args {
   std::string server = "127.0.0.1:50051";
   std::string mesh, session, token;
   double seconds = 5.0, rate = 60.0;
+  long frames = 0;  // poses to send; 0: seconds × rate (the C example takes --frames too)
 };
 
 constexpr const char* kUsage =
     "usage: engine_loop [--server HOST:PORT] (--mesh FILE | --session ID, with $FILIGREE_TOKEN the editor token)\n"
-    "                   [--seconds S] [--rate HZ]\n";
+    "                   [--frames N | --seconds S] [--rate HZ]\n";
 
 Args parse_args(int argc, char** argv) {
   Args a;
@@ -57,6 +58,7 @@ Args parse_args(int argc, char** argv) {
     else if (flag == "--mesh") a.mesh = value;
     else if (flag == "--session") a.session = value;
     else if (flag == "--seconds") a.seconds = std::stod(value);
+    else if (flag == "--frames") a.frames = std::stol(value);
     else if (flag == "--rate") a.rate = std::stod(value);
     else throw std::invalid_argument("unknown option " + flag);
   }
@@ -64,7 +66,8 @@ Args parse_args(int argc, char** argv) {
   // The token from the environment: a command line is visible to every user (ps).
   if (const char* token = std::getenv("FILIGREE_TOKEN")) a.token = token;
   if (!a.session.empty() && a.token.empty()) throw std::invalid_argument("joining a session: set FILIGREE_TOKEN");
-  if (!(a.rate > 0.0 && a.seconds > 0.0)) throw std::invalid_argument("--rate and --seconds must be positive");
+  if (!(a.rate > 0.0 && a.seconds > 0.0 && a.frames >= 0))
+    throw std::invalid_argument("--rate and --seconds must be positive, --frames not negative");
   return a;
 }
 
@@ -152,7 +155,8 @@ void run(const Args& args) {
   auto driver = client.drive(session_id, token, "engine_loop");
 
   const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / args.rate));
-  const auto poses = static_cast<std::uint64_t>(args.seconds * args.rate);
+  const auto poses = args.frames > 0 ? static_cast<std::uint64_t>(args.frames)
+                                     : static_cast<std::uint64_t>(args.seconds * args.rate);
   std::vector<Clock::time_point> sent_at(poses + 1);  // by pose_id
   std::mutex sent_mutex;
   std::atomic<std::uint64_t> last_sent{0}, newest_answered{0};
