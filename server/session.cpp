@@ -233,15 +233,15 @@ void Session::submit(const PoseOrigin& origin, std::span<const std::uint32_t> in
                       " is out of range: the base mesh has " + std::to_string(m) + " vertices");
   for (std::size_t i = 0; i < positions.size(); ++i) {
     if (!std::isfinite(positions[i])) throw PoseError("pose coordinate " + std::to_string(i) + " is not finite (NaN or Inf)");
-    check_reach(positions[i], "pose coordinate " + std::to_string(i));
+    check_reach(positions[i], "pose coordinate", i);
   }
   merge(origin, indices, positions, /*skinned=*/false);
 }
 
-void Session::check_reach(double coordinate, const std::string& what) const {
-  if (std::abs(coordinate) <= assets_->pose_reach) return;
+void Session::check_reach(double coordinate, const char* what, std::size_t index) const {
+  if (std::abs(coordinate) <= assets_->pose_reach) return;  // every coordinate of every pose: no message built
   std::ostringstream message;
-  message << what << " is " << coordinate << ", beyond this mesh's reach of ±" << assets_->pose_reach << " ("
+  message << what << ' ' << index << " is " << coordinate << ", beyond this mesh's reach of ±" << assets_->pose_reach << " ("
           << kPoseReachSizes << " times its size from where it lies)";
   throw PoseError(message.str());
 }
@@ -385,7 +385,7 @@ void Session::submit_skinned_locked(const PoseOrigin& origin) {
     for (int k = 0; k < 3; ++k) {
       const double c = skinned[i][k];
       if (!std::isfinite(c)) throw PoseError("the joint pose moves base vertex " + std::to_string(i) + " to a non-finite place");
-      check_reach(c, "the joint pose's base vertex " + std::to_string(i));
+      check_reach(c, "the joint pose's base vertex", i);
       skinned_[3 * i + k] = static_cast<float>(c);
     }
   merge(origin, {}, skinned_, /*skinned=*/true);
@@ -487,7 +487,7 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
       throw PoseError("handle vertex " + std::to_string(v) + " is out of range: the mesh has " +
                       std::to_string(assets_->hierarchy().vertex_count()) + " vertices");
     if (!target.allFinite()) throw PoseError("handle target of vertex " + std::to_string(v) + " is not finite");
-    for (int k = 0; k < 3; ++k) check_reach(target[k], "handle target of vertex " + std::to_string(v));
+    for (int k = 0; k < 3; ++k) check_reach(target[k], "handle target of vertex", v);
   }
   std::size_t count = 0;
   std::uint64_t seq;

@@ -285,8 +285,9 @@ class Session {
   // Skins the base with joint_pose_ and merges it (skeleton_mutex_ held).
   void submit_skinned_locked(const PoseOrigin& origin);
   // Merges a validated pose; `skinned` re-solves handles on top of it.
-  // Throws PoseError if a posed coordinate lies beyond SessionAssets::pose_reach.
-  void check_reach(double coordinate, const std::string& what) const;
+  // Throws PoseError if a posed coordinate lies beyond SessionAssets::pose_reach,
+  // naming it as `what` `index` ("pose coordinate 7").
+  void check_reach(double coordinate, const char* what, std::size_t index) const;
   void merge(const PoseOrigin& origin, std::span<const std::uint32_t> indices, std::span<const float> positions,
              bool skinned);
   // Builds and publishes the encoded frame.

@@ -18,6 +18,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include <grpcpp/grpcpp.h>
@@ -25,6 +26,7 @@
 #include <openssl/sha.h>
 
 #include "filigree/v1/filigree.grpc.pb.h"
+#include "support/grpc_upload.h"
 #include "support/raw_socket.h"
 #include "support/server_process.h"
 #include "support/test_meshes.h"
@@ -37,34 +39,17 @@ using test::ServerProcess;
 const std::string kBunny = test::shipped_path("bunny_small.obj");
 constexpr std::size_t kStatusBound = 512;  // bytes of grpc-message at most (server/bounded_status.h)
 
-struct Created {
-  grpc::Status status;
-  v1::CreateSessionResponse::Created created;
+// An upload (tests/support/grpc_upload.h) and the id of what it created.
+struct Created : test::Uploaded {
+  Created(test::Uploaded u) : test::Uploaded(std::move(u)) {}
   const std::string& id() const { return created.info().session_id(); }
 };
 
-// An upload whose Begin `shape` may change (a proposed id, options), with
-// an API key if given.
+// An upload of 150 base vertices whose Begin `shape` may change (a proposed
+// id, options), with an API key if given.
 Created upload(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
                const std::function<void(v1::CreateSessionRequest::Begin&)>& shape = {}, const std::string& api_key = {}) {
-  grpc::ClientContext ctx;
-  if (!api_key.empty()) ctx.AddMetadata("x-filigree-api-key", api_key);
-  auto stream = stub.CreateSession(&ctx);
-  v1::CreateSessionRequest message;
-  message.mutable_begin()->set_format(format);
-  message.mutable_begin()->set_total_bytes(bytes.size());
-  message.mutable_begin()->mutable_options()->set_base_vertices(150);
-  if (shape) shape(*message.mutable_begin());
-  stream->Write(message);
-  message.set_chunk(bytes);
-  stream->Write(message);
-  stream->WritesDone();
-  Created out;
-  v1::CreateSessionResponse r;
-  while (stream->Read(&r))
-    if (r.has_created()) out.created = r.created();
-  out.status = stream->Finish();
-  return out;
+  return test::upload_mesh(stub, bytes, format, 150, shape, api_key);
 }
 
 std::unique_ptr<grpc::ClientContext> with(const std::string& token, const std::string& api_key = {}) {
@@ -258,8 +243,10 @@ TEST_F(TrustTest, ErrorMessagesAreBoundedAndTheChannelKeepsWorking) {
   EXPECT_LE(unknown.error_message().size(), kStatusBound);
   EXPECT_NE(unknown.error_message().find("malformed id of 1048576 bytes"), std::string::npos) << unknown.error_message();
 
-  const std::string bad_uri = std::string(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":"data:)") +
-                              std::string(140000, '%') + R"("}]})";
+  // A buffer naming a 140 KB file that cannot be read from memory: tinygltf
+  // says so, quoting the name.
+  const std::string bad_uri = std::string(R"({"asset":{"version":"2.0"},"buffers":[{"byteLength":4,"uri":")") +
+                              std::string(140000, 'x') + R"(.bin"}]})";
   const Created refused = upload(*server.stub, bad_uri, "gltf");
   EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << refused.status.error_message().substr(0, 200);
   EXPECT_LE(refused.status.error_message().size(), kStatusBound);

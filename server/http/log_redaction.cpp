@@ -3,15 +3,10 @@
 #include <algorithm>
 #include <cctype>
 
+#include "server/http/hex_value.h"
+
 namespace filigree::server::http {
 namespace {
-
-int hex_value(char c) {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  return -1;
-}
 
 // Percent-decoded ('+' as a space) and lower-cased: "%54oken" is "token" to
 // a browser's URLSearchParams, so it is to this check too. A malformed

@@ -5,15 +5,10 @@
 #include <cctype>
 #include <utility>
 
+#include "server/http/hex_value.h"
+
 namespace filigree::server::http {
 namespace {
-
-int hex_value(char c) {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  return -1;
-}
 
 // Percent-decodes a URL path; nullopt on a malformed escape.
 std::optional<std::string> percent_decode(std::string_view in) {

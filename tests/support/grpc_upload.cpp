@@ -8,12 +8,20 @@ namespace filigree::test {
 
 Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
                      std::uint32_t base_vertices) {
+  return upload_mesh(stub, bytes, format, base_vertices, {});
+}
+
+Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
+                     std::uint32_t base_vertices, const std::function<void(v1::CreateSessionRequest::Begin&)>& shape,
+                     const std::string& api_key) {
   grpc::ClientContext ctx;
+  if (!api_key.empty()) ctx.AddMetadata("x-filigree-api-key", api_key);
   auto stream = stub.CreateSession(&ctx);
   v1::CreateSessionRequest message;
   message.mutable_begin()->set_format(format);
   message.mutable_begin()->set_total_bytes(bytes.size());
   message.mutable_begin()->mutable_options()->set_base_vertices(base_vertices);
+  if (shape) shape(*message.mutable_begin());
   stream->Write(message);
   message.set_chunk(bytes);
   stream->Write(message);

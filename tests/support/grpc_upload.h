@@ -3,6 +3,7 @@
 // contract alone: one mesh file's bytes uploaded whole.
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include <grpcpp/support/status.h>
@@ -19,5 +20,11 @@ struct Uploaded {
 // Uploads `bytes` (a mesh in `format`) with `base_vertices`; waits for the end of the call.
 Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
                      std::uint32_t base_vertices);
+
+// The same with the Begin message changed by `shape` (a proposed id,
+// options) and, when not empty, an API key in x-filigree-api-key.
+Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const std::string& format,
+                     std::uint32_t base_vertices, const std::function<void(v1::CreateSessionRequest::Begin&)>& shape,
+                     const std::string& api_key = {});
 
 }  // namespace filigree::test
