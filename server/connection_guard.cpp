@@ -153,7 +153,9 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
     // not after the peer's delayed ACK (40 ms a frame of a small mesh, seen).
     boost::system::error_code ignored;
     socket.set_option(tcp::no_delay(true), ignored);
-    auto relay = std::make_shared<Relay>(std::move(socket), io, count, unaccepted);
+    // Not make_shared: a weak_ptr left in `relays` would keep the whole
+    // object's memory (its two 64 KiB buffers) until pruned.
+    std::shared_ptr<Relay> relay(new Relay(std::move(socket), io, count, unaccepted));
     track(relay);
     relay->start(options.upstream);
   }
@@ -184,10 +186,12 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
     });
   }
 
-  // Every relay started, to close at stop(); expired ones are dropped as new ones come.
+  // Every relay started, to close at stop(); expired ones are dropped once
+  // they are as many as the live ones (so the list stays within twice the
+  // connections open now, whatever came and went before).
   void track(const std::shared_ptr<Relay>& relay) {
     std::lock_guard lock(relays_mutex);
-    if (relays.size() > 2 * options.max_connections)
+    if (relays.size() >= 2 * count.load() + 16)
       std::erase_if(relays, [](const std::weak_ptr<Relay>& r) { return r.expired(); });
     relays.push_back(relay);
   }

@@ -557,9 +557,10 @@ TEST_F(TrustTest, AFollowerReadingSlowlyOnADefaultChannelStaysOnTheNewestFrame) 
   driver.join();
   EXPECT_EQ(reads, 15u);
   // One frame in flight, one waiting, and those made while this one was
-  // read: ten frames a 200 ms read, so at most about twelve behind, never
-  // the hundreds a window of frames would hold.
-  EXPECT_LE(worst, 14u) << "the follower fell behind";
+  // read: ten frames a 200 ms read, so about twelve behind (10 measured);
+  // room for a loaded machine, where a read takes longer. Without the
+  // acknowledgements it is 130 behind after 15 reads, and growing.
+  EXPECT_LE(worst, 40u) << "the follower fell behind";
   follow->WritesDone();
   while (follow->Read(&f)) {
   }
