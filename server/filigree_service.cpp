@@ -653,6 +653,30 @@ struct OutgoingFrame {
 };
 const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
 
+// The clip time of each sample a PlayClip stream submitted, by pose id. A
+// sample is submitted once the previous one is shown, so frames name one of
+// the newest few: older ones are forgotten.
+class ClipTimes {
+ public:
+  void record(std::uint64_t pose_id, double seconds) {
+    std::lock_guard lock(mutex_);
+    times_.emplace_back(pose_id, seconds);
+    if (times_.size() > kKept) times_.pop_front();
+  }
+  // 0 for a pose id not among the newest (none is, once shown).
+  double of(std::uint64_t pose_id) const {
+    std::lock_guard lock(mutex_);
+    for (const auto& [id, seconds] : times_)
+      if (id == pose_id) return seconds;
+    return 0.0;
+  }
+
+ private:
+  static constexpr std::size_t kKept = 4;
+  mutable std::mutex mutex_;
+  std::deque<std::pair<std::uint64_t, double>> times_;
+};
+
 // A stream of frames with a mailbox of one: offer() replaces what is waiting,
 // so a slow client skips frames, and never blocks the session. In the chunked
 // format, a frame whose keyframe this stream has not written goes after it:
@@ -699,6 +723,9 @@ class FrameStream : public FrameSink {
 
   // Set once, before the stream subscribes.
   void set_format(v1::FrameFormat format) { format_ = format; }
+  // Set once, before the stream subscribes (PlayClip): the clip time of
+  // this stream's poses, written with the pose id into its frames.
+  void set_clip_times(std::shared_ptr<const ClipTimes> times) { clip_times_ = std::move(times); }
   // Called after every offer (with the frame) and on close (with null);
   // set once, before the stream subscribes. Must not block.
   void on_event(std::function<void(const PublishedFrame*)> observer) { observer_ = std::move(observer); }
@@ -751,7 +778,7 @@ class FrameStream : public FrameSink {
     if (driver_)
       if (const auto it = published.pose_of_driver.find(driver_); it != published.pose_of_driver.end()) pose_id = it->second;
     auto out = std::make_shared<OutgoingFrame>();
-    out->bytes = bytes.for_stream(pose_id);
+    out->bytes = bytes.for_stream(pose_id, clip_times_ && pose_id ? clip_times_->of(pose_id) : 0.0);
     out->version = message.version();
     if (!message.chunks().empty() && message.keyframe_version() == message.version()) out->keyframe = message.version();
     return out;
@@ -759,6 +786,7 @@ class FrameStream : public FrameSink {
 
   StreamWriter<Reactor, OutgoingFrame> writer_;
   std::function<void(const PublishedFrame*)> observer_;
+  std::shared_ptr<const ClipTimes> clip_times_;
   const std::uint64_t driver_;
   v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
   // Versions of the keyframes written and queued; none yet (a keyframe may be version 0).
@@ -1098,6 +1126,7 @@ class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::S
       return end_start(started, stream, status);
     }
     stream_->set_format(request_.frame_format());
+    stream_->set_clip_times(clip_times_);
     // The session may offer after this reactor is gone: the observer owns what it touches.
     stream_->on_event([state = state_, driver = driver_](const PublishedFrame* frame) {
       std::lock_guard lock(state->mutex);
@@ -1156,6 +1185,7 @@ class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::S
       const bool last = !request_.loop() && t >= duration;
       if (last) t = duration;
       if (request_.loop() && duration > 0.0) t = std::fmod(t, duration);
+      clip_times_->record(id, t);  // before the frame that shows it can be offered
       try {
         session_->submit_clip_sample({driver_, name, id}, *clip_, t);
       } catch (const PoseError& e) {
@@ -1189,6 +1219,7 @@ class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::S
     }
   };
   const std::shared_ptr<PlayState> state_ = std::make_shared<PlayState>();
+  const std::shared_ptr<ClipTimes> clip_times_ = std::make_shared<ClipTimes>();
   std::thread player_;
 };
 
@@ -1264,6 +1295,14 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
     } catch (const StoreUnavailable& e) {  // handles are journaled now
       return {grpc::StatusCode::UNAVAILABLE, e.what()};
     }
+    return grpc::Status::OK;
+  });
+}
+
+grpc::ServerUnaryReactor* FiligreeService::GetHandles(grpc::CallbackServerContext* context,
+                                                      const v1::GetHandlesRequest* request, v1::SessionHandles* response) {
+  return unary_on_session(context, request->session_id(), Role::kViewer, [response](Session& s) {
+    *response = s.handles();
     return grpc::Status::OK;
   });
 }

@@ -51,7 +51,7 @@ using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCa
         rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<
-                    rpc::WithRawCallbackMethod_Follow<rpc::Service>>>>>>>>>>>>>>;
+                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::Service>>>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
  public:
@@ -76,6 +76,8 @@ class FiligreeService final : public FiligreeServiceBase {
                                        v1::SubmitPoseResponse* response) override;
   grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,
                                        v1::SetHandlesResponse* response) override;
+  grpc::ServerUnaryReactor* GetHandles(grpc::CallbackServerContext* context, const v1::GetHandlesRequest* request,
+                                       v1::SessionHandles* response) override;
   // Request: a GetOverlaysRequest; answer: an Overlays serialized once per frame.
   grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                         grpc::ByteBuffer* response) override;

@@ -1,6 +1,7 @@
 #include "server/serialized_frame.h"
 
 #include <array>
+#include <bit>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -24,6 +25,8 @@ void give_back(void* user_data) {
 
 // Frame.pose_id (field 2, varint): the wire bytes of that one field.
 constexpr std::uint8_t kPoseIdTag = (2 << 3) | 0;
+// Frame.clip_seconds (field 14, a double: wire type 1, 8 bytes).
+constexpr std::uint8_t kClipSecondsTag = (14 << 3) | 1;
 
 }  // namespace
 
@@ -45,11 +48,19 @@ SerializedFrame::SerializedFrame(const v1::Frame& frame, std::shared_ptr<BufferP
   body_ = grpc::Slice(data, size, give_back, owned.release());
 }
 
-grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id) const {
-  if (pose_id == 0) return grpc::ByteBuffer(&body_, 1);
-  // The tag and at most 10 bytes of varint: within std::string's small buffer, no allocation.
-  std::string tail(1, static_cast<char>(kPoseIdTag));
-  append_varint(tail, pose_id);
+grpc::ByteBuffer SerializedFrame::for_stream(std::uint64_t pose_id, double clip_seconds) const {
+  if (pose_id == 0 && clip_seconds == 0.0) return grpc::ByteBuffer(&body_, 1);
+  // At most 11 + 9 bytes: within std::string's small buffer (15) or one allocation.
+  std::string tail;
+  if (pose_id != 0) {
+    tail.push_back(static_cast<char>(kPoseIdTag));
+    append_varint(tail, pose_id);
+  }
+  if (clip_seconds != 0.0) {
+    tail.push_back(static_cast<char>(kClipSecondsTag));
+    const auto bits = std::bit_cast<std::uint64_t>(clip_seconds);
+    for (int i = 0; i < 8; ++i) tail.push_back(static_cast<char>(bits >> (8 * i)));  // little-endian, as protobuf's fixed64
+  }
   const std::array<grpc::Slice, 2> slices{body_, grpc::Slice(tail)};
   return grpc::ByteBuffer(slices.data(), slices.size());
 }

@@ -35,9 +35,10 @@ class SerializedFrame {
   // (over 2 GiB).
   SerializedFrame(const v1::Frame& frame, std::shared_ptr<BufferPool<char>> pool);
 
-  // What one stream writes: the frame itself (pose_id 0), or the frame with
-  // its pose_id field set to `pose_id`. Shares the serialized bytes.
-  grpc::ByteBuffer for_stream(std::uint64_t pose_id) const;
+  // What one stream writes: the frame itself (pose_id 0, clip_seconds 0),
+  // or the frame with its pose_id and clip_seconds fields set to these.
+  // Shares the serialized bytes.
+  grpc::ByteBuffer for_stream(std::uint64_t pose_id, double clip_seconds = 0.0) const;
   std::size_t size() const { return body_.size(); }
   const grpc::Slice& bytes() const { return body_; }
 

@@ -517,6 +517,31 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
   return count;
 }
 
+v1::SessionHandles Session::handles() const {
+  std::vector<SessionHandle> kept;
+  v1::SessionHandles out;
+  {
+    std::lock_guard lock(mutex_);
+    kept = handles_locked();
+    out.set_version(record_.version);
+  }
+  // Oldest first is the order each client set its own in (stamps rise within a call).
+  std::map<std::string, std::vector<const SessionHandle*>> by_client;
+  for (const SessionHandle& h : kept) by_client[h.client].push_back(&h);
+  for (const auto& [client, handles] : by_client) {
+    v1::SessionHandles::Participant& p = *out.add_participants();
+    p.set_client_name(client);
+    for (const SessionHandle* h : handles) {
+      v1::Handle& w = *p.add_handles();
+      w.set_vertex(h->vertex);
+      w.set_x(h->target[0]);
+      w.set_y(h->target[1]);
+      w.set_z(h->target[2]);
+    }
+  }
+  return out;
+}
+
 bool Session::threshold_needs_preparation(double threshold, bool whole_mesh) const {
   const DeformerModel& m = *assets_->model;
   return whole_mesh || (threshold > 0.0 && !(m.node_graph_derived() && m.optimisation_data_derived()));

@@ -179,6 +179,9 @@ class Session {
   // journal, returns once the handles are journaled, and throws what the
   // journal throws. Returns the number of handles in the session after the merge.
   std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
+  // GetHandles' answer: every client's handles as set, by client name, and
+  // the version of the newest frame.
+  v1::SessionHandles handles() const;
   // Finishes every stream; the session computes nothing more.
   void close();
   // Leaves this process if no stream uses it, in one step with subscribe(),

@@ -62,6 +62,20 @@ TEST(SerializedFrame, EveryStreamReadsTheFrameAndADriversCarriesItsPoseId) {
   }
 }
 
+TEST(SerializedFrame, AClipStreamsFramesCarryTheClipTimeOfTheirSample) {
+  const v1::Frame frame = sample_frame();
+  const SerializedFrame wire(frame, std::make_shared<BufferPool<char>>(1));
+  // Times whose bytes differ in every position, a negative one and a denormal.
+  for (const double seconds : {0.25, 1.0 / 3.0, 123456.789, -2.5, 5e-324}) {
+    v1::Frame expected = frame;
+    expected.set_pose_id(7);
+    expected.set_clip_seconds(seconds);
+    EXPECT_EQ(parsed(wire.for_stream(7, seconds)).SerializeAsString(), expected.SerializeAsString()) << seconds;
+    expected.clear_pose_id();
+    EXPECT_EQ(parsed(wire.for_stream(0, seconds)).SerializeAsString(), expected.SerializeAsString()) << seconds;
+  }
+}
+
 TEST(SerializedFrame, StreamsShareOneCopyOfTheBytes) {
   const SerializedFrame wire(sample_frame(), nullptr);
   const auto a = slices_of(wire.for_stream(0)), b = slices_of(wire.for_stream(42)), c = slices_of(wire.for_stream(43));

@@ -931,12 +931,52 @@ TEST_F(ServiceTest, HandlesOfSeveralClientsMergeIntoTheBasePose) {
   for (const auto& ch : state.frame().changes()) saw_bob |= ch.client_name() == "bob";
   EXPECT_TRUE(saw_bob);
 
+  // Every page sees everyone's handles, with a viewer token: by name, each
+  // client's in the order it set them.
+  auto handles_now = [&] {
+    v1::GetHandlesRequest gh;
+    gh.set_session_id(id);
+    v1::SessionHandles out;
+    EXPECT_TRUE(stub_->GetHandles(context(id, c.created.viewer_token()).get(), gh, &out).ok());
+    return out;
+  };
+  auto listed = [](const v1::SessionHandles& all) {
+    std::vector<std::pair<std::string, std::vector<std::uint32_t>>> out;
+    for (const auto& p : all.participants()) {
+      out.push_back({p.client_name(), {}});
+      for (const auto& hh : p.handles()) out.back().second.push_back(hh.vertex());
+    }
+    return out;
+  };
+  // Carol's two handles, given in falling vertex order, and one on Bob's vertex.
+  v1::SetHandlesRequest carol;
+  carol.set_session_id(id);
+  carol.set_client_name("carol");
+  for (int v : {700, 200, 1500}) {
+    auto* hc = carol.add_handles();
+    hc->set_vertex(v);
+    hc->set_x(rest.positions(3 * v) + 0.05f), hc->set_y(rest.positions(3 * v + 1)), hc->set_z(rest.positions(3 * v + 2));
+  }
+  ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), carol, &r).ok());
+  v1::SessionHandles all = handles_now();
+  EXPECT_EQ(listed(all), (std::vector<std::pair<std::string, std::vector<std::uint32_t>>>{
+                             {"alice", {100}}, {"bob", {1500}}, {"carol", {700, 200, 1500}}}));
+  ASSERT_EQ(all.participants_size(), 3);
+  EXPECT_FLOAT_EQ(all.participants(0).handles(0).y(), float(target.y()));
+  EXPECT_FLOAT_EQ(all.participants(2).handles(0).x(), rest.positions(2100) + 0.05f);
+  ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), [&] { auto none = carol; none.clear_handles(); return none; }(), &r).ok());
+
   // Alice clears hers: Bob's remains.
   v1::SetHandlesRequest clear;
   clear.set_session_id(id);
   clear.set_client_name("alice");
   ASSERT_TRUE(stub_->SetHandles(context(id, editor).get(), clear, &r).ok());
   EXPECT_EQ(r.handles_in_session(), 1u);
+  EXPECT_EQ(listed(handles_now()), (std::vector<std::pair<std::string, std::vector<std::uint32_t>>>{{"bob", {1500}}}));
+  v1::GetHandlesRequest unknown;
+  unknown.set_session_id("no-such-session");
+  v1::SessionHandles none;
+  EXPECT_EQ(stub_->GetHandles(context("no-such-session", editor).get(), unknown, &none).error_code(), grpc::StatusCode::NOT_FOUND);
 
   v1::SetHandlesRequest bad = one;
   bad.mutable_handles(0)->set_vertex(1839);
