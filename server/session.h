@@ -261,6 +261,9 @@ class Session {
     std::atomic<bool> failed{false};
   };
 
+  // The session's first frame (the rest mesh, or the restored pose),
+  // computed and encoded on the caller's thread, then published.
+  void encode_first_frame();
   // Computes the merged pose into frame_ (and overlays); false when nothing
   // may be published (the journal failed, or the compute did).
   bool compute_frame(InFlight& f, bool keep_version);

@@ -10,6 +10,9 @@
 namespace filigree::server {
 namespace {
 
+// The largest error automatic quantization allows, per unit of the rest mesh's diagonal.
+constexpr double kAutomaticError = 5e-5;
+
 // Vertices per frame chunk: 16384, or for a mesh of fewer than 2·threads
 // such chunks, an even split into 2·threads of them (at least 2048 each), so
 // that a small mesh's frame still encodes on every thread, two coders
@@ -34,6 +37,7 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   for (Index v : h.base_vertices) a->base.add_original_ids(v);
   a->info_wire = std::make_shared<const MeshWire>(a->base, rest_mesh_message(h));
   a->rest_diagonal = bounding_box_diagonal(h.rest_positions);
+  a->automatic_max_error = kAutomaticError * std::max(a->rest_diagonal, 1e-30);
   double farthest = 0.0;
   for (const Vec3& p : h.rest_positions) farthest = std::max(farthest, p.cwiseAbs().maxCoeff());
   a->pose_reach = farthest + kPoseReachSizes * std::max(a->rest_diagonal, 1e-30);

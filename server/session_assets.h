@@ -38,6 +38,9 @@ struct SessionAssets {
   // session adds its upload's ids when it answers.
   std::shared_ptr<const MeshWire> info_wire;
   double rest_diagonal = 1.0;
+  // Automatic quantization (SessionOptions.quantization_bits = 0) keeps every
+  // coordinate's error within this: 5e-5 of rest_diagonal.
+  double automatic_max_error = 0.0;
   // How far from the origin a posed base coordinate may be: the rest mesh's
   // farthest coordinate plus kPoseReachSizes times its size. Farther poses
   // are refused: the deformation of a mesh posed beyond float's useful

@@ -1,0 +1,170 @@
+#pragma once
+// A subscriber's frame stream: the session's FrameSink over a gRPC stream
+// writer (Drive, Watch, Follow and PlayClip streams alike).
+
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <exception>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include <grpcpp/grpcpp.h>
+#include <spdlog/spdlog.h>
+
+#include "server/clip_times.h"
+#include "server/session.h"
+#include "server/stream_writer.h"
+
+namespace filigree::server {
+
+// A frame as one stream writes it: the frame's shared wire bytes (with the
+// stream's pose id), and the version it has if it is a chunked keyframe.
+struct OutgoingFrame {
+  grpc::ByteBuffer bytes;
+  std::uint64_t version = 0;
+  std::optional<std::uint64_t> keyframe;
+};
+inline const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
+
+// A stream of frames with a mailbox of one: offer() replaces what is waiting,
+// so a slow client skips frames, and never blocks the session. In the chunked
+// format, a frame whose keyframe this stream has not written goes after it:
+// the keyframe is queued to be sent first (Frame.keyframe_version).
+template <class Reactor>
+class FrameStream : public FrameSink {
+ public:
+  FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
+    writer_.on_start_write([this](const OutgoingFrame& f) {
+      if (f.keyframe) written_keyframe_ = *f.keyframe;
+      // Only a stream that acknowledges keeps what it wrote: on Drive and
+      // Watch nothing would ever take it off again.
+      if (!acknowledged_) return;
+      std::lock_guard lock(unread_mutex_);
+      unread_.push_back(f.version);
+    });
+  }
+
+  // Set once, before the stream subscribes (Follow): at most `window`
+  // frames written and not acknowledged.
+  void acknowledged_within(std::size_t window) {
+    acknowledged_ = true;
+    writer_.set_window(window);
+  }
+
+  // The client read every frame up to `version` (Follow): the frames written
+  // at or below it leave the writer's window.
+  void acknowledge(std::uint64_t version) {
+    std::size_t read = 0;
+    {
+      std::lock_guard lock(unread_mutex_);
+      // Written in version order, but a keyframe may go before an older
+      // frame's place: count every written version at or below this one.
+      for (auto it = unread_.begin(); it != unread_.end();)
+        if (*it <= version) {
+          it = unread_.erase(it);
+          ++read;
+        } else {
+          ++it;
+        }
+    }
+    if (read) writer_.release(read);
+  }
+
+  // Set once, before the stream subscribes.
+  void set_format(v1::FrameFormat format) { format_ = format; }
+  // Set once, before the stream subscribes (PlayClip): the clip time of
+  // this stream's poses, written with the pose id into its frames.
+  void set_clip_times(std::shared_ptr<const ClipTimes> times) { clip_times_ = std::move(times); }
+  // Called after every offer (with the frame) and on close (with null);
+  // set once, before the stream subscribes. Must not block.
+  void on_event(std::function<void(const PublishedFrame*)> observer) { observer_ = std::move(observer); }
+  v1::FrameFormat format() const override { return format_; }
+  std::uint64_t driver() const override { return driver_; }
+
+  void offer(std::shared_ptr<const PublishedFrame> frame) override {
+    // The session offers from its workers and, once, from subscribe(): one at
+    // a time, and never an older frame after a newer one.
+    std::lock_guard lock(offer_mutex_);
+    if (offered_any_ && frame->frame.version() <= offered_version_) return;
+    offered_any_ = true;
+    offered_version_ = frame->frame.version();
+    write(frame);
+    if (observer_) observer_(frame.get());
+  }
+  void close(bool session_closed, const std::string& why) override {
+    writer_.finish(session_closed ? grpc::Status::OK : grpc::Status(grpc::StatusCode::UNAVAILABLE, why));
+    if (observer_) observer_(nullptr);
+  }
+  StreamWriter<Reactor, OutgoingFrame>& writer() { return writer_; }
+
+ private:
+  void write(const std::shared_ptr<const PublishedFrame>& frame) {
+    try {
+      if (format_ == v1::FRAME_FORMAT_SINGLE) {
+        if (frame->single) writer_.send(outgoing(*frame, *frame->single, frame->single_bytes()), /*droppable=*/true);
+        return;
+      }
+      const PublishedFrame* key = frame->keyframe.get();
+      if (key != nullptr) {
+        const std::uint64_t version = key->frame.version();
+        if (written_keyframe_ != version && queued_keyframe_ != version) {
+          queued_keyframe_ = version;
+          writer_.send(outgoing(*key, key->frame, key->frame_bytes()), /*droppable=*/false, /*supersede=*/true);
+        }
+      }
+      writer_.send(outgoing(*frame, frame->frame, frame->frame_bytes()), /*droppable=*/true);
+    } catch (const std::exception& e) {  // the frame could not be serialized: this stream cannot go on
+      spdlog::error("event=frame_serialization_failed version={} error=\"{}\"", frame->frame.version(), e.what());
+      writer_.finish({grpc::StatusCode::INTERNAL, std::string("a frame could not be serialized: ") + e.what()});
+    }
+  }
+
+  // Every stream writes the frame's one serialized copy; a driver's also
+  // names the newest of its poses the frame includes.
+  std::shared_ptr<const OutgoingFrame> outgoing(const PublishedFrame& published, const v1::Frame& message,
+                                                const SerializedFrame& bytes) const {
+    std::uint64_t pose_id = 0;
+    if (driver_)
+      if (const auto it = published.pose_of_driver.find(driver_); it != published.pose_of_driver.end()) pose_id = it->second;
+    auto out = std::make_shared<OutgoingFrame>();
+    out->bytes = bytes.for_stream(pose_id, clip_times_ && pose_id ? clip_times_->of(pose_id) : 0.0);
+    out->version = message.version();
+    if (!message.chunks().empty() && message.keyframe_version() == message.version()) out->keyframe = message.version();
+    return out;
+  }
+
+  StreamWriter<Reactor, OutgoingFrame> writer_;
+  std::function<void(const PublishedFrame*)> observer_;
+  std::shared_ptr<const ClipTimes> clip_times_;
+  const std::uint64_t driver_;
+  v1::FrameFormat format_ = v1::FRAME_FORMAT_SINGLE;
+  // Versions of the keyframes written and queued; none yet (a keyframe may be version 0).
+  static constexpr std::uint64_t kNone = ~std::uint64_t{0};
+  std::atomic<std::uint64_t> written_keyframe_{kNone};
+  std::mutex offer_mutex_;
+  std::uint64_t queued_keyframe_ = kNone;  // offer_mutex_
+  bool offered_any_ = false;               // offer_mutex_
+  std::uint64_t offered_version_ = 0;
+  std::atomic<bool> acknowledged_{false};  // a Follow stream
+  std::mutex unread_mutex_;
+  std::deque<std::uint64_t> unread_;  // versions written and not acknowledged (Follow)
+};
+
+// A frame stream's end (OnDone): it no longer subscribes or drives (a
+// watcher's driver 0 drives nothing), and its writer never touches the
+// reactor again.
+template <class Reactor>
+void leave(const std::shared_ptr<Session>& session, FrameStream<Reactor>& stream, std::uint64_t driver) {
+  if (session) {
+    session->unsubscribe(&stream);
+    session->driver_left(driver);
+  }
+  stream.writer().detach();
+}
+
+}  // namespace filigree::server
