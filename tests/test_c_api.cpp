@@ -23,6 +23,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <set>
@@ -60,8 +61,8 @@ const std::set<std::string> kApi = {
     "filigree_session_free", "filigree_driver_open", "filigree_driver_send_positions",
     "filigree_driver_send_partial", "filigree_driver_send_joints", "filigree_driver_poll",
     "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_wait_for_pose", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
-    "filigree_watcher_open", "filigree_play_clip", "filigree_watcher_poll", "filigree_watcher_frame_info",
-    "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
+    "filigree_watcher_open", "filigree_play_clip", "filigree_play_clip_with", "filigree_watcher_poll",
+    "filigree_watcher_frame_info", "filigree_watcher_clip_seconds", "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
 
 // The names of the symbols the ELF file defines in its dynamic symbol table
 // (what dlsym can find), read with <elf.h>.
@@ -439,6 +440,139 @@ TEST_F(CApiServer, JointPosesAndClipsOfASkinnedUpload) {
   EXPECT_NE(std::string(filigree_watcher_last_error(missing)).find("no clip 'nope'"), std::string::npos)
       << filigree_watcher_last_error(missing);
   EXPECT_EQ(filigree_watcher_free(missing), FILIGREE_OK);
+
+  // From a start time, at most max_rate samples per second: every frame says
+  // which clip time it shows. The server takes sample k (pose_id) no sooner
+  // than 1/max_rate s after sample k − 1, so at speed 1 its clip time is at
+  // least start_seconds + (k − 1)/max_rate; the last is at the duration.
+  double duration = -1.0;
+  for (size_t c = 0; c < clips; ++c) {
+    char name[64];
+    ASSERT_EQ(filigree_session_clip_name(session_, c, name, sizeof name, nullptr), FILIGREE_OK);
+    if (std::string(name) == "bend") {
+      ASSERT_EQ(filigree_session_clip_duration(session_, c, &duration), FILIGREE_OK);
+    }
+  }
+  ASSERT_GT(duration, 1.0);
+  const filigree_clip_playback ranged{.speed = 1.0, .loop = 0, .start_seconds = duration - 1.0, .max_rate = 5.0};
+  const double spacing = ranged.speed / ranged.max_rate;  // clip seconds from one sample to the next, at least
+  filigree_watcher* from = nullptr;
+  ASSERT_EQ(filigree_play_clip_with(session_, nullptr, "bend", &ranged, nullptr, nullptr, &from), FILIGREE_OK)
+      << last_error();
+  uint64_t last_version = 0, samples = 0;
+  size_t polled = 0;
+  double shown = 0.0;
+  for (;;) {
+    const int waited = filigree_watcher_wait_frame(from, 30000);
+    if (waited == FILIGREE_ERROR_STREAM_ENDED) break;  // ended normally, its last frame polled
+    ASSERT_EQ(waited, FILIGREE_OK) << filigree_watcher_last_error(from);
+    uint64_t version = 0, pose_id = 0;
+    int updated = 0;
+    ASSERT_EQ(filigree_watcher_poll(from, positions.data(), positions.size(), &version, &pose_id, &updated), FILIGREE_OK)
+        << filigree_watcher_last_error(from);
+    ASSERT_EQ(updated, 1) << "wait_frame said a frame was waiting";
+    filigree_frame_info polled_info{};
+    double seconds = -1.0;
+    ASSERT_EQ(filigree_watcher_frame_info(from, &polled_info), FILIGREE_OK);
+    ASSERT_EQ(filigree_watcher_clip_seconds(from, &seconds), FILIGREE_OK) << filigree_watcher_last_error(from);
+    // (A keyframe the stream had not sent may come before a frame with an older version.)
+    if (polled > 0 && polled_info.keyframe && version < last_version) continue;
+    last_version = version;
+    ++polled;
+    if (pose_id == 0) {  // the session's frame from before the first sample
+      EXPECT_EQ(seconds, 0.0) << "version " << version;
+      continue;
+    }
+    EXPECT_GE(pose_id, samples);
+    EXPECT_GE(seconds, shown) << "sample " << pose_id;  // never back in a clip that does not loop
+    EXPECT_GE(seconds, ranged.start_seconds + double(pose_id - 1) * spacing - 1e-9) << "sample " << pose_id;
+    EXPECT_LE(seconds, duration) << "sample " << pose_id;
+    samples = pose_id;
+    shown = seconds;
+  }
+  EXPECT_EQ(filigree_watcher_wait(from, 30000), FILIGREE_OK) << filigree_watcher_last_error(from);
+  EXPECT_DOUBLE_EQ(shown, duration);  // the last frame shows the clip's end
+  // Samples 1…K−1 lie before the duration (the first at or past it is the
+  // last, K), each at least `spacing` after the one before:
+  // (K − 2)·spacing < duration − start_seconds.
+  EXPECT_GE(samples, 2u);
+  EXPECT_LE(samples, static_cast<uint64_t>(std::floor((duration - ranged.start_seconds) / spacing)) + 2);
+  EXPECT_EQ(filigree_watcher_free(from), FILIGREE_OK);
+
+  // NULL options are the defaults (the whole clip, once); a callback's
+  // watcher tells the clip time of the frame it handed over last.
+  std::atomic<size_t> handed{0};
+  const filigree_frame_callback count = [](const float*, size_t, uint64_t, void* user) {
+    ++*static_cast<std::atomic<size_t>*>(user);
+  };
+  filigree_watcher* whole = nullptr;
+  ASSERT_EQ(filigree_play_clip_with(session_, nullptr, "bend", nullptr, count, &handed, &whole), FILIGREE_OK)
+      << last_error();
+  EXPECT_EQ(filigree_watcher_wait(whole, 30000), FILIGREE_OK) << filigree_watcher_last_error(whole);
+  double end_seconds = -1.0;
+  ASSERT_EQ(filigree_watcher_clip_seconds(whole, &end_seconds), FILIGREE_OK);
+  EXPECT_DOUBLE_EQ(end_seconds, duration);
+  EXPECT_GE(handed.load(), 2u);
+  EXPECT_EQ(filigree_watcher_clip_seconds(whole, nullptr), FILIGREE_ERROR_NULL_ARGUMENT);
+  EXPECT_EQ(filigree_watcher_free(whole), FILIGREE_OK);
+}
+
+// filigree_play_clip_with checks its numbers before anything is sent: a bad
+// one is FILIGREE_INVALID_ARGUMENT naming it, and no watcher. (The session
+// has no skeleton: a check left to the server would answer OK here, and the
+// stream would end with FAILED_PRECONDITION later.)
+TEST_F(CApiServer, PlayClipWithRefusesBadNumbersAtTheCall) {
+  upload();
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  const auto playback = [](double speed, double start_seconds, double max_rate) {
+    return filigree_clip_playback{.speed = speed, .loop = 0, .start_seconds = start_seconds, .max_rate = max_rate};
+  };
+  struct Case {
+    filigree_clip_playback options;
+    const char* names;  // what the message must name
+  };
+  const Case cases[] = {
+      {playback(-1.0, 0.0, 0.0), "speed must be finite and >= 0"},
+      {playback(nan, 0.0, 0.0), "speed must be finite and >= 0"},
+      {playback(inf, 0.0, 0.0), "speed must be finite and >= 0"},
+      {playback(1.0, 0.0, -5.0), "max_rate must be finite and >= 0"},
+      {playback(1.0, 0.0, nan), "max_rate must be finite and >= 0"},
+      {playback(1.0, 0.0, inf), "max_rate must be finite and >= 0"},
+      {playback(1.0, nan, 0.0), "start_seconds must be finite"},
+      {playback(1.0, -inf, 0.0), "start_seconds must be finite"},
+  };
+  for (const Case& c : cases) {
+    filigree_watcher* watcher = reinterpret_cast<filigree_watcher*>(&n_);  // not NULL: the call must clear it
+    EXPECT_EQ(filigree_play_clip_with(session_, nullptr, "bend", &c.options, nullptr, nullptr, &watcher),
+              FILIGREE_INVALID_ARGUMENT) << c.names;
+    EXPECT_EQ(watcher, nullptr) << c.names;
+    EXPECT_NE(last_error().find(std::string("filigree_play_clip_with: ") + c.names), std::string::npos) << last_error();
+    EXPECT_NE(std::string(filigree_session_last_error(session_)).find(c.names), std::string::npos)
+        << filigree_session_last_error(session_);
+  }
+  // filigree_play_clip keeps its signature and checks its speed the same way.
+  filigree_watcher* watcher = nullptr;
+  EXPECT_EQ(filigree_play_clip(session_, nullptr, "bend", nan, 0, nullptr, nullptr, &watcher), FILIGREE_INVALID_ARGUMENT);
+  EXPECT_EQ(watcher, nullptr);
+  EXPECT_NE(last_error().find("filigree_play_clip: speed must be finite and >= 0"), std::string::npos) << last_error();
+  // NULL clip and out, and NULL session, as every call.
+  const filigree_clip_playback defaults{};
+  EXPECT_EQ(filigree_play_clip_with(session_, nullptr, nullptr, &defaults, nullptr, nullptr, &watcher),
+            FILIGREE_ERROR_NULL_ARGUMENT);
+  EXPECT_EQ(filigree_play_clip_with(session_, nullptr, "bend", &defaults, nullptr, nullptr, nullptr),
+            FILIGREE_ERROR_NULL_ARGUMENT);
+  EXPECT_EQ(filigree_play_clip_with(nullptr, nullptr, "bend", &defaults, nullptr, nullptr, &watcher),
+            FILIGREE_ERROR_INVALID_HANDLE);
+  // -0 and zeros are valid ({0}: the defaults); the stream then ends because
+  // this session has no skeleton, as the server says.
+  const filigree_clip_playback zeros{.speed = -0.0, .loop = 0, .start_seconds = -0.0, .max_rate = -0.0};
+  ASSERT_EQ(filigree_play_clip_with(session_, nullptr, "bend", &zeros, nullptr, nullptr, &watcher), FILIGREE_OK)
+      << last_error();
+  EXPECT_EQ(filigree_watcher_wait(watcher, 30000), FILIGREE_FAILED_PRECONDITION) << filigree_watcher_last_error(watcher);
+  double seconds = -1.0;
+  EXPECT_EQ(filigree_watcher_clip_seconds(watcher, &seconds), FILIGREE_OK);
+  EXPECT_EQ(seconds, 0.0);  // no frame
+  EXPECT_EQ(filigree_watcher_free(watcher), FILIGREE_OK);
 }
 
 TEST_F(CApiServer, UnknownSessionAndBadTokenGiveTheGrpcCodes) {

@@ -458,5 +458,54 @@ TEST_F(SkeletalTest, PlayClipStreamsTheClipAndEndsAfterItsLastSample) {
   EXPECT_LE(max_distance(last.positions, s.mesh.rest_positions), double{last.max_error} + 1e-4);
 }
 
+// ClipPlayback's start time and sample rate reach the server, and each frame
+// says which clip time it shows (Frame.clip_seconds, copied into
+// DecodedFrame). The server takes sample k (the frames' pose_id) no sooner
+// than 1/max_rate s after sample k − 1, so at speed 1 its clip time is at
+// least start_seconds + (k − 1)/max_rate; the last sample is at the clip's
+// duration.
+TEST_F(SkeletalTest, PlayClipFromAStartTimeAtMostMaxRateSaysWhichClipTimeEachFrameShows) {
+  const SessionHandle s = upload(glb_);
+  double duration = -1.0;
+  for (const v1::Skeleton::Clip& c : s.mesh.skeleton.clips())
+    if (c.name() == "bend") duration = c.duration_seconds();
+  ASSERT_GT(duration, 1.0);
+
+  ClipPlayback playback;  // speed 1
+  playback.start_seconds = duration - 1.0;  // the clip's last second
+  playback.max_rate = 5.0;
+  const double spacing = playback.speed / playback.max_rate;  // clip seconds from one sample to the next, at least
+  auto stream = client_->play_clip(s.session_id, s.editor_token, "bend", playback);
+  FrameDecoder decoder(s.mesh.rest_positions);
+  std::uint64_t last_version = 0, samples = 0;
+  std::size_t frames = 0;
+  double shown = 0.0;
+  while (auto frame = stream->read()) {
+    const DecodedFrame f = decoder.decode(*frame);
+    // (A keyframe the stream had not sent may come before a frame with an older version.)
+    if (frames > 0 && f.keyframe && f.version < last_version) continue;
+    last_version = f.version;
+    ++frames;
+    if (f.pose_id == 0) {  // the session's frame from before the first sample
+      EXPECT_EQ(f.clip_seconds, 0.0) << "version " << f.version;
+      continue;
+    }
+    EXPECT_GE(f.pose_id, samples);
+    EXPECT_GE(f.clip_seconds, shown) << "sample " << f.pose_id;  // never back in a clip that does not loop
+    EXPECT_GE(f.clip_seconds, playback.start_seconds + double(f.pose_id - 1) * spacing - 1e-9) << "sample " << f.pose_id;
+    EXPECT_LE(f.clip_seconds, duration) << "sample " << f.pose_id;
+    samples = f.pose_id;
+    shown = f.clip_seconds;
+  }
+  ASSERT_TRUE(stream->finish().ok());
+  EXPECT_DOUBLE_EQ(shown, duration);  // the last frame shows the clip's end
+  // Samples 1…K−1 lie before the duration (the first at or past it is the
+  // last, K), each at least `spacing` after the one before:
+  // (K − 2)·spacing < duration − start_seconds.
+  const auto most = static_cast<std::uint64_t>(std::floor((duration - playback.start_seconds) / spacing)) + 2;
+  EXPECT_GE(samples, 2u);
+  EXPECT_LE(samples, most);
+}
+
 }  // namespace
 }  // namespace filigree

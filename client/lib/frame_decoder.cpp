@@ -57,6 +57,7 @@ DecodedFrame FrameDecoder::decode(const v1::Frame& frame) {
   out.version = frame.version();
   out.pose_id = frame.pose_id();
   out.max_error = frame.max_error();
+  out.clip_seconds = frame.clip_seconds();
   out.stats = frame.stats();
   out.changes.assign(frame.changes().begin(), frame.changes().end());
   return out;

@@ -3,6 +3,7 @@ handles, errors, and frames equal to the C++ client's decoding."""
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 import subprocess
@@ -184,8 +185,70 @@ def test_skeletal_poses_and_clips_of_a_rigged_upload(client, diagonal):
                 frames = list(playing)  # ends after the clip's last sample
             assert len(frames) >= 2
             assert max(np.abs(f.positions - s.rest_positions).max() for f in frames) > 0.01 * diagonal
+            duration = next(c.duration for c in s.clips if c.name == "bend")
+            assert frames[-1].clip_seconds == pytest.approx(duration, rel=1e-12)  # the last frame shows the end
             with pytest.raises(filigree.NotFound):
                 s.play_clip("no-such-clip").next_frame(TIMEOUT)
+            check_clip_from_a_start_time_at_most_max_rate(s, duration)
+
+
+def check_clip_from_a_start_time_at_most_max_rate(s, duration):
+    """Each frame of a clip says which clip time it shows, and start_seconds
+    and max_rate reach the server: it takes sample k (pose_id) no sooner than
+    1/max_rate s after sample k - 1, so at speed 1 its clip time is at least
+    start_seconds + (k - 1)/max_rate; the last is at the duration."""
+    assert duration > 1.0
+    start, rate = duration - 1.0, 5.0  # the clip's last second
+    spacing = 1.0 / rate  # clip seconds from one sample to the next, at least (speed 1)
+    with s.play_clip("bend", start_seconds=start, max_rate=rate) as playing:
+        frames = list(playing)  # the newest when several wait: a subset, the last one included
+    shown, samples, last_version = 0.0, 0, None
+    for f in frames:
+        # (A keyframe the stream had not sent may come before a frame with an older version.)
+        if last_version is not None and f.keyframe and f.version < last_version:
+            continue
+        last_version = f.version
+        if f.pose_id == 0:  # the session's frame from before the first sample
+            assert f.clip_seconds == 0.0, f
+            continue
+        assert f.pose_id >= samples
+        assert f.clip_seconds >= shown, (f.pose_id, f.clip_seconds, shown)  # never back in a clip that does not loop
+        assert f.clip_seconds >= start + (f.pose_id - 1) * spacing - 1e-9, (f.pose_id, f.clip_seconds)
+        assert f.clip_seconds <= duration, (f.pose_id, f.clip_seconds)
+        samples, shown = f.pose_id, f.clip_seconds
+    assert shown == pytest.approx(duration, rel=1e-12)  # the last frame shows the clip's end
+    # Samples 1..K-1 lie before the duration (the first at or past it is the
+    # last, K), each at least `spacing` after the one before:
+    # (K - 2) * spacing < duration - start.
+    assert 2 <= samples <= math.floor((duration - start) / spacing) + 2, samples
+
+
+def test_play_clip_refuses_bad_numbers_at_the_call(session):
+    # ValueError before anything reaches the library (which would raise
+    # filigree.InvalidArgument, no ValueError; and this session has no
+    # skeleton, which the server would tell only on the stream).
+    cases = [
+        ({"speed": -1.0}, "speed must be finite and >= 0"),
+        ({"speed": float("nan")}, "speed must be finite and >= 0"),
+        ({"speed": float("inf")}, "speed must be finite and >= 0"),
+        ({"max_rate": -5.0}, "max_rate must be finite and >= 0"),
+        ({"max_rate": float("nan")}, "max_rate must be finite and >= 0"),
+        ({"max_rate": float("inf")}, "max_rate must be finite and >= 0"),
+        ({"start_seconds": float("nan")}, "start_seconds must be finite"),
+        ({"start_seconds": float("-inf")}, "start_seconds must be finite"),
+    ]
+    for arguments, names in cases:
+        with pytest.raises(ValueError, match=names):
+            session.play_clip("bend", **arguments)
+    # The token was play_clip's fourth parameter before start_seconds: by
+    # position it is refused, and the error does not repeat it.
+    with pytest.raises(TypeError, match="start_seconds must be a number") as refused:
+        session.play_clip("bend", 1.0, False, session.editor_token)
+    assert session.editor_token not in str(refused.value)
+    # Zeros are valid (speed 0 means 1): the stream then ends because this
+    # session has no skeleton, as the server says.
+    with pytest.raises(filigree.FailedPrecondition):
+        session.play_clip("bend", speed=0.0, start_seconds=0.0, max_rate=0.0).next_frame(TIMEOUT)
 
 
 def test_a_half_closed_drive_still_gets_the_frame_of_its_last_pose(session, diagonal):

@@ -98,6 +98,7 @@ void FrameStream::deliver(DecodedFrame& frame) {
       std::lock_guard lock(mutex_);
       info.frames_received = ++frames_received_;
       polled_info_ = info;  // set first, so that the callback may ask for it
+      polled_clip_seconds_ = frame.clip_seconds;
       polled_changes_.clear();
       merge_changes(frame.changes, polled_changes_);
     }
@@ -108,6 +109,7 @@ void FrameStream::deliver(DecodedFrame& frame) {
   latest_.swap(frame.positions);
   info.frames_received = ++frames_received_;
   latest_info_ = info;
+  latest_clip_seconds_ = frame.clip_seconds;
   merge_changes(frame.changes, pending_changes_);
   fresh_ = true;
   changed_cv_.notify_all();
@@ -144,6 +146,7 @@ int FrameStream::poll(ErrorSlot& slot, const char* function, float* positions, s
     std::copy(latest_.begin(), latest_.end(), positions);
     fresh_ = false;
     polled_info_ = latest_info_;
+    polled_clip_seconds_ = latest_clip_seconds_;
     polled_changes_.swap(pending_changes_);
     pending_changes_.clear();
   }
@@ -161,6 +164,11 @@ filigree_frame_info FrameStream::info() const {
   filigree_frame_info out = polled_info_;
   out.frames_received = frames_received_;
   return out;
+}
+
+double FrameStream::clip_seconds() const {
+  std::lock_guard lock(mutex_);
+  return polled_clip_seconds_;
 }
 
 int FrameStream::wait_frame(ErrorSlot& slot, const char* function,

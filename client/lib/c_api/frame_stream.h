@@ -55,6 +55,9 @@ class FrameStream {
            std::uint64_t* pose_id, int* updated);
   // The latest frame polled or handed to the callback.
   filigree_frame_info info() const;
+  // That frame's DecodedFrame::clip_seconds (not in filigree_frame_info,
+  // whose size existing binaries rely on).
+  double clip_seconds() const;
   // filigree_*_wait_frame: waits until poll() has a frame newer than the last
   // polled one (FILIGREE_OK), the stream ended without one (why it ended) or
   // `timeout` passed (FILIGREE_DEADLINE_EXCEEDED; nullopt: no limit).
@@ -98,6 +101,7 @@ class FrameStream {
   mutable std::condition_variable changed_cv_;  // a frame arrived or the stream ended
   std::vector<float> latest_;  // the newest frame not polled yet, when fresh_
   filigree_frame_info latest_info_{}, polled_info_{};
+  double latest_clip_seconds_ = 0.0, polled_clip_seconds_ = 0.0;  // as the infos
   // Frames' changes merged by client: since the last poll, and up to it.
   std::map<std::string, v1::Change> pending_changes_, polled_changes_;
   std::uint64_t frames_received_ = 0;

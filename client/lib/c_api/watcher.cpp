@@ -2,6 +2,9 @@
 // the background, for a callback or for polls.
 
 #include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <optional>
 
 #include "c_api/internal.h"
 
@@ -24,6 +27,37 @@ int open_watcher(filigree_session& s, const char* function, filigree_frame_callb
   handle->stream = std::make_unique<FrameStream>(std::move(hooks), s.mesh.rest_positions,
                                                  s.connection->decode_threads.load(), callback, user);
   return hand_out(std::move(handle), out);
+}
+
+// What is wrong with a playback's numbers (the server's rules for
+// PlayClipRequest), checked here so that a bad one fails the call itself
+// rather than the stream later; nullopt when nothing is.
+std::optional<std::string> playback_error(const filigree::ClipPlayback& p) {
+  const auto text = [](double v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%g", v);
+    return std::string(buffer);
+  };
+  if (!std::isfinite(p.speed) || p.speed < 0.0)
+    return "speed must be finite and >= 0 (0 means 1), not " + text(p.speed);
+  if (!std::isfinite(p.start_seconds)) return "start_seconds must be finite, not " + text(p.start_seconds);
+  if (!std::isfinite(p.max_rate) || p.max_rate < 0.0)
+    return "max_rate must be finite and >= 0 (0: as fast as frames compute), not " + text(p.max_rate);
+  return std::nullopt;
+}
+
+// filigree_play_clip and filigree_play_clip_with, after the handle check.
+int play_clip(filigree_session& s, const char* function, const char* token, const char* clip,
+              const filigree::ClipPlayback& playback, filigree_frame_callback callback, void* user,
+              filigree_watcher** out) {
+  if (!clip) return null_argument(&s.error, function, "clip");
+  if (!out) return null_argument(&s.error, function, "out");
+  *out = nullptr;
+  if (const auto why = playback_error(playback))
+    return fail(&s.error, FILIGREE_INVALID_ARGUMENT, std::string(function) + ": " + *why);
+  return open_watcher(s, function, callback, user, out, [&](filigree::Reconnect) {
+    return s.connection->client.play_clip(s.mesh.session_id, token ? token : s.token, clip, playback, "filigree-c");
+  });
 }
 
 int wrong_thread(filigree_watcher& w, const char* function) {
@@ -59,13 +93,26 @@ int filigree_play_clip(filigree_session* session, const char* token, const char*
                        filigree_frame_callback callback, void* user, filigree_watcher** out) {
   constexpr const char* kFunction = "filigree_play_clip";
   return with_handle(session, kFunction, [&](filigree_session& s) -> int {
-    if (!clip) return null_argument(&s.error, kFunction, "clip");
     filigree::ClipPlayback playback;
     playback.speed = speed;
     playback.loop = loop != 0;
-    return open_watcher(s, kFunction, callback, user, out, [&](filigree::Reconnect) {
-      return s.connection->client.play_clip(s.mesh.session_id, token ? token : s.token, clip, playback, "filigree-c");
-    });
+    return play_clip(s, kFunction, token, clip, playback, callback, user, out);
+  });
+}
+
+int filigree_play_clip_with(filigree_session* session, const char* token, const char* clip,
+                            const filigree_clip_playback* options, filigree_frame_callback callback, void* user,
+                            filigree_watcher** out) {
+  constexpr const char* kFunction = "filigree_play_clip_with";
+  return with_handle(session, kFunction, [&](filigree_session& s) -> int {
+    filigree::ClipPlayback playback;  // NULL options: these defaults
+    if (options) {
+      playback.speed = options->speed;
+      playback.loop = options->loop != 0;
+      playback.start_seconds = options->start_seconds;
+      playback.max_rate = options->max_rate;
+    }
+    return play_clip(s, kFunction, token, clip, playback, callback, user, out);
   });
 }
 
@@ -82,6 +129,15 @@ int filigree_watcher_frame_info(const filigree_watcher* watcher, filigree_frame_
   return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
     if (!info) return null_argument(&w.error, kFunction, "info");
     *info = w.stream->info();
+    return FILIGREE_OK;
+  });
+}
+
+int filigree_watcher_clip_seconds(const filigree_watcher* watcher, double* seconds) {
+  constexpr const char* kFunction = "filigree_watcher_clip_seconds";
+  return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
+    if (!seconds) return null_argument(&w.error, kFunction, "seconds");
+    *seconds = w.stream->clip_seconds();
     return FILIGREE_OK;
   });
 }

@@ -39,6 +39,10 @@ class FrameInfo(ctypes.Structure):
     ]
 
 
+class ClipPlayback(ctypes.Structure):
+    _fields_ = [("speed", c_double), ("loop", c_int32), ("start_seconds", c_double), ("max_rate", c_double)]
+
+
 FrameCallback = ctypes.CFUNCTYPE(None, POINTER(c_float), c_size_t, c_uint64, c_void_p)
 
 _P = c_void_p  # every handle is opaque
@@ -96,8 +100,11 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_driver_free": ([_P], c_int),
     "filigree_watcher_open": ([_P, c_char_p, c_uint64, FrameCallback, c_void_p, POINTER(_P)], c_int),
     "filigree_play_clip": ([_P, c_char_p, c_char_p, c_double, c_int, FrameCallback, c_void_p, POINTER(_P)], c_int),
+    "filigree_play_clip_with": ([_P, c_char_p, c_char_p, POINTER(ClipPlayback), FrameCallback, c_void_p, POINTER(_P)],
+                                c_int),
     "filigree_watcher_poll": ([_P, _F, c_size_t, POINTER(c_uint64), POINTER(c_uint64), POINTER(c_int)], c_int),
     "filigree_watcher_frame_info": ([_P, POINTER(FrameInfo)], c_int),
+    "filigree_watcher_clip_seconds": ([_P, POINTER(c_double)], c_int),
     "filigree_watcher_wait_frame": ([_P, c_int64], c_int),
     "filigree_watcher_reconnects": ([_P, POINTER(c_uint64)], c_int),
     "filigree_watcher_changes": ([_P, c_char_p, c_size_t, _SIZE], c_int),

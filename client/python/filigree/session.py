@@ -113,10 +113,16 @@ class Session:
         to 60 s), from the last frame it decoded."""
         return Watcher.open(self, after_version, token)
 
-    def play_clip(self, clip: str, speed: float = 1.0, loop: bool = False, token: Optional[str] = None) -> "Watcher":
+    def play_clip(self, clip: str, speed: float = 1.0, loop: bool = False, start_seconds: float = 0.0,
+                  max_rate: float = 0.0, token: Optional[str] = None) -> "Watcher":
         """Plays one of `clips` on the server: a Watcher over its frames,
-        which ends after the last sample unless `loop`."""
-        return Watcher.play(self, clip, speed, loop, token)
+        which ends after the last sample unless `loop`. The first sample is
+        at clip time `start_seconds`; `speed` is the playback rate (0 means
+        1); `max_rate` bounds the samples per second (0: as fast as frames
+        compute, up to 60). Each frame's `clip_seconds` is the clip time of
+        the newest sample it includes. ValueError for a speed or max_rate
+        that is negative or not finite, or a start_seconds not finite."""
+        return Watcher.play(self, clip, speed, loop, start_seconds, max_rate, token)
 
     # ------------------------------------------------------------ editing
 

@@ -5,6 +5,8 @@ or wait for the next frame, and iterate over frames."""
 from __future__ import annotations
 
 import ctypes
+import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Iterator, Optional, Sequence
@@ -38,7 +40,10 @@ class Change:
 @dataclass
 class Frame:
     """A decoded frame: `positions` is the posed detailed mesh (n × 3
-    float32, session order), within `max_error` of the server's."""
+    float32, session order), within `max_error` of the server's. A clip's
+    frames (Session.play_clip) number the newest sample they include in
+    `pose_id` and give its clip time, in seconds, in `clip_seconds` (0 for
+    other streams and for a frame that includes no sample)."""
 
     version: int
     pose_id: int
@@ -48,6 +53,7 @@ class Frame:
     keyframe: bool
     frames_received: int
     changes: list[Change] = field(default_factory=list)
+    clip_seconds: float = 0.0
 
 
 def _wait(function, handle, timeout: Optional[float]) -> bool:
@@ -66,6 +72,20 @@ def _wait(function, handle, timeout: Optional[float]) -> bool:
                 return False
 
 
+def _number(name: str, value: float, at_least_zero: bool) -> float:
+    """`value` as a float, or ValueError naming `name` when it is not finite
+    (or, with `at_least_zero`, negative): the server's rules for a clip's
+    playback. TypeError for what is no number (e.g. a token passed by
+    position where start_seconds now is; its value is not repeated)."""
+    if not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number, not a {type(value).__name__}")
+    number = float(value)
+    if not math.isfinite(number) or (at_least_zero and number < 0.0):
+        rule = "finite and >= 0" if at_least_zero else "finite"
+        raise ValueError(f"{name} must be {rule}, not {value!r}")
+    return number
+
+
 def _parse_changes(text: str) -> list[Change]:
     out = []
     for line in text.splitlines():
@@ -78,6 +98,7 @@ class _Stream:
     """What drivers and watchers share: polling, waiting and iterating."""
 
     _poll = _info = _wait_frame = _reconnects = _changes = _close = _free = None  # the C functions, set by subclasses
+    _clip_seconds = None  # a watcher's only: drivers play no clips
 
     def __init__(self, session: Session, handle: ctypes.c_void_p) -> None:
         self._session = session  # its meshes size the frames; it outlives the handle's use
@@ -117,8 +138,11 @@ class _Stream:
             return None
         info = FrameInfo()
         check(type(self)._info(self.handle, ctypes.byref(info)))
+        clip_seconds = ctypes.c_double(0.0)
+        if type(self)._clip_seconds is not None:
+            check(type(self)._clip_seconds(self.handle, ctypes.byref(clip_seconds)))
         return Frame(version.value, pose_id.value, out, info.encoded_bytes, info.max_error, bool(info.keyframe),
-                     info.frames_received, self.changes())
+                     info.frames_received, self.changes(), clip_seconds.value)
 
     @property
     def reconnects(self) -> int:
@@ -256,6 +280,7 @@ class Watcher(_Stream):
 
     _poll = lib.filigree_watcher_poll
     _info = lib.filigree_watcher_frame_info
+    _clip_seconds = lib.filigree_watcher_clip_seconds
     _wait_frame = lib.filigree_watcher_wait_frame
     _reconnects = lib.filigree_watcher_reconnects
     _changes = lib.filigree_watcher_changes
@@ -270,10 +295,14 @@ class Watcher(_Stream):
         return cls(session, handle)
 
     @classmethod
-    def play(cls, session: Session, clip: str, speed: float, loop: bool, token: Optional[str]) -> "Watcher":
+    def play(cls, session: Session, clip: str, speed: float, loop: bool, start_seconds: float, max_rate: float,
+             token: Optional[str]) -> "Watcher":
+        options = _library.ClipPlayback(speed=_number("speed", speed, at_least_zero=True), loop=int(bool(loop)),
+                                        start_seconds=_number("start_seconds", start_seconds, at_least_zero=False),
+                                        max_rate=_number("max_rate", max_rate, at_least_zero=True))
         handle = ctypes.c_void_p()
-        check(lib.filigree_play_clip(session.handle, token_bytes(token), clip.encode(), float(speed), int(bool(loop)),
-                                     _library.NULL_CALLBACK, None, ctypes.byref(handle)))
+        check(lib.filigree_play_clip_with(session.handle, token_bytes(token), clip.encode(), ctypes.byref(options),
+                                          _library.NULL_CALLBACK, None, ctypes.byref(handle)))
         return cls(session, handle)
 
     def wait(self, timeout: Optional[float] = None) -> bool:

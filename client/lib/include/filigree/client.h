@@ -48,9 +48,11 @@ struct SessionHandle {
   SessionMesh mesh;     // what join() would return, without a second request
 };
 
-// How Client::play_clip() plays a clip (PlayClipRequest's fields).
+// How Client::play_clip() plays a clip (PlayClipRequest's fields). The
+// server refuses (INVALID_ARGUMENT, from finish()) a speed or max_rate that
+// is negative or not finite, and a start_seconds that is not finite.
 struct ClipPlayback {
-  double speed = 1.0;          // playback rate
+  double speed = 1.0;          // playback rate; 0 means 1
   bool loop = false;           // until the stream is cancelled
   double start_seconds = 0.0;  // clip time of the first sample
   double max_rate = 0.0;       // samples per second at most; 0: as fast as frames compute, up to 60
@@ -115,6 +117,10 @@ class Client {
   // Plays the session's clip `clip` (SessionMesh::skeleton.clips) on the
   // server (editor token): the returned stream carries the frames, as a
   // Drive stream does, and ends after the clip's last sample unless looping.
+  // Each frame's pose_id numbers the newest sample it includes and its
+  // clip_seconds (DecodedFrame::clip_seconds) is that sample's clip time:
+  // from start_seconds up to the clip's duration, which the last frame
+  // shows (a looping clip wraps around to 0 instead).
   std::unique_ptr<Watcher> play_clip(const std::string& session_id, const std::string& token, const std::string& clip,
                                      const ClipPlayback& playback = {}, const std::string& client_name = "clip");
   // Routing::kDirect for an engine that calls the replica locate() named

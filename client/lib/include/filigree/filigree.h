@@ -407,9 +407,29 @@ FILIGREE_API int filigree_watcher_open(filigree_session* session, const char* to
 /* Plays the session's clip `clip` (its name, see filigree_session_clip_name)
  * on the server (editor token; NULL: the session's) at `speed` (0 means 1),
  * looping while `loop` is nonzero: a watcher over the frames of the clip,
- * which ends normally after the clip's last sample unless looping. */
+ * which ends normally after the clip's last sample unless looping. The same
+ * as filigree_play_clip_with with start_seconds and max_rate 0. */
 FILIGREE_API int filigree_play_clip(filigree_session* session, const char* token, const char* clip, double speed,
                                     int loop, filigree_frame_callback callback, void* user, filigree_watcher** out);
+
+/* How filigree_play_clip_with plays a clip (PlayClipRequest in the
+ * contract). Zero fields mean the defaults, so {0} is a valid value. */
+typedef struct filigree_clip_playback {
+  double speed;         /* playback rate, finite and >= 0; 0 means 1 */
+  int32_t loop;         /* nonzero: play until the watcher is closed */
+  double start_seconds; /* clip time of the first sample, finite */
+  double max_rate;      /* samples per second at most, finite and >= 0; 0: as fast as frames compute, up to 60 */
+} filigree_clip_playback;
+
+/* As filigree_play_clip, with every option of the contract; `options` may be
+ * NULL (the defaults: from the start, at speed 1, once). A speed or max_rate
+ * that is negative or not finite, or a start_seconds that is not finite,
+ * gives FILIGREE_INVALID_ARGUMENT and no watcher. Each frame's pose_id
+ * numbers the newest sample it includes, and filigree_watcher_clip_seconds
+ * gives that sample's clip time. */
+FILIGREE_API int filigree_play_clip_with(filigree_session* session, const char* token, const char* clip,
+                                         const filigree_clip_playback* options, filigree_frame_callback callback,
+                                         void* user, filigree_watcher** out);
 
 /* As filigree_driver_poll (pose_id is 0 for a Watch stream; for a clip,
  * the server's number of the sample). A watcher with a callback gives
@@ -419,6 +439,13 @@ FILIGREE_API int filigree_watcher_poll(filigree_watcher* watcher, float* positio
 
 /* The latest frame polled, or handed to the callback. */
 FILIGREE_API int filigree_watcher_frame_info(const filigree_watcher* watcher, filigree_frame_info* info);
+
+/* For a clip's watcher: the clip time, in seconds, of the newest sample the
+ * latest frame polled (or handed to the callback) includes. A clip that
+ * does not loop goes from the playback's start_seconds up to its duration,
+ * which its last frame shows; a looping one wraps around to 0. 0 when that
+ * frame includes no sample, before the first frame, and for Watch streams. */
+FILIGREE_API int filigree_watcher_clip_seconds(const filigree_watcher* watcher, double* seconds);
 
 /* How many times the stream has begun to reconnect (as filigree_driver_reconnects). */
 FILIGREE_API int filigree_watcher_reconnects(const filigree_watcher* watcher, uint64_t* count);

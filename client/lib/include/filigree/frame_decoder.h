@@ -22,6 +22,10 @@ struct DecodedFrame {
   std::size_t encoded_bytes = 0;    // size of the compressed deltas on the wire (chunks and runs)
   bool keyframe = true;             // chunked: a keyframe; false: a sparse frame
   std::size_t present_vertices = 0; // vertices the frame carried
+  // A clip's stream (Client::play_clip): the clip time, in seconds, of the
+  // newest sample of that stream the frame includes (pose_id is its number);
+  // 0 when it includes none, and on other streams.
+  double clip_seconds = 0.0;
 };
 
 // Decodes the frames of one stream, in the order they arrive: both formats

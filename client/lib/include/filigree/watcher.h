@@ -18,7 +18,8 @@
 namespace filigree {
 
 // Made by Client::watch() (or Client::play_clip(), whose stream carries the
-// frames of the clip it plays and ends after the clip's last one). A slow
+// frames of the clip it plays, each with the clip time it shows in
+// Frame.clip_seconds, and ends after the clip's last one). A slow
 // reader skips frames and is at most two frames behind the newest; it never
 // slows the session. cancel() may be called from any
 // thread, e.g. to wake a thread blocked in read(); finish() once no other
