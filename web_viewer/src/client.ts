@@ -3,11 +3,11 @@ import { Code, ConnectError, createClient, type Client, type Interceptor } from 
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
 import {
-  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionInfo, type SessionState,
-  type SetHandlesResponse,
+  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionHandles, type SessionInfo,
+  type SessionState, type SetHandlesResponse,
 } from './gen/filigree/v1/filigree_pb';
 
-export type { Frame, Overlays, SessionInfo, SessionState };
+export type { Frame, Overlays, SessionHandles, SessionInfo, SessionState };
 export type SessionEntry = ListSessionsResponse_Entry;
 
 // A handle as this page keeps it: a vertex of the detailed mesh (original
@@ -77,6 +77,12 @@ export class SessionClient {
   // all participants' handle count after the merge.
   setHandles(clientName: string, handles: HandleTarget[]): Promise<SetHandlesResponse> {
     return this.client.setHandles({ sessionId: this.sessionId, clientName, handles });
+  }
+
+  // Every participant's handles by client name, as their last SetHandles
+  // left them (this page's own among them); viewer token.
+  getHandles(): Promise<SessionHandles> {
+    return this.client.getHandles({ sessionId: this.sessionId });
   }
 
   // The regions and the cut mesh of the latest frame; ready is false until

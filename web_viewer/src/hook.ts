@@ -26,6 +26,15 @@ export interface TestHook {
   handlesAcceptedAt: number;  // the version the last one was accepted at: the frame with its handles is newer
   handlesSending: boolean;  // a SetHandles call is running or waiting
   handlesInSession: number | null;  // everyone's handles, after the last accepted call
+  // The other participants drawn (participants.ts): name, colour (#rrggbb) and handle count, by name.
+  participants: { name: string; colour: string; handles: number }[];
+  participantsAnswers: number;      // GetHandles answers shown
+  participantsVersion: number;      // the version of the last one
+  participantsFetching: boolean;    // a GetHandles call is running or due
+  // The other participants' spheres in the scene: colour drawn, vertex, page point (null: behind the camera).
+  otherHandles(): { name: string; colour: string; vertex: number; visible: boolean; x: number | null; y: number | null }[];
+  // The colour a client name gets (the same on every page).
+  participantColour(name: string): string;
   regionCount: number | null;       // of the last ready GetOverlays (null: none yet)
   overlaysVersion: number;          // the frame those overlays describe
   cutTriangles: number;             // triangles of that cut mesh
@@ -84,7 +93,9 @@ declare global {
 export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
-  displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null, regionCount: null,
+  displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null,
+  participants: [], participantsAnswers: 0, participantsVersion: 0, participantsFetching: false, otherHandles: () => [],
+  participantColour: () => '', regionCount: null,
   overlaysVersion: 0, cutTriangles: 0, stretchMax: 0, clips: [], clipState: 'idle', clipFrames: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,

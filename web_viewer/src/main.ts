@@ -20,6 +20,7 @@ import { StretchOverlay } from './overlay-stretch';
 import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
 import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
+import { participantColour, ParticipantsLayer } from './participants';
 import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined, type Ready } from './pipeline';
 import { pollPresence } from './presence';
 import { isFinal, lossReason, retryDelay } from './reconnect';
@@ -48,6 +49,7 @@ class Viewer {
   private stretch!: StretchOverlay;
   private feed!: OverlayFeed<DrawableOverlays>;
   private handles: HandleEditor | null = null;
+  private participants!: ParticipantsLayer;
   private lastVersion = 0n;
   private stream = 0;  // the current Watch stream's number
   private streamOpen = false;
@@ -98,6 +100,7 @@ class Viewer {
     byId('loading').hidden = true;
     hook.loadStage = 'done';
     this.applyRole(joined.info.role);
+    this.participants.refresh();
     void this.showShare();
     await this.follow();
   }
@@ -171,6 +174,7 @@ class Viewer {
     };
     showSession(info, this.params.serverUrl, CLIENT_NAME, faces.length / 3, joined.originalIds.length);
     this.setupEditing(joined);
+    this.setupParticipants();
     this.setupOptions(info);
     this.setupClips(info);
     this.setupViewControls();
@@ -288,6 +292,22 @@ class Viewer {
     apply();
   }
 
+  // Everyone else's handles, in their colours with their names, and the legend.
+  private setupParticipants(): void {
+    this.participants = new ParticipantsLayer(this.view, this.client, CLIENT_NAME, byId('participants'), {
+      shown: (participants, version) => {
+        hook.participants = participants.map((p) => ({ name: p.name, colour: p.colour, handles: p.handles.length }));
+        hook.participantsAnswers = this.participants.answers;
+        hook.participantsVersion = Number(version);
+      },
+      status: (text, bad) => setNote('participants-status', text, bad),
+      describe: (error) => this.describe(error),
+    });
+    Object.defineProperty(hook, 'participantsFetching', { get: () => this.participants.fetching, enumerable: true });
+    hook.otherHandles = () => this.participants.spheresOnPage();
+    hook.participantColour = (name) => participantColour(name).css;
+  }
+
   // The base wireframe comes from the frames, the stretch map from the
   // worker; the cut and the regions from GetOverlays, polled while one of them is shown.
   private setupOverlays(joined: Joined): void {
@@ -368,7 +388,10 @@ class Viewer {
   private opened(): void {
     if (this.streamOpen) return;
     this.streamOpen = true;
-    if (this.attempt > 0) ++hook.reconnects;
+    if (this.attempt > 0) {
+      ++hook.reconnects;
+      this.participants.refresh();  // handles may have changed meanwhile (or the server restarted)
+    }
     this.attempt = 0;
     this.downSince = null;
     hook.state = 'live';
@@ -420,6 +443,7 @@ class Viewer {
     if (frame.version > this.lastVersion) this.lastVersion = frame.version;
     hook.newestVersion = Number(this.lastVersion);
     this.changes.add(frame);
+    this.participants.frameArrived(frame);
     this.feed.frameArrived();
     if (hook.framesReceived === 1) {
       // From the first frame on, the count includes this page's own Watch.

@@ -52,6 +52,14 @@ export class MeshView {
   // Called after each draw with the version drawn, the draw's duration (the
   // uploads and the draw call) and its end time.
   onDrawn: (drawMs: number, at: number) => void = () => {};
+  // Called when the camera moved or the view was resized (not for frames):
+  // what is placed over the canvas by projecting follows.
+  private readonly viewListeners: (() => void)[] = [];
+  // The container's size in CSS pixels, as of the last resize (projection
+  // without a layout read).
+  private cssWidth = 0;
+  private cssHeight = 0;
+  private readonly scratch = new THREE.Vector3();
 
   // `dense`: a mesh heavy enough to be drawn coarser while busy; it is drawn
   // without multisampling (its triangles are mostly smaller than a pixel).
@@ -92,6 +100,7 @@ export class MeshView {
     this.controls.addEventListener('change', () => {
       this.updateClipping();
       this.moved();
+      this.viewChanged();
     });
 
     // A sky/ground hemisphere for the overall shape, plus a key light that
@@ -136,6 +145,36 @@ export class MeshView {
     this.controls.update();
     this.updateClipping();
     this.invalidate();
+    this.viewChanged();
+  }
+
+  // The container's size in CSS pixels (as of the last resize).
+  get cssSize(): { width: number; height: number } {
+    return { width: this.cssWidth, height: this.cssHeight };
+  }
+
+  // `listener` runs after every camera move or resize.
+  onViewChange(listener: () => void): void {
+    this.viewListeners.push(listener);
+  }
+
+  private viewChanged(): void {
+    for (const listener of this.viewListeners) listener();
+  }
+
+  // Projects `count` world points (xyz in `world`) to the container's CSS
+  // pixels: out[2k], out[2k + 1]; NaN for a point behind the camera. No
+  // allocation and no layout read (the size is the last resize's).
+  projectPoints(world: ArrayLike<number>, count: number, out: Float32Array): void {
+    this.camera.updateMatrixWorld();
+    const v = this.scratch;
+    for (let k = 0; k < count; ++k) {
+      v.set(world[3 * k], world[3 * k + 1], world[3 * k + 2]).applyMatrix4(this.camera.matrixWorldInverse);
+      const behind = v.z >= 0;
+      v.applyMatrix4(this.camera.projectionMatrix);
+      out[2 * k] = behind ? NaN : (v.x + 1) / 2 * this.cssWidth;
+      out[2 * k + 1] = behind ? NaN : (1 - v.y) / 2 * this.cssHeight;
+    }
   }
 
   // Near and far planes from the mesh's size and the camera's distance to it.
@@ -317,6 +356,11 @@ export class MeshView {
     this.camera.aspect = width / height;
     this.camera.updateProjectionMatrix();
     this.invalidate();
+    if (width !== this.cssWidth || height !== this.cssHeight) {
+      this.cssWidth = width;
+      this.cssHeight = height;
+      this.viewChanged();
+    }
   }
 
   // Draws only when something changed: an idle viewer costs no GPU time.

@@ -350,6 +350,96 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
     await watcher.context().close();
   });
 
+  it('shows another participant\'s handle in its colour with its name, on editor and viewer pages, until it is dropped', { timeout: TEST_TIMEOUT_MS }, async (t) => {
+    // Two editors (own contexts, so own names) and a viewer, all live and
+    // past their first GetHandles before A places anything: what they show
+    // later comes from the frames' changes, not from the join.
+    const a = await open(viewerUrl(session.editor_token));
+    const b = await open(viewerUrl(session.editor_token));
+    const viewer = await open(viewerUrl(session.viewer_token));
+    const settled = () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1
+      && window.__filigree.participantsAnswers >= 1 && !window.__filigree.participantsFetching;
+    for (const page of [a, b, viewer]) await waitFor(page, settled);
+    const nameA = (await hookState(a)).clientName;
+    const nameB = (await hookState(b)).clientName;
+    assert.notEqual(nameA, nameB);
+    const colourA = await b.evaluate((n) => window.__filigree.participantColour(n), nameA);
+    assert.match(colourA, /^#[0-9a-f]{6}$/);
+    assert.equal(await a.evaluate((n) => window.__filigree.participantColour(n), nameA), colourA, 'the same colour on every page');
+    assert.notEqual(colourA, '#39d0ff', 'not the colour of a page\'s own handles');
+    for (const page of [b, viewer]) {
+      assert.ok(!(await hookState(page)).participants.some((p) => p.name === nameA), 'A holds no handle yet');
+    }
+
+    // A places a handle: a click (press and release) on the vertex nearest to the camera.
+    await a.selectOption('#edit-mode', 'handles');
+    const vertex = await a.evaluate(() => window.__filigree.nearestVertexToCamera());
+    const at = await a.evaluate((i) => window.__filigree.screenPointOfVertex(i), vertex);
+    await a.mouse.click(at.x, at.y);
+    await waitFor(a, () => window.__filigree.handleCount === 1 && window.__filigree.handlesAnswered >= 1
+      && !window.__filigree.handlesSending);
+    const placedAt = (await hookState(a)).handlesAcceptedAt;
+
+    // What B and the viewer show: A's sphere in A's colour, a name tag beside
+    // it, and a legend line; never their own handles as someone else's.
+    const rgbToHex = (css) => `#${css.match(/\d+/g).slice(0, 3).map((c) => Number(c).toString(16).padStart(2, '0')).join('')}`;
+    for (const page of [b, viewer]) {
+      await waitFor(page, (n) => window.__filigree.participants.some((p) => p.name === n && p.handles === 1), nameA);
+      const spheres = (await page.evaluate(() => window.__filigree.otherHandles())).filter((s) => s.name === nameA);
+      assert.equal(spheres.length, 1, `one sphere of A's: ${JSON.stringify(spheres)}`);
+      assert.equal(spheres[0].vertex, vertex);
+      assert.equal(spheres[0].colour, colourA, 'drawn in A\'s colour');
+      assert.ok(spheres[0].visible && spheres[0].x !== null, 'in view');
+      // The label: A's name, A's colour, next to the sphere (placed at the next animation frame).
+      const labelSelector = `.participant-label[data-participant="${nameA}"]`;
+      await waitFor(page, (s) => {
+        const label = document.querySelector(s);
+        return label !== null && !label.hidden && label.style.transform !== '';
+      }, labelSelector);
+      const label = await page.evaluate((s) => {
+        const element = document.querySelector(s);
+        const r = element.getBoundingClientRect();
+        return {
+          text: element.textContent, background: getComputedStyle(element).backgroundColor,
+          left: r.left, right: r.right, top: r.top, bottom: r.bottom,
+        };
+      }, labelSelector);
+      assert.equal(label.text, nameA);
+      assert.equal(rgbToHex(label.background), colourA);
+      const { x, y } = spheres[0];
+      const gap = Math.hypot(Math.max(label.left - x, 0, x - label.right), Math.max(label.top - y, 0, y - label.bottom));
+      assert.ok(gap > 0 && gap < 25, `the label is beside the sphere, not over it (${gap.toFixed(1)} px from it)`);
+      assert.ok(await page.isVisible(labelSelector), 'the label is seen');
+      // The legend: swatch in A's colour, A's name, one handle.
+      const legend = await page.evaluate((n) => {
+        const item = document.querySelector(`#participants li[data-participant="${n}"]`);
+        return item && { text: item.textContent, swatch: getComputedStyle(item.querySelector('.swatch')).backgroundColor };
+      }, nameA);
+      assert.ok(legend, 'a legend line for A');
+      assert.match(legend.text, new RegExp(`${nameA}\\s*1 handle$`));
+      assert.equal(rgbToHex(legend.swatch), colourA);
+    }
+    // A's own handle keeps its own look (handles.ts): A does not draw it as someone else's.
+    assert.deepEqual((await a.evaluate(() => window.__filigree.otherHandles())).filter((s) => s.name === nameA), []);
+    assert.equal(await a.locator(`.participant-label[data-participant="${nameA}"]`).count(), 0);
+
+    // A drops it (right-click on the handle): it goes from B and the viewer too.
+    await a.mouse.click(at.x, at.y, { button: 'right' });
+    await waitFor(a, () => window.__filigree.handleCount === 0 && window.__filigree.handlesInSession === 0
+      && !window.__filigree.handlesSending);
+    for (const page of [b, viewer]) {
+      await waitFor(page, (n) => !window.__filigree.participants.some((p) => p.name === n)
+        && !window.__filigree.otherHandles().some((s) => s.name === n)
+        && document.querySelector(`.participant-label[data-participant="${n}"]`) === null
+        && document.querySelector(`#participants li[data-participant="${n}"]`) === null, nameA);
+    }
+    assert.match(await b.textContent('#participants'), /No other participant holds handles\./);
+    const seen = await hookState(b);
+    t.diagnostic(`A ${nameA} (${colourA}) placed vertex ${vertex} at v${placedAt}; B ${nameB} asked GetHandles ` +
+      `${seen.participantsAnswers} times, last at v${seen.participantsVersion}`);
+    for (const page of [a, b, viewer]) await page.context().close();
+  });
+
   it('pulls the neighbourhood of a dragged point with the editor token, and leaves the far side in place', { timeout: TEST_TIMEOUT_MS }, async (t) => {
     const page = await open(viewerUrl(session.editor_token));
     await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1

@@ -2,7 +2,8 @@
 //   docs/viewer-regions.png  a session bent part-way by the CLI, T = 1e6, the regions overlay on
 //   docs/viewer-handles.png  a handle being dragged (two anchoring), the stretch map on
 //   docs/images/front-door.png  the root page: create, the sessions (one made here), connect a program
-//   docs/images/live-two-participants.png  two pages on one session side by side, each pulling; the change lists name both
+//   docs/images/live-two-participants.png  two editor pages on one session side by side, each holding handles; each
+//                                          shows the other's in its colour with its name, and lists it
 //   docs/images/million-vertices.png  a 1,001,114-vertex bumpy sphere bent by the CLI
 //
 //   node test/screenshots.mjs [MESH] [--only regions,handles,front,two,million]
@@ -56,6 +57,24 @@ try {
   const waitFor = (page, fn, arg) => page.waitForFunction(fn, arg, { timeout: WAIT_MS }).catch(async (error) => {
     throw new Error(`${error.message}\nthe page: ${JSON.stringify(await hookState(page))}`);
   });
+  // Where the mesh is on a page: the top of the centre column (x, top), a row
+  // near the bottom (y) and where that row meets the mesh (left, right).
+  const meshExtent = (page) => page.evaluate(() => {
+    const rect = document.querySelector('#view canvas').getBoundingClientRect();
+    const hit = (x, y) => window.__filigree.vertexAt(x, y) !== null;
+    const hitInRow = (y) => { for (let x = rect.left; x < rect.right; x += 8) if (hit(x, y)) return true; return false; };
+    const x = rect.left + rect.width / 2;
+    let top = rect.top;
+    while (top < rect.bottom && !hit(x, top)) top += 2;
+    let bottom = rect.bottom;
+    while (bottom > top && !hitInRow(bottom)) bottom -= 4;
+    const y = bottom - 0.05 * (bottom - top);
+    let left = rect.left;
+    while (left < rect.right && !hit(left, y)) left += 2;
+    let right = rect.right;
+    while (right > left && !hit(right, y)) right -= 2;
+    return { x, top, bottom, y, left, right };
+  });
   // The panel shows the section about the overlays.
   const showPanelAt = (page, selector) => page.evaluate((s) => {
     const panel = document.querySelector('#panel');
@@ -91,22 +110,7 @@ try {
     await page.selectOption('#edit-mode', 'handles');
     await page.check('#overlay-stretch');
     // Where the mesh is: the top of the centre column, the ends of a row near the bottom.
-    const extent = await page.evaluate(() => {
-      const rect = document.querySelector('#view canvas').getBoundingClientRect();
-      const hit = (x, y) => window.__filigree.vertexAt(x, y) !== null;
-      const hitInRow = (y) => { for (let x = rect.left; x < rect.right; x += 8) if (hit(x, y)) return true; return false; };
-      const x = rect.left + rect.width / 2;
-      let top = rect.top;
-      while (top < rect.bottom && !hit(x, top)) top += 2;
-      let bottom = rect.bottom;
-      while (bottom > top && !hitInRow(bottom)) bottom -= 4;
-      const y = bottom - 0.05 * (bottom - top);
-      let left = rect.left;
-      while (left < rect.right && !hit(left, y)) left += 2;
-      let right = rect.right;
-      while (right > left && !hit(right, y)) right -= 2;
-      return { x, top, bottom, y, left, right };
-    });
+    const extent = await meshExtent(page);
     const height = extent.bottom - extent.top;
     const handles = (n) => waitFor(page, (k) => window.__filigree.handleCount === k && !window.__filigree.handlesSending, n);
     // Anchors: a click (press and release, no move) keeps a vertex where it is.
@@ -150,7 +154,8 @@ try {
     await context.close();
   }
 
-  // ---- two participants: two editor pages side by side, one pulling, one holding a handle; the change lists name both.
+  // ---- two participants: two editor pages side by side, each holding handles; each page shows the other's
+  // handles in its colour with its name, and lists it in the panel.
   if (ONLY.has('two')) {
     const session = await upload(grpc, MESH, 'two-participants');
     const size = { width: 720, height: 520 };  // over 700 px: the panel beside the canvas, not a drawer
@@ -160,41 +165,47 @@ try {
       page.on('pageerror', (error) => { throw error; });
       await page.goto(`http://${http}/?session=${session.session_id}#token=${session.editor_token}&viewer=${session.viewer_token}`);
       await page.waitForFunction(() => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1, null, { timeout: WAIT_MS });
+      await page.selectOption('#edit-mode', 'handles');
       pages.push(page);
     }
     const [a, b] = pages;
-    // A point on the mesh near the middle of a page's canvas.
-    const pointOn = (page, fx, fy) => page.evaluate(([fx, fy]) => {
-      const rect = document.querySelector('#view canvas').getBoundingClientRect();
-      for (let r = 0; r < 200; r += 4) {
-        for (const [dx, dy] of [[0, -r], [r, 0], [0, r], [-r, 0]]) {
-          const x = rect.left + fx * rect.width + dx;
-          const y = rect.top + fy * rect.height + dy;
-          if (window.__filigree.vertexAt(x, y) !== null) return { x, y };
-        }
-      }
-      return null;
-    }, [fx, fy]);
-    // A pulls (proportional editing) an arm sideways; wait for its frame.
-    const pa = await pointOn(a, 0.35, 0.35);
-    await a.mouse.move(pa.x, pa.y);
+    // Page names are random and colours come from names: B is reloaded (a new name) until the two colours differ.
+    const colourOf = (page) => page.evaluate(() => window.__filigree.participantColour(window.__filigree.clientName));
+    while (await colourOf(a) === await colourOf(b)) {
+      await b.reload();
+      await b.waitForFunction(() => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1, null, { timeout: WAIT_MS });
+      await b.selectOption('#edit-mode', 'handles');
+    }
+    const settled = (page, n) => waitFor(page, (k) => window.__filigree.handleCount === k && window.__filigree.handlesAnswered > 0
+      && !window.__filigree.handlesSending, n);
+    // B pins a foot (a click keeps a vertex where it is).
+    const eb = await meshExtent(b);
+    await b.mouse.click(eb.right - 8, eb.y);
+    await settled(b, 1);
+    // A pins the other foot, then drags the head sideways and holds it.
+    const ea = await meshExtent(a);
+    await a.mouse.click(ea.left + 8, ea.y);
+    await settled(a, 1);
+    const height = ea.bottom - ea.top;
+    const from = { x: ea.x, y: ea.top + 0.06 * height };
+    await a.mouse.move(from.x, from.y);
     await a.mouse.down();
-    await a.mouse.move(pa.x - 60, pa.y - 40, { steps: 12 });
-    await a.mouse.up();
-    await waitFor(a, () => window.__filigree.pulledVertices > 0);
-    // B pulls the other side and holds it (the sphere of influence shown while dragging).
-    const pb = await pointOn(b, 0.62, 0.3);
-    await b.mouse.move(pb.x, pb.y);
-    await b.mouse.down();
-    await b.mouse.move(pb.x + 45, pb.y - 35, { steps: 12 });
-    await waitFor(b, () => window.__filigree.pulledVertices > 0);
-    // Both pages show the frame after both edits, and each change list names both pages.
+    await a.mouse.move(from.x + 0.12 * height, from.y + 0.04 * height, { steps: 20 });
+    await settled(a, 2);
+    // Each page shows the other's handles (asked after the frame that names them), its
+    // label placed, and the newest frame drawn; the change lists name both pages.
     const names = await Promise.all(pages.map((p) => p.evaluate(() => window.__filigree.clientName)));
-    for (const page of pages) {
-      await waitFor(page, (n) => n.every((name) => document.querySelector('#changes').textContent.includes(name))
+    const accepted = await Promise.all(pages.map((p) => p.evaluate(() => window.__filigree.handlesAcceptedAt)));
+    for (const [k, page] of pages.entries()) {
+      const other = 1 - k;
+      await waitFor(page, ([name, count, at]) => window.__filigree.participants.some((p) => p.name === name && p.handles === count)
+        && window.__filigree.participantsVersion >= at && !window.__filigree.participantsFetching
+        && document.querySelector(`.participant-label[data-participant="${name}"]`)?.style.transform
         && window.__filigree.drawnVersion === window.__filigree.newestVersion
-        && window.__filigree.framesReceived === window.__filigree.framesApplied + window.__filigree.framesSkipped, names);
-      await showPanelAt(page, '#changes');
+        && window.__filigree.framesReceived === window.__filigree.framesApplied + window.__filigree.framesSkipped,
+        [names[other], other === 0 ? 2 : 1, accepted[other]]);
+      await waitFor(page, (n) => n.every((name) => document.querySelector('#changes').textContent.includes(name)), names);
+      await showPanelAt(page, '#participants');
     }
     const shots = await Promise.all(pages.map((p) => p.screenshot().then((data) => PNG.sync.read(data))));
     const gap = 8;
@@ -206,7 +217,7 @@ try {
     for (let i = 0; i < out.data.length; ++i) if (i % 4 !== 3) out.data[i] = Math.min(255, out.data[i] + 2) & 0xfc;
     writeFileSync(path, PNG.sync.write(out, { colorType: 2, inputHasAlpha: true }));
     saved(path);
-    await b.mouse.up();
+    await a.mouse.up();
     for (const page of pages) await page.context().close();
   }
 

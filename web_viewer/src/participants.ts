@@ -1,0 +1,337 @@
+// The other participants' handles: every client that holds handles in the
+// session (other pages, programs), each in a colour of its own with its name
+// next to its handles, and a legend in the panel (name, colour, handle count).
+// This page's own handles are handles.ts's (their own look); viewer pages
+// show the others' too, read-only.
+//
+// GetHandles is asked on join, after a reconnect, and whenever a frame's
+// changes name a client other than this page (the changes name the clients
+// whose poses or handles changed since the previous frame): at most one call
+// in flight and one per MIN_INTERVAL_MS, the frames in between making one
+// more call (newest wins). An answer equal to what is drawn changes nothing.
+//
+// Light on the page's thread: nothing per frame but a look at its changes;
+// spheres, labels and legend are rebuilt only when an answer differs; the
+// labels (DOM, over the canvas) are moved only when the camera moves or the
+// view is resized (projected once per animation frame, no layout read).
+import * as THREE from 'three';
+
+import { Code, isCode, type Frame, type SessionClient, type SessionHandles } from './client';
+import type { MeshView } from './scene';
+
+export const MIN_INTERVAL_MS = 250;
+
+// Colours of other participants (never this page's cyan and yellow), and
+// whether a label on each needs dark text.
+export const PALETTE: readonly { css: string; darkText: boolean }[] = [
+  { css: '#ff5c5c', darkText: true },   // red
+  { css: '#ff9f1c', darkText: true },   // orange
+  { css: '#2ecc71', darkText: true },   // green
+  { css: '#a66cff', darkText: false },  // violet
+  { css: '#ff6fd8', darkText: true },   // pink
+  { css: '#4d7cff', darkText: false },  // blue
+  { css: '#c5e84a', darkText: true },   // lime
+];
+// A label's largest width and about its height (CSS: .participant-label), and its gap to the anchor.
+const LABEL_MAX_WIDTH = 160;
+const LABEL_HEIGHT = 20;
+const LABEL_GAP = 9;
+
+// FNV-1a (32 bits) of the name's UTF-16 code units.
+export function nameHash(name: string): number {
+  let h = 0x811c9dc5;
+  for (let i = 0; i < name.length; ++i) {
+    h ^= name.charCodeAt(i);
+    h = Math.imul(h, 0x01000193);
+  }
+  return h >>> 0;
+}
+
+// The palette entry of a client name: the same on every page, for good.
+export function participantColour(name: string): (typeof PALETTE)[number] {
+  return PALETTE[nameHash(name) % PALETTE.length];
+}
+
+// Whether a frame's changes name a client other than `own` (no allocation).
+export function namesOther(frame: Pick<Frame, 'changes'>, own: string): boolean {
+  for (const change of frame.changes) if (change.clientName !== own) return true;
+  return false;
+}
+
+export interface ShownHandle { vertex: number; x: number; y: number; z: number }
+export interface Participant { name: string; colour: string; darkText: boolean; handles: ShownHandle[] }
+
+// The participants to show from an answer: every one but `own`, with at
+// least one handle, by name.
+export function othersOf(answer: Pick<SessionHandles, 'participants'>, own: string): Participant[] {
+  return answer.participants
+    .filter((p) => p.clientName !== own && p.handles.length > 0)
+    .map((p) => {
+      const { css, darkText } = participantColour(p.clientName);
+      return {
+        name: p.clientName, colour: css, darkText,
+        handles: p.handles.map(({ vertex, x, y, z }) => ({ vertex, x, y, z })),
+      };
+    })
+    .sort((a, b) => (a.name < b.name ? -1 : a.name > b.name ? 1 : 0));
+}
+
+// A string equal for equal lists of participants (names and handles).
+export function participantsKey(participants: readonly Participant[]): string {
+  return participants.map((p) => `${p.name}\u0000${p.handles.map((h) => `${h.vertex},${h.x},${h.y},${h.z}`).join(';')}`)
+    .join('\u0001');
+}
+
+// When to ask: request() marks an ask due; asks run one at a time, at most
+// one per MIN_INTERVAL_MS; requests meanwhile make one more ask after it.
+// `failed` returns true when asking again is pointless (the server lacks the call).
+export class HandlesFeed<A> {
+  private due = false;
+  private busy = false;
+  private stopped = false;
+  private lastCall = -Infinity;
+  private timer: ReturnType<typeof setTimeout> | undefined;
+
+  constructor(private readonly fetch: () => Promise<A>,
+              private readonly answered: (answer: A) => void,
+              private readonly failed: (error: unknown) => boolean,
+              private readonly now: () => number = () => performance.now()) {}
+
+  request(): void {
+    this.due = true;
+    this.kick();
+  }
+
+  get idle(): boolean {
+    return !this.busy && !this.due;
+  }
+
+  private kick(): void {
+    if (this.stopped || !this.due || this.busy || this.timer !== undefined) return;
+    const wait = this.lastCall + MIN_INTERVAL_MS - this.now();
+    if (wait > 0) {
+      this.timer = setTimeout(() => {
+        this.timer = undefined;
+        this.kick();
+      }, wait);
+      return;
+    }
+    this.due = false;
+    this.busy = true;
+    this.lastCall = this.now();
+    this.fetch()
+      .then((answer) => this.answered(answer), (error: unknown) => {
+        if (this.failed(error)) this.stopped = true;
+      })
+      .finally(() => {
+        this.busy = false;
+        this.kick();
+      });
+  }
+}
+
+export interface ParticipantsEvents {
+  // The participants drawn now (after every change) and the answer's version.
+  shown(participants: readonly Participant[], version: bigint): void;
+  // A note under the legend (bad: an error); '' clears it.
+  status(text: string, bad?: boolean): void;
+  describe(error: unknown): string;
+}
+
+// What the layer draws for one participant.
+interface Drawn extends Participant {
+  spheres: THREE.Mesh[];
+  label: HTMLDivElement;
+}
+
+export class ParticipantsLayer {
+  private readonly group = new THREE.Group();
+  private readonly sphere: THREE.SphereGeometry;
+  private readonly materials = new Map<string, THREE.MeshBasicMaterial>();  // by colour: at most the palette
+  private readonly pool: THREE.Mesh[] = [];
+  private readonly labels: HTMLDivElement;
+  private readonly feed: HandlesFeed<SessionHandles>;
+  private drawn: Drawn[] = [];
+  private key: string | null = null;  // of what is drawn (null: no answer yet)
+  private anchors = new Float32Array(0);  // each label's anchor (xyz), then its projection (xy)
+  private projected = new Float32Array(0);
+  private placing = false;  // an animation frame is due to move the labels
+  answers = 0;
+  version = 0n;
+
+  constructor(private readonly view: MeshView, client: SessionClient, readonly ownName: string,
+              private readonly legend: HTMLElement, private readonly events: ParticipantsEvents) {
+    // The size of this page's own handles (handles.ts).
+    this.sphere = new THREE.SphereGeometry(view.radius * 0.02, 16, 12);
+    this.group.renderOrder = 1;
+    view.add(this.group);
+    this.labels = document.createElement('div');
+    this.labels.className = 'participant-labels';
+    this.labels.setAttribute('aria-hidden', 'true');  // the legend says the same in the panel
+    view.canvas.after(this.labels);
+    view.onViewChange(() => this.placeLabelsSoon());
+    this.feed = new HandlesFeed(() => client.getHandles(), (answer) => this.show(answer), (error) => {
+      if (isCode(error, Code.Unimplemented)) {
+        this.events.status('This server does not share the participants\' handles (no GetHandles).', true);
+        return true;
+      }
+      this.events.status(this.events.describe(error), true);
+      return false;
+    });
+  }
+
+  // On join and after a reconnect: ask for everyone's handles.
+  refresh(): void {
+    this.feed.request();
+  }
+
+  // Every frame that arrives: ask again when someone else changed something.
+  frameArrived(frame: Frame): void {
+    if (namesOther(frame, this.ownName)) this.feed.request();
+  }
+
+  // A GetHandles call is running or due.
+  get fetching(): boolean {
+    return !this.feed.idle;
+  }
+
+  get participants(): readonly Participant[] {
+    return this.drawn;
+  }
+
+  // For the tests: each other participant's sphere in the scene, with the
+  // colour it is drawn in and where it is on the page (null: behind the camera).
+  spheresOnPage(): { name: string; colour: string; vertex: number; visible: boolean; x: number | null; y: number | null }[] {
+    const rect = this.view.canvas.getBoundingClientRect();
+    const out = new Float32Array(2);
+    return this.group.children.map((object) => {
+      const mesh = object as THREE.Mesh;
+      const { x, y, z } = mesh.position;
+      this.view.projectPoints([x, y, z], 1, out);
+      const material = mesh.material as THREE.MeshBasicMaterial;
+      return {
+        name: mesh.userData.participant as string, colour: `#${material.color.getHexString()}`,
+        vertex: mesh.userData.vertex as number, visible: mesh.visible && this.group.visible,
+        x: Number.isNaN(out[0]) ? null : rect.left + out[0], y: Number.isNaN(out[1]) ? null : rect.top + out[1],
+      };
+    });
+  }
+
+  private show(answer: SessionHandles): void {
+    ++this.answers;
+    this.version = answer.version;
+    this.events.status('');
+    const participants = othersOf(answer, this.ownName);
+    const key = participantsKey(participants);
+    if (key === this.key) {
+      this.events.shown(this.drawn, this.version);
+      return;
+    }
+    this.key = key;
+    this.draw(participants);
+    this.renderLegend();
+    this.placeLabelsSoon();
+    this.view.invalidate();
+    this.events.shown(this.drawn, this.version);
+  }
+
+  private material(colour: string): THREE.MeshBasicMaterial {
+    let material = this.materials.get(colour);
+    if (!material) {
+      // Always drawn, through the mesh, as this page's own handles are.
+      material = new THREE.MeshBasicMaterial({ color: new THREE.Color(colour), depthTest: false });
+      this.materials.set(colour, material);
+    }
+    return material;
+  }
+
+  // Spheres and labels for `participants`; meshes are reused.
+  private draw(participants: Participant[]): void {
+    for (const object of this.group.children) this.pool.push(object as THREE.Mesh);
+    this.group.clear();
+    const labels: HTMLDivElement[] = [];
+    this.drawn = participants.map((p) => {
+      const material = this.material(p.colour);
+      const spheres = p.handles.map((h) => {
+        const sphere = this.pool.pop() ?? new THREE.Mesh(this.sphere);
+        sphere.material = material;
+        sphere.position.set(h.x, h.y, h.z);
+        sphere.renderOrder = 1;
+        sphere.userData.participant = p.name;
+        sphere.userData.vertex = h.vertex;
+        this.group.add(sphere);
+        return sphere;
+      });
+      const label = document.createElement('div');
+      label.className = 'participant-label';
+      label.textContent = p.name || '(unnamed client)';
+      label.style.background = p.colour;
+      label.style.color = p.darkText ? '#111' : '#fff';
+      label.dataset.participant = p.name;
+      labels.push(label);
+      return { ...p, spheres, label };
+    });
+    this.labels.replaceChildren(...labels);
+    // Each label next to its participant's newest handle (the last one set).
+    this.anchors = new Float32Array(3 * this.drawn.length);
+    this.projected = new Float32Array(2 * this.drawn.length);
+    this.drawn.forEach((p, k) => {
+      const last = p.handles[p.handles.length - 1];
+      this.anchors.set([last.x, last.y, last.z], 3 * k);
+    });
+  }
+
+  private placeLabelsSoon(): void {
+    if (this.placing || this.drawn.length === 0) return;
+    this.placing = true;
+    requestAnimationFrame(() => {
+      this.placing = false;
+      this.placeLabels();
+    });
+  }
+
+  // Moves each label beside its anchor as drawn now (above right; left or
+  // below near the view's right or top edge); hides it behind the camera.
+  private placeLabels(): void {
+    this.view.projectPoints(this.anchors, this.drawn.length, this.projected);
+    const { width } = this.view.cssSize;
+    for (let k = 0; k < this.drawn.length; ++k) {
+      const { label } = this.drawn[k];
+      const x = this.projected[2 * k];
+      const y = this.projected[2 * k + 1];
+      const hidden = Number.isNaN(x);
+      if (label.hidden !== hidden) label.hidden = hidden;
+      if (hidden) continue;
+      const left = x + LABEL_GAP + LABEL_MAX_WIDTH > width && x > width / 2;
+      const below = y - LABEL_GAP - LABEL_HEIGHT < 0;
+      label.style.transform = `translate(${Math.round(left ? x - LABEL_GAP : x + LABEL_GAP)}px, ` +
+        `${Math.round(below ? y + LABEL_GAP : y - LABEL_GAP)}px) translate(${left ? -100 : 0}%, ${below ? 0 : -100}%)`;
+    }
+  }
+
+  // The panel's legend: a swatch, the name and the handle count per participant.
+  private renderLegend(): void {
+    if (this.drawn.length === 0) {
+      const none = document.createElement('li');
+      none.className = 'note';
+      none.textContent = 'No other participant holds handles.';
+      this.legend.replaceChildren(none);
+      return;
+    }
+    this.legend.replaceChildren(...this.drawn.map((p) => {
+      const item = document.createElement('li');
+      item.dataset.participant = p.name;
+      const swatch = document.createElement('span');
+      swatch.className = 'swatch';
+      swatch.style.background = p.colour;
+      const name = document.createElement('span');
+      name.className = 'participant-name';
+      name.textContent = p.name || '(unnamed client)';
+      const count = document.createElement('span');
+      count.className = 'participant-count';
+      count.textContent = `${p.handles.length} handle${p.handles.length === 1 ? '' : 's'}`;
+      item.append(swatch, name, count);
+      return item;
+    }));
+  }
+}
