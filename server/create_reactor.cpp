@@ -249,7 +249,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       }
       v1::CreateSessionResponse r;
       auto* created = r.mutable_created();
-      *created->mutable_info() = session->info();
+      *created->mutable_info() = session->info(service_.limits().inline_rest_bytes());
       const SessionRecord record = session->record();
       created->set_editor_token(record.editor_token);
       created->set_viewer_token(record.viewer_token);

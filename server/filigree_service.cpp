@@ -17,6 +17,7 @@
 #include "server/play_clip_reactor.h"
 #include "server/pose_request.h"
 #include "server/resident_memory.h"
+#include "server/rest_mesh_reactor.h"
 #include "server/watch_reactors.h"
 
 namespace filigree::server {
@@ -362,13 +363,13 @@ grpc::ServerUnaryReactor* FiligreeService::JoinSession(grpc::CallbackServerConte
                                                        grpc::ByteBuffer* response) {
   v1::JoinSessionRequest r;
   if (const grpc::Status parsed = parse_request(*request, r); !parsed.ok()) return finish_unary(context, parsed);
-  return unary_on_session(context, r.session_id(), Role::kViewer, [context, response](Session& s) {
+  return unary_on_session(context, r.session_id(), Role::kViewer, [this, context, response](Session& s) {
     // The mesh's bytes, shared by every join, and then the caller's role:
     // one more field, which protobuf merges into the same SessionInfo.
     v1::SessionInfo role;
     role.set_role(s.authorize(metadata(*context, "x-filigree-token")) == Role::kEditor ? v1::ROLE_EDITOR : v1::ROLE_VIEWER);
     std::vector<grpc::Slice> slices;
-    (void)s.info_wire().Dump(&slices);
+    (void)s.info_wire(limits_.inline_rest_bytes()).Dump(&slices);
     slices.emplace_back(role.SerializeAsString());
     *response = grpc::ByteBuffer(slices.data(), slices.size());
     return grpc::Status::OK;
@@ -405,6 +406,11 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
     }
     return grpc::Status::OK;
   });
+}
+
+grpc::ServerWriteReactor<v1::RestMeshPart>* FiligreeService::GetRestMesh(grpc::CallbackServerContext* context,
+                                                                         const v1::GetRestMeshRequest* request) {
+  return new_rest_mesh_reactor(*this, context, *request);
 }
 
 grpc::ServerUnaryReactor* FiligreeService::GetHandles(grpc::CallbackServerContext* context,
@@ -446,12 +452,12 @@ grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext*
 
 namespace {
 
-grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, grpc::ByteBuffer* response) {
+grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, std::size_t inline_rest, grpc::ByteBuffer* response) {
   try {
     const std::uint64_t accepted = s.set_threshold(threshold, whole_mesh);
     // Not the current frame's version: a frame may have been published since
     // the change, and a client waiting for a frame after it would wait forever.
-    *response = s.info_wire(accepted);
+    *response = s.info_wire(inline_rest, accepted);
   } catch (const StoreUnavailable& e) {
     return {grpc::StatusCode::UNAVAILABLE, e.what()};
   } catch (const HierarchyError& e) {
@@ -474,11 +480,12 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
   const double threshold = r.threshold();
   const bool whole_mesh = r.whole_mesh();
   const bool valid = threshold >= 0.0 && !std::isinf(threshold);
+  const std::size_t inline_rest = limits_.inline_rest_bytes();
   return unary_on_session(
       context, r.session_id(), Role::kEditor,
-      [threshold, whole_mesh, valid, response](Session& s) -> grpc::Status {
+      [threshold, whole_mesh, valid, inline_rest, response](Session& s) -> grpc::Status {
         if (!valid) return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-        return apply_options(s, threshold, whole_mesh, response);
+        return apply_options(s, threshold, whole_mesh, inline_rest, response);
       },
       // The first finite T of a mesh derives its node graph and region
       // optimisation's data (~1 s at 1.25M vertices), and whole-mesh

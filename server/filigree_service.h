@@ -36,6 +36,10 @@ struct ServiceLimits {
   // Longest an upload may take to send its bytes (slow or stalled clients
   // hold memory and a stream); 0: no limit.
   double upload_seconds = 300.0;
+  // Largest gRPC message the server sends (--max-message-mib). A rest mesh
+  // over half of it leaves SessionInfo for GetRestMesh (RestMesh.in_parts).
+  std::uint64_t max_message_bytes = 64ull << 20;
+  std::size_t inline_rest_bytes() const { return static_cast<std::size_t>(max_message_bytes / 2); }
 };
 
 // Every method on the callback API (v1::Filigree::CallbackService, spelled
@@ -51,7 +55,7 @@ using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCa
         rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<
-                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::Service>>>>>>>>>>>>>>>;
+                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::WithCallbackMethod_GetRestMesh<rpc::Service>>>>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
  public:
@@ -76,6 +80,9 @@ class FiligreeService final : public FiligreeServiceBase {
                                        v1::SubmitPoseResponse* response) override;
   grpc::ServerUnaryReactor* SetHandles(grpc::CallbackServerContext* context, const v1::SetHandlesRequest* request,
                                        v1::SetHandlesResponse* response) override;
+  // A session's rest mesh in parts (rest_mesh_reactor.h).
+  grpc::ServerWriteReactor<v1::RestMeshPart>* GetRestMesh(grpc::CallbackServerContext* context,
+                                                          const v1::GetRestMeshRequest* request) override;
   grpc::ServerUnaryReactor* GetHandles(grpc::CallbackServerContext* context, const v1::GetHandlesRequest* request,
                                        v1::SessionHandles* response) override;
   // Request: a GetOverlaysRequest; answer: an Overlays serialized once per frame.

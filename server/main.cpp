@@ -224,6 +224,7 @@ int main(int argc, char** argv) {
   app.add_option("--redis-prefix", redis_prefix, "Prefix of every Redis key (several deployments on one Redis)");
   CLI11_PARSE(app, argc, argv);
   service_limits.max_memory_bytes = max_memory_mib << 20;
+  service_limits.max_message_bytes = static_cast<std::uint64_t>(max_message_mib) << 20;
   // Logs go to stderr; stdout carries only the "listening on" (and "http on") lines for scripts.
   spdlog::set_default_logger(spdlog::stderr_color_mt("filigree-server"));
   spdlog::set_level(spdlog::level::from_str(log_level));

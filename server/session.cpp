@@ -470,13 +470,27 @@ grpc::ByteBuffer Session::overlays_wire() {
   return grpc::ByteBuffer(&none, 1);
 }
 
-v1::SessionInfo Session::info() const {
+v1::SessionInfo Session::info(std::size_t inline_rest_most) const {
   // The meshes are immutable: built and copied outside the session's lock.
   v1::SessionInfo info = own_info();
   *info.mutable_base() = assets_->base;
+  if (assets_->info_wire->rest_body().size() + ids_wire().size() > inline_rest_most) {
+    const Hierarchy& h = assets_->hierarchy();
+    v1::RestMesh& rest = *info.mutable_rest();
+    rest.set_vertex_count(static_cast<std::uint32_t>(h.vertex_count()));
+    rest.set_in_parts(true);
+    rest.set_face_count(static_cast<std::uint32_t>(h.original_face_count()));
+    return info;
+  }
   *info.mutable_rest() = rest_mesh_message(assets_->hierarchy());
   info.mutable_rest()->mutable_uploaded_ids()->Add(record_.uploaded_ids.begin(), record_.uploaded_ids.end());
   return info;
+}
+
+const grpc::Slice& Session::ids_wire() const {
+  // The ids never change after the session is made (record_.uploaded_ids is written only then).
+  std::call_once(ids_wire_once_, [this] { ids_wire_ = uploaded_ids_field(record_.uploaded_ids); });
+  return ids_wire_;
 }
 
 v1::SessionInfo Session::own_info() const {
@@ -490,12 +504,10 @@ v1::SessionInfo Session::own_info() const {
   return info;
 }
 
-grpc::ByteBuffer Session::info_wire(std::optional<std::uint64_t> version) const {
+grpc::ByteBuffer Session::info_wire(std::size_t inline_rest_most, std::optional<std::uint64_t> version) const {
   v1::SessionInfo own = own_info();
   if (version) own.set_version(*version);
-  // The ids never change after the session is made (record_.uploaded_ids is written only then).
-  std::call_once(ids_wire_once_, [this] { ids_wire_ = uploaded_ids_field(record_.uploaded_ids); });
-  return session_info_wire(own, *assets_->info_wire, ids_wire_);
+  return session_info_wire(own, *assets_->info_wire, ids_wire(), inline_rest_most);
 }
 
 void Session::describe(v1::ListSessionsResponse::Entry& entry) const {

@@ -202,10 +202,16 @@ class Session {
 
   // The whole SessionInfo as a message: builds the rest mesh (36+ bytes per
   // vertex), for the one answer that is no raw method (CreateSession's).
-  v1::SessionInfo info() const;
+  // A rest mesh over `inline_rest_most` bytes on the wire (with this
+  // session's uploaded ids) is left out: RestMesh.in_parts, read with
+  // GetRestMesh.
+  v1::SessionInfo info(std::size_t inline_rest_most) const;
   // The same as wire bytes (session_info_wire.h), the mesh's shared;
   // `version` replaces the current version when given (SetOptions).
-  grpc::ByteBuffer info_wire(std::optional<std::uint64_t> version = std::nullopt) const;
+  grpc::ByteBuffer info_wire(std::size_t inline_rest_most, std::optional<std::uint64_t> version = std::nullopt) const;
+  // The upload's vertex of each session vertex (RestMesh.uploaded_ids):
+  // fixed at creation.
+  std::span<const std::uint32_t> uploaded_ids() const { return record_.uploaded_ids; }
   // Its ListSessions entry: ids, counts, version, streams; no mesh copied.
   void describe(v1::ListSessionsResponse::Entry& entry) const;
   // GetState's answer as wire bytes: the merged pose and the current frame
@@ -309,7 +315,8 @@ class Session {
   std::uint64_t in_flight_locked() const { return assigned_version_ - record_.version; }
 
   const std::shared_ptr<const SessionAssets> assets_;  // shared by every session of the mesh
-  // record_.uploaded_ids as RestMesh wire bytes, made by the first info_wire().
+  // record_.uploaded_ids as RestMesh wire bytes, made by the first ids_wire().
+  const grpc::Slice& ids_wire() const;
   mutable std::once_flag ids_wire_once_;
   mutable grpc::Slice ids_wire_;
   // The base mesh's rig and the joint state skeletal poses merge into; null

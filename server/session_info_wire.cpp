@@ -38,6 +38,11 @@ MeshWire::MeshWire(const v1::BaseMesh& base, const v1::RestMesh& rest) {
   body.reserve(rest_size);
   rest.AppendToString(&body);
   rest_body_ = owned_slice(std::move(body));
+  v1::RestMesh summary;
+  summary.set_vertex_count(rest.vertex_count());
+  summary.set_in_parts(true);
+  summary.set_face_count(static_cast<std::uint32_t>(rest.faces_size() / 3));
+  rest_summary_ = owned_slice(summary.SerializeAsString());
 }
 
 grpc::Slice uploaded_ids_field(std::span<const std::uint32_t> ids) {
@@ -52,11 +57,16 @@ grpc::Slice uploaded_ids_field(std::span<const std::uint32_t> ids) {
   return owned_slice(std::move(field));
 }
 
-grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& mesh, const grpc::Slice& ids) {
+grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& mesh, const grpc::Slice& ids,
+                                   std::size_t inline_rest_most) {
   if (own.has_base() || own.has_rest()) throw std::invalid_argument("a session's own SessionInfo fields must leave base and rest to the mesh");
   std::string head;
   own.SerializeToString(&head);
-  const std::size_t rest_size = mesh.rest_body().size() + ids.size();
+  const bool in_parts = mesh.rest_body().size() + ids.size() > inline_rest_most;
+  const grpc::Slice none;
+  const grpc::Slice& rest = in_parts ? mesh.rest_summary() : mesh.rest_body();
+  const grpc::Slice& rest_ids = in_parts ? none : ids;
+  const std::size_t rest_size = rest.size() + rest_ids.size();
   check_size(rest_size, "a rest mesh with its uploaded ids");
   head.push_back(static_cast<char>(kRestTag));
   append_varint(head, rest_size);
@@ -64,7 +74,7 @@ grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& m
   std::array<grpc::Slice, 4> slices;
   std::size_t n = 0;
   slices[n++] = grpc::Slice(head);
-  for (const grpc::Slice* s : {&mesh.rest_body(), &ids, &mesh.base_field()})
+  for (const grpc::Slice* s : {&rest, &rest_ids, &mesh.base_field()})
     if (s->size() > 0) slices[n++] = *s;
   return grpc::ByteBuffer(slices.data(), n);
 }

@@ -31,9 +31,11 @@ class MeshWire {
 
   const grpc::Slice& base_field() const { return base_field_; }  // SessionInfo.base: tag, length, message
   const grpc::Slice& rest_body() const { return rest_body_; }    // RestMesh's fields, no tag or length
+  // RestMesh's fields when its arrays go in parts: vertex_count, in_parts, face_count.
+  const grpc::Slice& rest_summary() const { return rest_summary_; }
 
  private:
-  grpc::Slice base_field_, rest_body_;
+  grpc::Slice base_field_, rest_body_, rest_summary_;
 };
 
 // RestMesh.uploaded_ids (field 4, packed) as wire bytes: empty for no ids.
@@ -41,7 +43,10 @@ grpc::Slice uploaded_ids_field(std::span<const std::uint32_t> ids);
 
 // The wire bytes of `own` (a SessionInfo with neither base nor rest set:
 // std::invalid_argument otherwise) with the mesh's base, and its rest
-// carrying `ids` (from uploaded_ids_field). Shares the mesh's bytes.
-grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& mesh, const grpc::Slice& ids);
+// carrying `ids` (from uploaded_ids_field); or, when the rest with its ids
+// is over `inline_rest_most` bytes, the rest's summary (RestMesh.in_parts).
+// Shares the mesh's bytes.
+grpc::ByteBuffer session_info_wire(const v1::SessionInfo& own, const MeshWire& mesh, const grpc::Slice& ids,
+                                   std::size_t inline_rest_most);
 
 }  // namespace filigree::server

@@ -8,6 +8,9 @@
 #include <chrono>
 #include <filesystem>
 #include <future>
+#include <iomanip>
+#include <set>
+#include <sstream>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -306,6 +309,66 @@ TEST_F(LimitsTest, StreamsCancelledWhileWaitingToReconnectEndCancelled) {
   // Why they ended is the cancel, not the outage they were waiting out.
   EXPECT_EQ(watcher->finish().error_code(), grpc::StatusCode::CANCELLED) << watcher->finish().error_message();
   EXPECT_EQ(driver->finish().error_code(), grpc::StatusCode::CANCELLED) << driver->finish().error_message();
+}
+
+TEST_F(LimitsTest, AMeshTooLargeForOneMessageReachesTheClientInParts) {
+  // 40,962 vertices: a rest mesh of ~1.2 MB on the wire, over half of a
+  // 1 MiB message limit, so SessionInfo leaves it to GetRestMesh.
+  const TriMesh sphere = test::icosphere(6);
+  std::ostringstream off;
+  off << std::setprecision(17) << "OFF\n" << sphere.positions.size() << ' ' << sphere.faces.size() << " 0\n";
+  for (const Vec3& p : sphere.positions) off << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+  for (const Triangle& f : sphere.faces) off << "3 " << f[0] << ' ' << f[1] << ' ' << f[2] << '\n';
+  Server server(data_dir_, {"--max-message-mib", "1"});
+  Client client(server.process->address());
+  const SessionHandle made = client.create_session(off.str(), "off", {}, "big");
+  const SessionMesh joined = client.join(made.session_id, made.viewer_token);
+
+  // The answers themselves carry a summary, not the arrays.
+  v1::JoinSessionRequest join;
+  join.set_session_id(made.session_id);
+  v1::SessionInfo info;
+  ASSERT_TRUE(server.stub->JoinSession(context(made.session_id, made.viewer_token).get(), join, &info).ok());
+  EXPECT_TRUE(info.rest().in_parts());
+  EXPECT_EQ(info.rest().positions_size(), 0);
+  EXPECT_EQ(info.rest().face_count(), sphere.faces.size());
+  // The parts are bounded, and there are several.
+  v1::GetRestMeshRequest request;
+  request.set_session_id(made.session_id);
+  auto ctx = context(made.session_id, made.viewer_token);
+  auto parts = server.stub->GetRestMesh(ctx.get(), request);
+  int count = 0;
+  for (v1::RestMeshPart part; parts->Read(&part); ++count)
+    EXPECT_LE(part.positions_size() + part.faces_size() + part.uploaded_ids_size(), 1 << 17);
+  EXPECT_TRUE(parts->Finish().ok());
+  EXPECT_GE(count, 3);
+
+  // What the client assembled is the uploaded mesh, in the session's order.
+  for (const SessionMesh* m : {&made.mesh, &joined}) {
+    ASSERT_EQ(m->vertex_count(), sphere.positions.size());
+    ASSERT_EQ(m->uploaded_ids.size(), sphere.positions.size());
+    ASSERT_EQ(m->rest_faces.size(), 3 * sphere.faces.size());
+    for (std::size_t i = 0; i < m->vertex_count(); ++i)
+      for (int k = 0; k < 3; ++k)
+        ASSERT_EQ(m->rest_positions[3 * i + k], static_cast<float>(sphere.positions[m->uploaded_ids[i]][k])) << i;
+    std::set<std::array<std::uint32_t, 3>> uploaded, got;
+    auto sorted = [](std::array<std::uint32_t, 3> t) {
+      std::sort(t.begin(), t.end());
+      return t;
+    };
+    for (const Triangle& f : sphere.faces) uploaded.insert(sorted({f[0], f[1], f[2]}));
+    for (std::size_t f = 0; f < sphere.faces.size(); ++f)
+      got.insert(sorted({m->uploaded_ids[m->rest_faces[3 * f]], m->uploaded_ids[m->rest_faces[3 * f + 1]],
+                         m->uploaded_ids[m->rest_faces[3 * f + 2]]}));
+    EXPECT_EQ(got, uploaded);
+  }
+
+  // Another session's token reads nothing of it.
+  auto other = context(made.session_id, "not-a-token");
+  auto refused = server.stub->GetRestMesh(other.get(), request);
+  v1::RestMeshPart none;
+  EXPECT_FALSE(refused->Read(&none));
+  EXPECT_EQ(refused->Finish().error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 }  // namespace

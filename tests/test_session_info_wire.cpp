@@ -74,7 +74,7 @@ TEST(SessionInfoWire, ParsesAsTheTypedMessage) {
   for (const bool with_ids : {true, false}) {
     const Sample s = sample(5000, with_ids);
     const MeshWire mesh(s.base, s.rest);
-    const grpc::ByteBuffer wire = session_info_wire(s.own, mesh, uploaded_ids_field(s.ids));
+    const grpc::ByteBuffer wire = session_info_wire(s.own, mesh, uploaded_ids_field(s.ids), SIZE_MAX);
     v1::SessionInfo parsed;
     grpc::ByteBuffer copy(wire);
     ASSERT_TRUE(grpc::SerializationTraits<v1::SessionInfo>::Deserialize(&copy, &parsed).ok()) << with_ids;
@@ -91,7 +91,7 @@ TEST(SessionInfoWire, AnEmptyMeshStillHasItsFields) {
   const Sample s = sample(0, false);
   const MeshWire mesh(v1::BaseMesh{}, s.rest);
   v1::SessionInfo parsed;
-  grpc::ByteBuffer wire = session_info_wire(s.own, mesh, uploaded_ids_field({}));
+  grpc::ByteBuffer wire = session_info_wire(s.own, mesh, uploaded_ids_field({}), SIZE_MAX);
   ASSERT_TRUE(grpc::SerializationTraits<v1::SessionInfo>::Deserialize(&wire, &parsed).ok());
   EXPECT_TRUE(parsed.has_base());
   EXPECT_TRUE(parsed.has_rest());
@@ -103,15 +103,41 @@ TEST(SessionInfoWire, AnswersShareTheMeshBytes) {
   const MeshWire mesh(s.base, s.rest);
   const grpc::Slice ids = uploaded_ids_field(s.ids);
   std::vector<grpc::Slice> a, b;
-  ASSERT_TRUE(session_info_wire(s.own, mesh, ids).Dump(&a).ok());
+  ASSERT_TRUE(session_info_wire(s.own, mesh, ids, SIZE_MAX).Dump(&a).ok());
   v1::SessionInfo other = s.own;
   other.set_version(301);
-  ASSERT_TRUE(session_info_wire(other, mesh, ids).Dump(&b).ok());
+  ASSERT_TRUE(session_info_wire(other, mesh, ids, SIZE_MAX).Dump(&b).ok());
   ASSERT_EQ(a.size(), 4u);
   ASSERT_EQ(b.size(), 4u);
   for (std::size_t i = 1; i < 4; ++i) EXPECT_EQ(a[i].begin(), b[i].begin()) << "slice " << i << " was copied";
   EXPECT_EQ(a[1].begin(), mesh.rest_body().begin());
   EXPECT_EQ(a[3].begin(), mesh.base_field().begin());
+}
+
+TEST(SessionInfoWire, ARestOverTheInlineLimitIsASummaryAndTheRestIsUnchanged) {
+  const Sample s = sample(3000, true);
+  const MeshWire mesh(s.base, s.rest);
+  const grpc::Slice ids = uploaded_ids_field(s.ids);
+  const std::size_t rest_bytes = mesh.rest_body().size() + ids.size();
+  auto parse = [&](std::size_t most) {
+    grpc::ByteBuffer wire = session_info_wire(s.own, mesh, ids, most);
+    v1::SessionInfo parsed;
+    EXPECT_TRUE(grpc::SerializationTraits<v1::SessionInfo>::Deserialize(&wire, &parsed).ok());
+    return parsed;
+  };
+  // At the limit the rest goes whole; one byte under it, in parts.
+  EXPECT_EQ(parse(rest_bytes).SerializeAsString(), typed(s).SerializeAsString());
+  const v1::SessionInfo summary = parse(rest_bytes - 1);
+  EXPECT_TRUE(summary.rest().in_parts());
+  EXPECT_EQ(summary.rest().vertex_count(), s.rest.vertex_count());
+  EXPECT_EQ(summary.rest().face_count(), static_cast<std::uint32_t>(s.rest.faces_size() / 3));
+  EXPECT_EQ(summary.rest().positions_size() + summary.rest().faces_size() + summary.rest().uploaded_ids_size(), 0);
+  // Everything else is the whole answer's.
+  v1::SessionInfo expected = typed(s);
+  expected.clear_rest();
+  v1::SessionInfo without_rest = summary;
+  without_rest.clear_rest();
+  EXPECT_EQ(without_rest.SerializeAsString(), expected.SerializeAsString());
 }
 
 TEST(SessionInfoWire, RefusesMisuse) {
@@ -122,7 +148,7 @@ TEST(SessionInfoWire, RefusesMisuse) {
   const MeshWire mesh(s.base, s.rest);
   v1::SessionInfo own = s.own;
   own.mutable_rest()->set_vertex_count(1);
-  EXPECT_THROW(session_info_wire(own, mesh, grpc::Slice()), std::invalid_argument);
+  EXPECT_THROW(session_info_wire(own, mesh, grpc::Slice(), SIZE_MAX), std::invalid_argument);
 }
 
 }  // namespace

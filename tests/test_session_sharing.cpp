@@ -76,12 +76,12 @@ TEST_F(SessionSharing, InfoWireNamesTheVersionItIsGivenAndOtherwiseIsTheTypedInf
   // With uploaded ids, so that the wire's cached id field must be the right one.
   std::string key;
   auto s = registry_->create(hierarchy_of(test::icosphere(3), key), key, {}, {2, 0, 1});
-  grpc::ByteBuffer wire = s->info_wire(42);
+  grpc::ByteBuffer wire = s->info_wire(SIZE_MAX, 42);
   v1::SessionInfo parsed;
   ASSERT_TRUE(grpc::SerializationTraits<v1::SessionInfo>::Deserialize(&wire, &parsed).ok());
   EXPECT_EQ(parsed.version(), 42u);
   EXPECT_EQ(parsed.rest().uploaded_ids_size(), 3);
-  v1::SessionInfo typed = s->info();
+  v1::SessionInfo typed = s->info(SIZE_MAX);
   EXPECT_NE(typed.version(), 42u);
   typed.set_version(42);
   EXPECT_EQ(parsed.SerializeAsString(), typed.SerializeAsString());

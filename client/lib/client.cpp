@@ -9,7 +9,7 @@
 namespace filigree {
 namespace {
 
-constexpr std::size_t kChunkBytes = 1 << 20;  // upload chunk: well under any message limit
+constexpr std::size_t kChunkBytes = 1 << 19;  // upload chunk: under the smallest --max-message-mib (1)
 
 // Unary calls are retried while a session moves between replicas (or a
 // replica restarts): UNAVAILABLE, up to 5 attempts over about 3 s.
@@ -116,6 +116,7 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
   guard.finished = true;
   throw_if_error(stream->Finish());
   if (!created) throw ClientError(grpc::StatusCode::DATA_LOSS, "the server ended the upload without creating a session");
+  read_rest_in_parts(created->info().session_id(), created->editor_token(), *created->mutable_info());
   SessionMesh mesh = to_session_mesh(created->info());
   mesh.role = v1::ROLE_EDITOR;  // its creator holds the editor token
   return SessionHandle{created->info().session_id(), created->editor_token(), created->viewer_token(),
@@ -125,7 +126,48 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {
   v1::JoinSessionRequest request;
   request.set_session_id(session_id);
-  return to_session_mesh(call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_, call_timeout_));
+  v1::SessionInfo info = call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_, call_timeout_);
+  read_rest_in_parts(session_id, token, info);
+  return to_session_mesh(info);
+}
+
+void Client::read_rest_in_parts(const std::string& session_id, const std::string& token, v1::SessionInfo& info) {
+  v1::RestMesh& rest = *info.mutable_rest();
+  if (!rest.in_parts()) return;
+  const std::uint64_t positions = 3ull * rest.vertex_count(), faces = 3ull * rest.face_count();
+  rest.mutable_positions()->Reserve(static_cast<int>(positions));
+  rest.mutable_faces()->Reserve(static_cast<int>(faces));
+  grpc::ClientContext context;
+  set_session_metadata(context, session_id, token, routing_);
+  context.set_deadline(std::chrono::system_clock::now() + call_timeout_);
+  v1::GetRestMeshRequest request;
+  request.set_session_id(session_id);
+  auto reader = stub_->GetRestMesh(&context, request);
+  // Checked as parts arrive: a server sending more than the summary said
+  // cannot make the client hold more than the mesh.
+  bool overflow = false;
+  for (v1::RestMeshPart part; !overflow && reader->Read(&part);) {
+    overflow = rest.positions_size() + std::uint64_t(part.positions_size()) > positions ||
+               rest.faces_size() + std::uint64_t(part.faces_size()) > faces ||
+               rest.uploaded_ids_size() + std::uint64_t(part.uploaded_ids_size()) > rest.vertex_count();
+    if (overflow) break;
+    rest.mutable_positions()->Add(part.positions().begin(), part.positions().end());
+    rest.mutable_faces()->Add(part.faces().begin(), part.faces().end());
+    rest.mutable_uploaded_ids()->Add(part.uploaded_ids().begin(), part.uploaded_ids().end());
+  }
+  if (overflow) context.TryCancel();
+  const grpc::Status status = reader->Finish();
+  if (overflow)
+    throw ClientError(grpc::StatusCode::DATA_LOSS, "the rest mesh's parts hold more than its " +
+                                                       std::to_string(rest.vertex_count()) + " vertices and " +
+                                                       std::to_string(rest.face_count()) + " faces");
+  throw_if_error(status);
+  if (std::uint64_t(rest.positions_size()) != positions || std::uint64_t(rest.faces_size()) != faces)
+    throw ClientError(grpc::StatusCode::DATA_LOSS, "the rest mesh's parts hold " + std::to_string(rest.positions_size() / 3) +
+                                                       " vertices and " + std::to_string(rest.faces_size() / 3) +
+                                                       " faces, not " + std::to_string(rest.vertex_count()) + " and " +
+                                                       std::to_string(rest.face_count()));
+  rest.set_in_parts(false);
 }
 
 v1::SessionState Client::state(const std::string& session_id, const std::string& token) {

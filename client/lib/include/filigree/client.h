@@ -138,6 +138,11 @@ class Client {
   v1::Filigree::Stub& stub() { return *stub_; }
 
  private:
+  // A rest mesh too large for one message (RestMesh.in_parts): reads it
+  // with GetRestMesh into `info`. ClientError DATA_LOSS if the parts do not
+  // add up to the counts the summary gives.
+  void read_rest_in_parts(const std::string& session_id, const std::string& token, v1::SessionInfo& info);
+
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::Filigree::Stub> stub_;
   Routing routing_ = Routing::kLoadBalanced;
