@@ -102,7 +102,10 @@ class PlayClipReactor final : public FrameStreamReactor<PlayClipReactor, grpc::S
     using Clock = std::chrono::steady_clock;
     const double duration = clip_->duration();
     const double speed = request_.speed() > 0.0 ? request_.speed() : 1.0;
-    const double rate = request_.max_rate() > 0.0 ? std::min(request_.max_rate(), kMostSamplesPerSecond) : kMostSamplesPerSecond;
+    // max_rate counts samples per second of clip time: at speed s that is s
+    // times as many per second of the stream's clock, which is capped.
+    const double rate = request_.max_rate() > 0.0 ? std::min(request_.max_rate() * speed, kMostSamplesPerSecond)
+                                                  : kMostSamplesPerSecond;
     const auto interval = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / rate));
     const auto start = Clock::now();
     const std::string name = request_.client_name().empty() ? "clip " + request_.clip() : request_.client_name();
