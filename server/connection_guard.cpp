@@ -164,7 +164,7 @@ struct ConnectionGuard::State : std::enable_shared_from_this<ConnectionGuard::St
   // and a margin fit, beside those still promised to gRPC: relays connected
   // whose connection gRPC has not accepted yet (it has not spoken).
   bool room_to_relay() const {
-    return spare >= 0 && descriptors_free(spare, kRelayDescriptors + unaccepted.load());
+    return spare >= 0 && descriptors_free(kRelayDescriptors + unaccepted.load());
   }
 
   // Out of descriptors: give back the spare, take the waiting connection

@@ -690,7 +690,7 @@ void HttpServer::Impl::accept() {
       std::lock_guard lock(mutex);
       // A headroom of descriptors stays free for the gRPC port (descriptor_headroom.h).
       full = (options.max_connections != 0 && connections.size() >= options.max_connections) ||
-             !descriptors_free(socket.native_handle(), kDescriptorHeadroom);
+             !descriptors_free(kDescriptorHeadroom);
       if (!shut_down && !full) {
         const std::uint64_t id = next_connection++;
         using TlsConnection = Connection<beast::ssl_stream<beast::tcp_stream>>;
