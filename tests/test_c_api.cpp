@@ -443,7 +443,7 @@ TEST_F(CApiServer, JointPosesAndClipsOfASkinnedUpload) {
 
   // From a start time, at most max_rate samples per second: every frame says
   // which clip time it shows. The server takes sample k (pose_id) no sooner
-  // than 1/max_rate s after sample k − 1, so at speed 1 its clip time is at
+  // than 1/max_rate s of clip time after sample k − 1, so its clip time is at
   // least start_seconds + (k − 1)/max_rate; the last is at the duration.
   double duration = -1.0;
   for (size_t c = 0; c < clips; ++c) {
@@ -455,7 +455,7 @@ TEST_F(CApiServer, JointPosesAndClipsOfASkinnedUpload) {
   }
   ASSERT_GT(duration, 1.0);
   const filigree_clip_playback ranged{.speed = 1.0, .loop = 0, .start_seconds = duration - 1.0, .max_rate = 5.0};
-  const double spacing = ranged.speed / ranged.max_rate;  // clip seconds from one sample to the next, at least
+  const double spacing = 1.0 / ranged.max_rate;  // clip seconds from one sample to the next, at least
   filigree_watcher* from = nullptr;
   ASSERT_EQ(filigree_play_clip_with(session_, nullptr, "bend", &ranged, nullptr, nullptr, &from), FILIGREE_OK)
       << last_error();
@@ -515,6 +515,28 @@ TEST_F(CApiServer, JointPosesAndClipsOfASkinnedUpload) {
   EXPECT_GE(handed.load(), 2u);
   EXPECT_EQ(filigree_watcher_clip_seconds(whole, nullptr), FILIGREE_ERROR_NULL_ARGUMENT);
   EXPECT_EQ(filigree_watcher_free(whole), FILIGREE_OK);
+
+  // The CLI's `play` passes --start and prints each frame's clip time.
+  const double start = duration - 0.5;
+  ::setenv("FILIGREE_TOKEN", string_of(filigree_session_editor_token).c_str(), 1);  // never on a command line
+  const std::string command = std::string("timeout 60 '") + FILIGREE_CLI_BINARY + "' play --server " +
+                              server_->address() + " --session " + string_of(filigree_session_id) +
+                              " --clip bend --fps 10 --start " + std::to_string(start) + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  std::vector<double> times;
+  std::string output;
+  char line[512];
+  while (std::fgets(line, sizeof line, pipe)) {
+    output += line;
+    // "version V  sample S  clip_time T s …"; sample 0: the frame from before the first sample.
+    if (const char* at = std::strstr(line, "clip_time "); at && !std::strstr(line, "sample 0 ")) times.push_back(std::atof(at + 10));
+  }
+  EXPECT_EQ(::pclose(pipe), 0) << output;
+  ::unsetenv("FILIGREE_TOKEN");
+  ASSERT_FALSE(times.empty()) << output;
+  for (const double t : times) EXPECT_GE(t, start - 1e-3) << output;
+  EXPECT_NEAR(times.back(), duration, 1e-3) << output;
 }
 
 // filigree_play_clip_with checks its numbers before anything is sent: a bad

@@ -461,7 +461,7 @@ TEST_F(SkeletalTest, PlayClipStreamsTheClipAndEndsAfterItsLastSample) {
 // ClipPlayback's start time and sample rate reach the server, and each frame
 // says which clip time it shows (Frame.clip_seconds, copied into
 // DecodedFrame). The server takes sample k (the frames' pose_id) no sooner
-// than 1/max_rate s after sample k − 1, so at speed 1 its clip time is at
+// than 1/max_rate s of clip time after sample k − 1, so its clip time is at
 // least start_seconds + (k − 1)/max_rate; the last sample is at the clip's
 // duration.
 TEST_F(SkeletalTest, PlayClipFromAStartTimeAtMostMaxRateSaysWhichClipTimeEachFrameShows) {
@@ -474,7 +474,7 @@ TEST_F(SkeletalTest, PlayClipFromAStartTimeAtMostMaxRateSaysWhichClipTimeEachFra
   ClipPlayback playback;  // speed 1
   playback.start_seconds = duration - 1.0;  // the clip's last second
   playback.max_rate = 5.0;
-  const double spacing = playback.speed / playback.max_rate;  // clip seconds from one sample to the next, at least
+  const double spacing = 1.0 / playback.max_rate;  // clip seconds from one sample to the next, at least
   auto stream = client_->play_clip(s.session_id, s.editor_token, "bend", playback);
   FrameDecoder decoder(s.mesh.rest_positions);
   std::uint64_t last_version = 0, samples = 0;

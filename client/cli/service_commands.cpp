@@ -56,7 +56,8 @@ struct DriveArgs : SessionArgs {
 
 struct PlayArgs : SessionArgs {
   std::string clip, name = "filigree-cli";
-  double speed = 1.0, fps = 30.0;
+  double speed = 1.0, fps = 30.0, start = 0.0;
+  bool loop = false;
 };
 
 struct WatchArgs : SessionArgs {
@@ -333,6 +334,8 @@ void play(const PlayArgs& a) {
   ClipPlayback playback;
   playback.speed = a.speed;
   playback.max_rate = a.fps;
+  playback.start_seconds = a.start;
+  playback.loop = a.loop;
   auto stream = client.play_clip(a.session, token, a.clip, playback, a.name);
   std::vector<std::vector<Vec3>> frames;
   std::size_t bytes = 0;
@@ -342,8 +345,9 @@ void play(const PlayArgs& a) {
     bytes += d.encoded_bytes;
     if (!a.output.empty()) frames.push_back(points_from_xyz(d.positions));
     if (a.frames > 0 && ++count >= a.frames) stream->cancel();
-    std::printf("version %llu  sample %llu  bytes %zu  max_error %.3g\n", static_cast<unsigned long long>(d.version),
-                static_cast<unsigned long long>(d.pose_id), d.encoded_bytes, d.max_error);
+    std::printf("version %llu  sample %llu  clip_time %.3f s  bytes %zu  max_error %.3g\n",
+                static_cast<unsigned long long>(d.version), static_cast<unsigned long long>(d.pose_id), d.clip_seconds,
+                d.encoded_bytes, d.max_error);
   }
   const grpc::Status status = stream->finish();
   if (!(a.frames > 0 && status.error_code() == grpc::StatusCode::CANCELLED)) throw_if_error(status);
@@ -434,7 +438,9 @@ void add_service_commands(CLI::App& app) {
   add_session_options(pc, *pl, "Write the received frames: .glb animation, other formats the last frame");
   pc->add_option("--clip", pl->clip, "Clip name (SessionInfo.skeleton.clips; `filigree inspect UPLOAD.glb` lists them)")->required();
   pc->add_option("--speed", pl->speed, "Playback rate")->check(CLI::PositiveNumber);
-  pc->add_option("--fps", pl->fps, "Samples per second at most, and the .glb frame rate")->check(CLI::Range(1.0, 60.0));
+  pc->add_option("--fps", pl->fps, "Samples per second of clip time at most, and the .glb frame rate")->check(CLI::Range(1.0, 60.0));
+  pc->add_option("--start", pl->start, "Clip time of the first sample, in seconds")->check(CLI::NonNegativeNumber);
+  pc->add_flag("--loop", pl->loop, "Play until interrupted (with --frames: that many frames)");
   pc->add_option("--frames", pl->frames, "Stop after N frames")->check(CLI::Range(1, 1000000));
   pc->add_option("--name", pl->name, "Client name shown to other participants");
   pc->callback([pl] { play(*pl); });
