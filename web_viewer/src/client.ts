@@ -3,11 +3,11 @@ import { Code, ConnectError, createClient, type Client, type Interceptor } from 
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
 import {
-  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type SessionHandles, type SessionInfo,
-  type SessionState, type SetHandlesResponse,
+  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type RestMeshPart, type SessionHandles,
+  type SessionInfo, type SessionState, type SetHandlesResponse,
 } from './gen/filigree/v1/filigree_pb';
 
-export type { Frame, Overlays, SessionHandles, SessionInfo, SessionState };
+export type { Frame, Overlays, RestMeshPart, SessionHandles, SessionInfo, SessionState };
 export type SessionEntry = ListSessionsResponse_Entry;
 
 // A handle as this page keeps it: a vertex of the detailed mesh (original
@@ -32,8 +32,17 @@ export class SessionClient {
     this.client = createClient(Filigree, transport);
   }
 
+  // The session; its rest mesh may come without its arrays (info.rest.inParts:
+  // too large for one message), which restMesh() then streams.
   join(): Promise<SessionInfo> {
     return this.client.joinSession({ sessionId: this.sessionId });
+  }
+
+  // The rest mesh in parts (GetRestMesh, server streaming; viewer token):
+  // each part continues the arrays where the previous one left them,
+  // positions, then faces, then uploaded_ids (rest-parts.ts assembles them).
+  restMesh(signal?: AbortSignal): AsyncIterable<RestMeshPart> {
+    return this.client.getRestMesh({ sessionId: this.sessionId }, signal ? { signal } : {});
   }
 
   // The session's frames: the current one at once (if newer than

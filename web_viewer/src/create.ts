@@ -11,7 +11,9 @@ import {
 } from './gen/filigree/v1/filigree_pb';
 import { frame, frameHeader, FrameReader, parseTrailers, TRAILER_FLAG } from './grpc-web';
 
-export const CHUNK_BYTES = 3 << 20;  // under the server's message limit
+// 512 KiB: a chunk's message stays under the smallest message limit a server
+// may have (--max-message-mib 1).
+export const CHUNK_BYTES = 512 << 10;
 
 export interface Created { sessionId: string; editorToken: string; viewerToken: string; cached: boolean; vertexCount: number }
 
@@ -100,6 +102,8 @@ export async function createSession(serverUrl: string, file: Blob, format: strin
     } else if (message.kind.case === 'created') {
       const c = message.kind.value;
       created = {
+        // info.rest may be a summary (inParts: a mesh too large for one
+        // message); only its vertex count is read here, the page joins for the mesh.
         sessionId: c.info?.sessionId ?? '', editorToken: c.editorToken, viewerToken: c.viewerToken, cached: c.cached,
         vertexCount: c.info?.rest?.vertexCount ?? 0,
       };

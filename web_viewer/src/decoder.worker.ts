@@ -26,6 +26,7 @@ import {
 import { coarseIndex, frameMesh, vertexNormals } from './geometry';
 import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
 import { FrameMailbox } from './mailbox';
+import { RestAssembler } from './rest-parts';
 import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
 import { STRETCH_RED, stretchColor, TriangleStretch } from './stretch';
 
@@ -92,6 +93,21 @@ function callError(error: unknown): CallError {
   return { code: null, rawMessage: '', message: error instanceof Error ? error.message : String(error), fetchFailed: false };
 }
 
+// The rest mesh of a session whose SessionInfo left it out (rest.inParts),
+// read from GetRestMesh part by part, the progress posted as values received
+// of values in all. Parts that do not add up to the announced counts fail
+// (RestPartsError), the stream too (a ConnectError).
+async function restInParts(source: SessionClient, vertexCount: number, faceCount: number): Promise<RestAssembler> {
+  const assembler = new RestAssembler(vertexCount, faceCount);
+  post({ type: 'progress', stage: 'receive', loaded: 0, total: assembler.total });
+  for await (const part of source.restMesh()) {
+    assembler.push(part);  // a throw here ends the loop, which cancels the call
+    post({ type: 'progress', stage: 'receive', loaded: assembler.received, total: assembler.total });
+  }
+  assembler.finish();
+  return assembler;
+}
+
 async function join(serverUrl: string, sessionId: string, token: string): Promise<void> {
   const started = performance.now();
   const joining = new SessionClient(serverUrl, sessionId, token,
@@ -104,12 +120,26 @@ async function join(serverUrl: string, sessionId: string, token: string): Promis
     post({ type: 'joinFailed', error: callError(error) });
     return;
   }
+  const restMesh = info.rest!;
+  let restParts = 0;
+  if (restMesh.inParts) {
+    // Too large for one message: the arrays come from GetRestMesh.
+    try {
+      const assembled = await restInParts(client, restMesh.vertexCount, restMesh.faceCount);
+      rest = assembled.positions;
+      faces = assembled.faces;
+      restParts = assembled.parts;
+    } catch (error) {
+      post({ type: 'joinFailed', error: callError(error) });
+      return;
+    }
+  } else {
+    rest = Float32Array.from(restMesh.positions);
+    faces = Uint32Array.from(restMesh.faces);
+  }
   const joined = performance.now();
   post({ type: 'progress', stage: 'build', loaded: 0, total: null });
-  const restMesh = info.rest!;
-  const n = restMesh.vertexCount;
-  rest = Float32Array.from(restMesh.positions);
-  faces = Uint32Array.from(restMesh.faces);
+  const n = rest.length / 3;
   restMesh.positions = [];
   restMesh.faces = [];
   restMesh.uploadedIds = [];
@@ -131,7 +161,7 @@ async function join(serverUrl: string, sessionId: string, token: string): Promis
   const coarseFaces = coarseIndex(rest, faces);
   post({
     type: 'joined', info, faces: facesForPage, coarseFaces, buffers: { positions: rest.slice(), normals, colors: null }, framing,
-    basePositions, baseFaces, originalIds, joinMs: joined - started, buildMs: performance.now() - joined,
+    basePositions, baseFaces, originalIds, restParts, joinMs: joined - started, buildMs: performance.now() - joined,
   }, [facesForPage.buffer, normals.buffer, basePositions.buffer, baseFaces.buffer, originalIds.buffer,
     ...(coarseFaces ? [coarseFaces.buffer] : [])]);
 }

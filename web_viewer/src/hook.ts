@@ -8,7 +8,7 @@ export interface TestHook {
   state: 'starting' | 'usage' | 'joining' | 'live' | 'reconnecting' | 'closed' | 'error';
   error: string | null;     // the last error shown in the page
   sessionId: string | null;
-  vertexCount: number;
+  vertexCount: number;      // of the detailed mesh drawn
   baseVertexCount: number;
   version: number;          // of the last applied frame
   framesReceived: number;
@@ -57,8 +57,12 @@ export interface TestHook {
   viewDirection(): { look: number[]; up: number[] } | null;
   // The panel's statistics (stats.ts, StatsSnapshot; versions as numbers).
   statsSnapshot(): Record<string, unknown> | null;
-  loadStage: 'download' | 'build' | 'done' | '';
-  joinMs: number;           // JoinSession in the worker, to the last byte
+  loadStage: 'download' | 'receive' | 'build' | 'done' | '';
+  loadStages: string[];     // every stage shown while loading, in order ('receive': the mesh came in parts)
+  receiveFraction: number;  // of the mesh's values received in parts, when last shown
+  restParts: number;        // GetRestMesh parts the mesh came in (0: in JoinSession's answer)
+  triangleCount: number;    // of the detailed mesh drawn
+  joinMs: number;           // JoinSession in the worker, to the last byte (and GetRestMesh, for a mesh in parts)
   buildMs: number;          // the first normals and the framing, in the worker
   upAxis: 'y' | 'z' | '';   // as the page framed the mesh
   fits: number;             // Fit button or F key presses
@@ -99,7 +103,7 @@ export const hook: TestHook = window.__filigree = {
   overlaysVersion: 0, cutTriangles: 0, stretchMax: 0, clips: [], clipState: 'idle', clipFrames: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
-  loadStage: '', joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
+  loadStage: '', loadStages: [], receiveFraction: 0, restParts: 0, triangleCount: 0, joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
   editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
   framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0, coarseTriangles: 0, coarseDraws: 0, lastDrawFull: false, pixelRatio: 1, drawShowMs: 0,
   frontState: '', apiKeysNeeded: false, sessionsListed: [], createStages: [],

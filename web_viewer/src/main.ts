@@ -22,6 +22,7 @@ import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSess
 import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
 import { participantColour, ParticipantsLayer } from './participants';
 import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined, type Ready } from './pipeline';
+import type { LoadStage } from './pipeline-protocol';
 import { pollPresence } from './presence';
 import { isFinal, lossReason, retryDelay } from './reconnect';
 import { MeshView } from './scene';
@@ -106,11 +107,19 @@ class Viewer {
   }
 
   // Progress while the session's mesh arrives and is built, over the canvas.
-  private loading(stage: 'download' | 'build', loaded: number, total: number | null): void {
+  private loading(stage: LoadStage, loaded: number, total: number | null): void {
     hook.loadStage = stage;
+    if (!hook.loadStages.includes(stage)) hook.loadStages.push(stage);
     byId('loading').hidden = false;
     const bar = byId<HTMLProgressElement>('loading-progress');
-    if (stage === 'download') {
+    if (stage === 'receive') {
+      // A mesh too large for one message, in parts: the share of its values received.
+      const fraction = total ? loaded / total : 0;
+      hook.receiveFraction = fraction;
+      byId('loading-text').textContent = `Receiving the mesh: ${Math.floor(100 * fraction)} %…`;
+      bar.max = 1;
+      bar.value = fraction;
+    } else if (stage === 'download') {
       byId('loading-text').textContent = loaded === 0 ? 'Asking for the session…'
         : `Downloading the mesh: ${megabytes(loaded)}${total ? ` of ${megabytes(total)}` : ''}…`;
       if (total) {
@@ -127,7 +136,7 @@ class Viewer {
 
   private show(joined: Joined): void {
     const { info, buffers, faces, framing } = joined;
-    const vertexCount = info.rest!.vertexCount;
+    const vertexCount = buffers.positions.length / 3;  // as drawn (info.rest.vertexCount announced it)
     this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing, joined.coarseFaces !== null);
     if (joined.coarseFaces) this.view.setCoarse(joined.coarseFaces);
     hook.coarseTriangles = joined.coarseFaces ? joined.coarseFaces.length / 3 : 0;
@@ -145,6 +154,8 @@ class Viewer {
     hook.clientName = CLIENT_NAME;
     hook.vertexCount = vertexCount;
     hook.baseVertexCount = joined.originalIds.length;
+    hook.triangleCount = faces.length / 3;
+    hook.restParts = joined.restParts;
     hook.upAxis = framing.upAxis;
     hook.joinMs = joined.joinMs;
     hook.buildMs = joined.buildMs;

@@ -21,15 +21,21 @@ export type ToWorker =
   | { type: 'stretch'; on: boolean }
   | { type: 'overlays'; id: number };
 
+export type LoadStage = 'download' | 'receive' | 'build';
+
 // A failed call, as the page rebuilds it (a ConnectError cannot be posted).
 export interface CallError { code: number | null; rawMessage: string; message: string; fetchFailed: boolean }
 
 export type FromWorker =
-  | { type: 'progress'; stage: 'download' | 'build'; loaded: number; total: number | null }
-  // The session without its big arrays (info.rest emptied), those as typed arrays.
+  // download: JoinSession's bytes; receive: the rest mesh's values from
+  // GetRestMesh (a mesh too large for one message); build: normals, framing.
+  | { type: 'progress'; stage: LoadStage; loaded: number; total: number | null }
+  // The session without its big arrays (info.rest emptied), those as typed
+  // arrays; restParts: GetRestMesh parts they came in (0: in JoinSession's answer).
   | {
     type: 'joined'; info: SessionInfo; faces: Uint32Array; coarseFaces: Uint32Array | null; buffers: Buffers; framing: Framing;
-    basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; joinMs: number; buildMs: number;
+    basePositions: Float32Array; baseFaces: Uint32Array; originalIds: Uint32Array; restParts: number; joinMs: number;
+    buildMs: number;
   }
   | { type: 'joinFailed'; error: CallError }
   // The Watch stream is open (the server answered).

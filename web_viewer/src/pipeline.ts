@@ -7,7 +7,7 @@
 import { Code, ConnectError } from '@connectrpc/connect';
 
 import type { Frame } from './client';
-import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
+import type { Buffers, CallError, FromWorker, LoadStage, ToWorker } from './pipeline-protocol';
 
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
 export type Applied = Extract<FromWorker, { type: 'applied' }>;
@@ -24,7 +24,7 @@ export interface StreamEnd { error: Error | null; aborted: boolean }
 export interface PipelineEvents {
   opened(stream: number): void;
   arrived(arrival: Arrival): void;
-  progress(stage: 'download' | 'build', loaded: number, total: number | null): void;
+  progress(stage: LoadStage, loaded: number, total: number | null): void;
   // A frame applied in the worker (not drawn yet).
   applied(result: Applied): void;
   // The state to draw.

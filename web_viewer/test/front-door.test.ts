@@ -4,7 +4,7 @@ import { fromBinary } from '@bufbuild/protobuf';
 import { describe, expect, it } from 'vitest';
 
 import { connectLines, grpcAddress, meshFormat, sessionHref } from '../src/connect';
-import { requestBody } from '../src/create';
+import { CHUNK_BYTES, requestBody } from '../src/create';
 import { CreateSessionRequestSchema } from '../src/gen/filigree/v1/filigree_pb';
 import { frame, FrameReader, parseTrailers, TRAILER_FLAG } from '../src/grpc-web';
 
@@ -50,6 +50,14 @@ describe('the CreateSession body', () => {
     const bytes = messages.slice(1).map((m) => (m.kind.case === 'chunk' ? Array.from(m.kind.value) : []));
     expect(bytes.map((b) => b.length)).toEqual([300, 300, 300, 100]);
     expect(bytes.flat()).toEqual(Array.from(new Uint8Array(1000).map((_, i) => i % 251)));
+  });
+
+  it('sends chunks of 512 KiB by default, whose messages fit a server with --max-message-mib 1', async () => {
+    const size = (3 << 20) + 7;
+    const frames = new FrameReader().push(new Uint8Array(await requestBody(new Blob([new Uint8Array(size)]), 'ply', 'web').arrayBuffer()));
+    expect(CHUNK_BYTES).toBe(512 << 10);
+    expect(frames.length).toBe(1 + Math.ceil(size / CHUNK_BYTES));
+    for (const f of frames) expect(f.payload.length).toBeLessThan(1 << 20);
   });
 
   it('frames a chunk over 2 MiB (a multi-byte length varint)', async () => {
