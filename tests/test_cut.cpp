@@ -335,6 +335,30 @@ TEST_P(CutTest, ThresholdChangesResetOrKeepTheCut) {
   expect_equal(cut.regions(), plain_regions(laplacian_, cut.in_cut()), "T = 2e4 again");
 }
 
+// Optimisation goes where the deformation is acute: under a local bump the
+// vertices handed to regions are the ones the bump moved, not the still
+// parts (with the most acute node taken first; taking the mildest, the
+// regions settle where nothing moved).
+TEST_P(CutTest, RegionsGoWhereTheDeformationIsAcute) {
+  Deformer d(h_);
+  const std::vector<Vec3> bumped = d.deform(procedural_pose(h_.base_mesh().positions, Motion::kBump, 1.0)).positions;
+  // How far each vertex moved: 0 away from the bump.
+  std::vector<double> moved(mesh_.vertex_count());
+  double mean_all = 0.0;
+  for (Index v = 0; v < mesh_.vertex_count(); ++v) mean_all += moved[v] = (bumped[v] - mesh_.positions[v]).norm();
+  mean_all /= static_cast<double>(mesh_.vertex_count());
+  AdaptiveCut cut(*graph_, laplacian_, 2e4);
+  for (int frame = 0; frame < 20; ++frame) cut.update(bumped, h_.node_count(), 16 + h_.node_count() / 64);
+  double mean_regions = 0.0;
+  std::size_t in_regions = 0;
+  for (Index v = 0; v < mesh_.vertex_count(); ++v)
+    if (!cut.in_cut()[v]) mean_regions += moved[v], ++in_regions;
+  ASSERT_GT(in_regions, 0u);
+  mean_regions /= static_cast<double>(in_regions);
+  EXPECT_GT(mean_regions, 2.0 * mean_all) << in_regions << " vertices in regions, moved " << mean_regions
+                                          << " on average; the whole mesh " << mean_all;
+}
+
 TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
   const std::vector<Vec3> bent = bent_result(0.8);
   AdaptiveCut one(*graph_, laplacian_, 2e4), two(*graph_, laplacian_, 2e4);
