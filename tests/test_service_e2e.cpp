@@ -978,6 +978,33 @@ TEST_F(ServiceTest, HandlesOfSeveralClientsMergeIntoTheBasePose) {
   v1::SessionHandles none;
   EXPECT_EQ(stub_->GetHandles(context("no-such-session", editor).get(), unknown, &none).error_code(), grpc::StatusCode::NOT_FOUND);
 
+  // Two clients on one vertex: the newest call's target is the one solved
+  // (documented in SetHandles), whoever holds the vertex longer.
+  auto hold = [&](const std::string& client, const Vec3& offset) {
+    v1::SetHandlesRequest r;
+    r.set_session_id(id);
+    r.set_client_name(client);
+    auto* hh = r.add_handles();
+    hh->set_vertex(100);
+    const Vec3 at = rest_of(100) + offset;
+    hh->set_x(float(at.x())), hh->set_y(float(at.y())), hh->set_z(float(at.z()));
+    v1::SetHandlesResponse answer;
+    EXPECT_TRUE(stub_->SetHandles(context(id, editor).get(), r, &answer).ok());
+    return answer.accepted_at_version();
+  };
+  // Where vertex 100 is in the first frame after `accepted`: at the winning
+  // target, far from the other one (they are 0.32 apart).
+  auto followed = [&](std::uint64_t accepted, const Vec3& winner, const Vec3& loser) {
+    const v1::SessionState now = wait_for_version_after(accepted);
+    const Vec3 at = rest_of(100) + decode(now.frame())[100];
+    EXPECT_LT((at - (rest_of(100) + winner)).norm(), 0.25 * (winner - loser).norm())
+        << "vertex 100 at " << at.transpose() << ", the newest target " << (rest_of(100) + winner).transpose();
+  };
+  const Vec3 by_bob(0.0, 0.0, -0.25), by_carol(0.2, 0.0, 0.0);
+  hold("bob", by_bob);                                    // bob's only handle now: vertex 100
+  followed(hold("carol", by_carol), by_carol, by_bob);    // the newer of the two
+  followed(hold("bob", by_bob), by_bob, by_carol);        // and again
+
   v1::SetHandlesRequest bad = one;
   bad.mutable_handles(0)->set_vertex(1839);
   EXPECT_EQ(stub_->SetHandles(context(id, editor).get(), bad, &r).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
