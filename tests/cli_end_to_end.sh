@@ -65,6 +65,8 @@ expect_error "only" "$FILIGREE" export-cut "$OUT/bunny.fgh" --recover 999999 -o 
 head -c 100 /dev/zero > "$OUT/short.pose"
 expect_error "needs 12" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/short.pose" -o "$OUT/x.obj"
 expect_error "threshold" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.obj" --threshold fast -o "$OUT/x.obj"
+expect_error "terms takes edge or vertex, not 'both'" "$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.obj" --threshold inf --terms both -o "$OUT/x.obj"
+"$FILIGREE" deform "$OUT/bunny.fgh" --pose "$OUT/base.obj" --threshold inf --terms vertex --iterations 2 -o "$OUT/vertex_terms.obj" > /dev/null
 expect_error "motion" "$FILIGREE" animate "$OUT/bunny.fgh" --motion dance -o "$OUT/x.glb"
 # Skinned input: rig → preprocess (writes H.rig) → animate a clip; a rig that is not one is refused.
 "$FILIGREE" rig "$DATA/bunny_small.obj" -o "$OUT/rigged.glb" --joints 3 > /dev/null

@@ -28,7 +28,7 @@ namespace {
 constexpr int kSettleFrames = 100;
 
 struct RuntimeArgs {
-  std::string hierarchy, output, threshold = "default", rotation = "best-fit";
+  std::string hierarchy, output, threshold = "default", rotation = "best-fit", terms = "edge";
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   int iterations = 0;
 };
@@ -66,6 +66,13 @@ DeformerOptions options_of(const RuntimeArgs& a) {
     throw std::invalid_argument("--rotation takes best-fit or local-frame, not '" + a.rotation + "'");
   }
   o.threads = a.threads;
+  if (a.terms == "edge") {
+    o.region_terms = RegionTerms::kEdgeRotations;
+  } else if (a.terms == "vertex") {
+    o.region_terms = RegionTerms::kVertexRotations;
+  } else {
+    throw std::invalid_argument("--terms takes edge or vertex, not '" + a.terms + "'");
+  }
   o.local_global_iterations = a.iterations;
   return o;
 }
@@ -84,7 +91,11 @@ void add_runtime_options(CLI::App* cmd, RuntimeArgs& a) {
   cmd->add_option("-o,--output", a.output, "Output mesh")->required();
   cmd->add_option("--threshold", a.threshold, "Performance threshold T: a number, 0 (direct recovery only) or inf (whole-mesh optimisation)");
   cmd->add_option("--rotation", a.rotation, "Base rotations: best-fit (default) or local-frame");
-  cmd->add_option("--iterations", a.iterations, "Local-global iterations")->check(CLI::Range(0, 100));
+  cmd->add_option("--terms", a.terms,
+                  "How optimisation rotates the rest geometry: edge (default; each edge by its ends' mean rotation) or "
+                  "vertex (each differential coordinate by its vertex's rotation, the thesis' form)");
+  cmd->add_option("--iterations", a.iterations, "Local-global (as-rigid-as-possible) iterations; each lowers the energy or leaves it")
+      ->check(CLI::Range(0, 100));
   cmd->add_option("--threads", a.threads, "Worker threads")->check(CLI::Range(1, 256));
 }
 

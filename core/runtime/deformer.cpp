@@ -16,6 +16,7 @@
 #include "runtime/regions.h"
 #include "runtime/rotation_interpolation.h"
 #include "util/buffer_pool.h"
+#include "util/parallel_for.h"
 
 namespace filigree {
 namespace {
@@ -38,6 +39,12 @@ struct Deformer::Optimised {
   RegionSolver solver;
   std::vector<Vec3> positions;  // the last frame's result (rest before the first): the cut scores it
   std::vector<Eigen::Quaterniond> base_q;
+  // Local–global iterations: the vertices whose rotations the ARAP energy
+  // uses (the region vertices and their cut neighbours), those rotations,
+  // and a mark per vertex (all 0 between frames).
+  std::vector<Index> fitted;
+  std::vector<Eigen::Matrix3d> fit;
+  std::vector<std::uint8_t> marked;
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
       : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.node_graph(), m.laplacian(), o.threshold),
@@ -123,7 +130,8 @@ void Deformer::restore_cut(const CutSnapshot& snapshot) {
 std::size_t Deformer::memory_bytes() const {
   std::size_t bytes = s_->workspace.xyzw.capacity() * sizeof(float);
   if (const Optimised* o = s_->optimised.get())
-    bytes += o->positions.capacity() * sizeof(Vec3) + o->cut.memory_bytes() + o->solver.memory_bytes();
+    bytes += o->positions.capacity() * sizeof(Vec3) + o->cut.memory_bytes() + o->solver.memory_bytes() +
+             o->fitted.capacity() * sizeof(Index) + o->fit.capacity() * sizeof(Eigen::Matrix3d) + o->marked.capacity();
   return bytes;
 }
 
@@ -214,20 +222,16 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
     const auto& c = corners[v];
     return interpolate_rotation({s.base_q[c[0]], s.base_q[c[1]], s.base_q[c[2]]}, h.maps_barycentric(v)).toRotationMatrix();
   };
-  stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
-  const CotangentLaplacian& laplacian = model_->laplacian();
-  for (int it = 0; it < options_.local_global_iterations; ++it) {
-    // Local step: the best-fit rotation of each region vertex's 1-ring on the
-    // current result; global step: solve again (factorisations are cached).
-    auto refit = [&](Index v) {
-      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
-        const Index j = laplacian.neighbors[k];
-        cov += laplacian.weights[k] * (h.rest_positions[j] - h.rest_positions[v]) * (x[j] - x[v]).transpose();
-      }
-      return best_fit_rotation(cov);
-    };
-    stats.factorizations += s.solver.solve(regions, x, options_.threads, refit);
+  if (regions.count() > 0 && options_.region_terms == RegionTerms::kEdgeRotations) {
+    collect_fitted(s);
+    parallel_for(s.fitted.size(), options_.threads, [&](std::size_t i) { s.fit[s.fitted[i]] = interpolated(s.fitted[i]); });
+    stats.factorizations = solve_edge_terms(s, x);
+  } else {
+    stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
+  }
+  if (options_.local_global_iterations > 0) {
+    if (options_.region_terms != RegionTerms::kEdgeRotations) collect_fitted(s);
+    local_global(s, x);
   }
   stats.regions_ms = ms_since(t);
   std::copy(x.begin(), x.end(), out.begin());
@@ -241,6 +245,62 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   stats.performance_estimate = regions.performance_estimate();
   stats.total_ms = ms_since(start);
   return stats;
+}
+
+void Deformer::collect_fitted(Optimised& s) const {
+  const CotangentLaplacian& laplacian = model_->laplacian();
+  const std::size_t n = model_->hierarchy().vertex_count();
+  if (s.marked.size() != n) s.marked.assign(n, 0), s.fit.resize(n);
+  s.fitted.clear();
+  for (const Index v : s.cut.regions().vertices) {
+    if (!s.marked[v]) s.marked[v] = 1, s.fitted.push_back(v);
+    for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+      const Index j = laplacian.neighbors[k];
+      if (!s.marked[j]) s.marked[j] = 1, s.fitted.push_back(j);
+    }
+  }
+  for (const Index v : s.fitted) s.marked[v] = 0;
+}
+
+std::size_t Deformer::solve_edge_terms(Optimised& s, std::vector<Vec3>& x) const {
+  const Hierarchy& h = model_->hierarchy();
+  const CotangentLaplacian& laplacian = model_->laplacian();
+  return s.solver.solve_terms(s.cut.regions(), x, options_.threads, [&](Index v) {
+    // ½ R_v Σ_j w_vj (p_v − p_j) + ½ Σ_j w_vj R_j (p_v − p_j)
+    Vec3 own = Vec3::Zero(), others = Vec3::Zero();
+    for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+      const Index j = laplacian.neighbors[k];
+      const Vec3 e = laplacian.weights[k] * (h.rest_positions[v] - h.rest_positions[j]);
+      own += e;
+      others += s.fit[j] * e;
+    }
+    return Vec3(0.5 * (s.fit[v] * own + others));
+  });
+}
+
+// Local–global iterations (as-rigid-as-possible, Sorkine & Alexa 2007) on
+// the regions, from the solve above: the local step fits each rotation to
+// its ring on the current result; the global step solves with edge terms,
+// the exact minimiser, for those rotations, of the ARAP energy
+// Σ w_vj ‖(x_v − x_j) − R_v (p_v − p_j)‖² over the edges at the regions.
+// Both steps only lower that energy, so an iteration never raises it (with
+// the thesis' R_v·δ_v terms there was no such energy: on needle triangles
+// iterating diverged).
+void Deformer::local_global(Optimised& s, std::vector<Vec3>& x) const {
+  const Hierarchy& h = model_->hierarchy();
+  const CotangentLaplacian& laplacian = model_->laplacian();
+  for (int it = 0; it < options_.local_global_iterations; ++it) {
+    parallel_for(s.fitted.size(), options_.threads, [&](std::size_t i) {
+      const Index v = s.fitted[i];
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
+        const Index j = laplacian.neighbors[k];
+        cov += laplacian.weights[k] * (h.rest_positions[j] - h.rest_positions[v]) * (x[j] - x[v]).transpose();
+      }
+      s.fit[v] = best_fit_rotation(cov);
+    });
+    solve_edge_terms(s, x);
+  }
 }
 
 }  // namespace filigree

@@ -18,6 +18,20 @@ struct Hierarchy;
 class CutState;
 class DeformerModel;
 
+// How region optimisation rotates the rest mesh's geometry into a frame's
+// right-hand side.
+enum class RegionTerms {
+  // Each edge by the mean of its ends' rotations, Σ_j w_vj·½(R_v + R_j)(p_v − p_j):
+  // the as-rigid-as-possible global step. The default: measured against the
+  // analytic truth (bench/runtime_bench, Armadillo, T = ∞) 12–26% lower RMS
+  // than the thesis' form on bend, twist, bump and fold, and it stays close
+  // on needle triangles, where the thesis' form was off by a mesh size.
+  kEdgeRotations,
+  // Each vertex's differential coordinate by its own rotation, R_v·δ_v (the
+  // thesis' rotated differential coordinates), for comparison.
+  kVertexRotations,
+};
+
 struct DeformerOptions {
   // Performance threshold T on Σ (n_i² + c_i²) (thesis eq. 3.12): 0 = direct
   // recovery only (fastest), ∞ = whole-mesh optimisation (the quality reference).
@@ -26,8 +40,10 @@ struct DeformerOptions {
   // little of the rest for its cost (docs/performance.md, "Runtime speed and quality").
   double threshold = kDefaultThreshold;
   RotationMethod rotation = RotationMethod::kBestFit;
-  // Local–global refinements (re-fit per-vertex rotations on the result, solve
-  // again); off by default.
+  RegionTerms region_terms = RegionTerms::kEdgeRotations;
+  // Local–global refinements (as-rigid-as-possible: re-fit each rotation to
+  // its ring on the result, solve again with edge terms); each lowers the
+  // ARAP energy of the edges at the regions, or leaves it. Off by default.
   int local_global_iterations = 0;
   int threads = 1;
   // Let the cut follow the deformation between frames (thesis §3.3); off pins it.
@@ -113,6 +129,15 @@ class Deformer {
   struct State;
   struct Optimised;
   Optimised& optimised();
+  // The vertices whose rotations edge terms read (s.fitted): the region
+  // vertices and their neighbours (each rotation depends on its vertex
+  // alone, so their order changes no result).
+  void collect_fitted(Optimised& s) const;
+  // Solves the regions with edge terms of the rotations in s.fit; returns
+  // the factorisations made.
+  std::size_t solve_edge_terms(Optimised& s, std::vector<Vec3>& x) const;
+  // Local–global iterations on the regions of `s`, from the result `x`.
+  void local_global(Optimised& s, std::vector<Vec3>& x) const;
 
   std::shared_ptr<const DeformerModel> model_;
   DeformerOptions options_;

@@ -375,7 +375,7 @@ void RegionSolver::solve_region(const Regions& regions, std::size_t r, const Fac
     Vec3 y[kDirectMax];
     for (std::size_t i = 0; i < n; ++i) {
       const Index v = first[i];
-      Vec3 rhs = calls.rotation(calls.context, v) * delta_[v];
+      Vec3 rhs = calls.term(calls.context, v);
       double diagonal = 0.0;
       for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
         const Index j = laplacian_.neighbors[k];
@@ -398,7 +398,7 @@ void RegionSolver::solve_region(const Regions& regions, std::size_t r, const Fac
   }
   auto rhs_of = [&](std::size_t i) {
     const Index v = first[i];
-    Vec3 rhs = calls.rotation(calls.context, v) * delta_[v];
+    Vec3 rhs = calls.term(calls.context, v);
     for (Index k = laplacian_.offsets[v]; k < laplacian_.offsets[v + 1]; ++k) {
       const Index j = laplacian_.neighbors[k];
       if (regions.region_of[j] != self) rhs += laplacian_.weights[k] * x[j];

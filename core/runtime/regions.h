@@ -81,10 +81,27 @@ class RegionSolver {
   template <class RotationOf>
   std::size_t solve(const Regions& regions, std::vector<Vec3>& x, int threads, RotationOf&& rotation) {
     using F = std::remove_reference_t<RotationOf>;
-    Calls calls{[](const void* f, Index v) -> Eigen::Matrix3d { return (*static_cast<const F*>(f))(v); }, nullptr,
-                &rotation};
+    struct Context {
+      const F* rotation;
+      const std::vector<Vec3>* delta;
+    } context{&rotation, &delta_};
+    Calls calls{[](const void* c, Index v) -> Vec3 {
+                  const auto* k = static_cast<const Context*>(c);
+                  return (*k->rotation)(v) * (*k->delta)[v];
+                },
+                nullptr, &context};
     if constexpr (requires(const F& f, Index v) { f.prefetch(v); })
-      calls.prefetch = [](const void* f, Index v) { static_cast<const F*>(f)->prefetch(v); };
+      calls.prefetch = [](const void* c, Index v) { static_cast<const Context*>(c)->rotation->prefetch(v); };
+    return solve_all(regions, x, threads, calls);
+  }
+
+  // As solve(), with the whole term of each region vertex's row given:
+  // `term(v)` replaces R_v·δ_v (local–global steps give Σ_j w_vj·½(R_v + R_j)
+  // (p_v − p_j)). Same threads and reads as solve()'s rotation.
+  template <class TermOf>
+  std::size_t solve_terms(const Regions& regions, std::vector<Vec3>& x, int threads, TermOf&& term) {
+    using F = std::remove_reference_t<TermOf>;
+    Calls calls{[](const void* f, Index v) -> Vec3 { return (*static_cast<const F*>(f))(v); }, nullptr, &term};
     return solve_all(regions, x, threads, calls);
   }
 
@@ -104,9 +121,9 @@ class RegionSolver {
  private:
   friend class RegionFactors;
   struct Factor;
-  // The caller's rotation, type-erased.
+  // The caller's term of each row (R_v·δ_v, or given), type-erased.
   struct Calls {
-    Eigen::Matrix3d (*rotation)(const void*, Index);
+    Vec3 (*term)(const void*, Index);
     void (*prefetch)(const void*, Index);  // may be null
     const void* context;
   };
