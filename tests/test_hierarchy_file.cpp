@@ -75,9 +75,7 @@ void expect_same_hierarchy(const Hierarchy& a, const Hierarchy& b) {
   expect_same_bytes<Index>(a.maps_face, b.maps_face, "maps_face");
   expect_same_bytes<Barycentric16>(a.maps_bary, b.maps_bary, "maps_bary");
   EXPECT_EQ(a.mesh_hash, b.mesh_hash);
-  EXPECT_EQ(a.build.build_seconds, b.build.build_seconds);
   EXPECT_EQ(a.build.requested_base_vertices, b.build.requested_base_vertices);
-  EXPECT_EQ(a.build.threads, b.build.threads);
 }
 
 // Byte offset of section `tag`'s first element.

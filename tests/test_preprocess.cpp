@@ -16,6 +16,7 @@
 #include "hierarchy/cut_state.h"
 #include "hierarchy/node_graph.h"
 #include "hierarchy/hierarchy.h"
+#include "hierarchy/hierarchy_file.h"
 #include "mesh/mesh_validation.h"
 #include "preprocess/mean_curvature.h"
 #include "preprocess/mesh_saliency.h"
@@ -364,6 +365,21 @@ TEST(PreprocessDeterminism, SameInputSameHierarchy) {
   EXPECT_EQ(a.original_faces, b.original_faces);
   EXPECT_EQ(a.created_corners, b.created_corners);
   EXPECT_EQ(a.maps_bary, b.maps_bary);
+}
+
+// The file is the same byte for byte for any thread count (and however long
+// the build took): caches keyed by the mesh and options stay valid.
+TEST(PreprocessDeterminism, OneFileForAnyThreadCount) {
+  for (const TriMesh& m : {test::shipped_mesh("bunny_small.obj"), test::two_spheres(3), test::capped_tube(24, 16)}) {
+    std::string first;
+    for (const int threads : {1, 2, 4}) {
+      PreprocessOptions o;
+      o.threads = threads;
+      const std::string bytes = serialize_hierarchy(preprocess(m, o));
+      if (first.empty()) first = bytes;
+      EXPECT_TRUE(bytes == first) << threads << " threads, " << m.vertex_count() << " vertices";
+    }
+  }
 }
 
 }  // namespace

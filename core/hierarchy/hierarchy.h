@@ -64,7 +64,10 @@ struct FaceIdRange {
   FaceId operator[](std::size_t i) const { return static_cast<FaceId>(first + i); }
 };
 
-// How the hierarchy was built (stored in the file, shown by `inspect`).
+// How the hierarchy was built. Only what was asked is stored in the file
+// (shown by `inspect`): the time and the thread count are not, so that one
+// mesh with one set of options gives the same file byte for byte however it
+// was built (a loaded hierarchy has 0 for both).
 struct BuildInfo {
   std::uint64_t requested_base_vertices = 0;
   double build_seconds = 0.0;

@@ -91,7 +91,8 @@ void write_payload(const Hierarchy& h, const StoredHierarchy& s, const Sink& sin
     using T = typename std::decay_t<decltype(v)>::value_type;
     write_section(sink, tag, sizeof(T), v.size(), v.data());
   });
-  const BuildRecord b{h.build.requested_base_vertices, h.build.build_seconds, h.build.threads, 0};
+  // Not the time or the threads: the same mesh and options give the same bytes (BuildInfo).
+  const BuildRecord b{h.build.requested_base_vertices, 0.0, 0, 0};
   write_section(sink, kBuildTag, sizeof b, 1, &b);
 }
 
