@@ -322,6 +322,28 @@ TEST(PreprocessInput, RatioAndDefaultTargets) {
   EXPECT_EQ(default_base_vertices(642), 100u);
 }
 
+// A base smaller than the mesh allows is not silently larger: the report
+// says, for every vertex left, which check kept it.
+TEST(PreprocessInput, ABaseAboveTheTargetSaysWhatKeptEachVertex) {
+  const TriMesh m = test::two_spheres(2);
+  PreprocessOptions o;
+  o.base_vertices = 4;  // two closed spheres cannot go below 4 vertices each
+  SimplifyReport report;
+  o.simplify.report = &report;
+  const Hierarchy h = preprocess(m, o);
+  ASSERT_GT(h.base_vertices.size(), 4u);
+  std::size_t held = 0;
+  for (const std::size_t n : report.refused) held += n;
+  EXPECT_EQ(held, h.base_vertices.size());
+  EXPECT_GT(report.refused[static_cast<std::size_t>(BaseRefusal::kTopology)], 0u);
+  // A target within reach leaves the report empty.
+  SimplifyReport none;
+  o.base_vertices = 200;
+  o.simplify.report = &none;
+  EXPECT_EQ(preprocess(m, o).base_vertices.size(), 200u);
+  for (const std::size_t n : none.refused) EXPECT_EQ(n, 0u);
+}
+
 // Saliency keeps what stands out: the vertices of highest saliency (on a
 // sphere with a spike, whose curvature differs from what surrounds it) are
 // removed later with the saliency term in the removal cost than without it.

@@ -73,8 +73,9 @@ void add_inspect_command(CLI::App& app) {
                 static_cast<double>(info.file_size) / n);
     std::printf("node graph    derived and checked in %.1f ms; %.1f bytes/vertex more once a session sets a finite T\n", graph_ms,
                 static_cast<double>(graph.memory_bytes()) / n);
-    std::printf("built         with a requested base of %llu vertices\n",
-                static_cast<unsigned long long>(h.build.requested_base_vertices));
+    std::printf("built         with a requested base of %llu vertices%s\n",
+                static_cast<unsigned long long>(h.build.requested_base_vertices),
+                h.base_vertices.size() > h.build.requested_base_vertices ? " (no further vertex could be removed)" : "");
   });
 }
 

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <optional>
+#include <string>
 #include <thread>
 
 #include <CLI/CLI.hpp>
@@ -12,6 +13,7 @@
 #include "cli/commands.h"
 #include "cli/progress_bar.h"
 #include "hierarchy/hierarchy.h"
+#include "preprocess/simplifier.h"
 #include "hierarchy/hierarchy_file.h"
 #include "mesh/mesh_io.h"
 #include "mesh/mesh_validation.h"
@@ -63,6 +65,8 @@ void run(const PreprocessArgs& a) {
   options.threads = a.threads;
   ProgressBar bar("simplifying");
   options.progress = [&](double f) { bar.update(f); };
+  SimplifyReport simplified;
+  options.simplify.report = &simplified;
   const Hierarchy h = preprocess(mesh, options);
   bar.finish();
   save_hierarchy(h, a.output);
@@ -77,6 +81,15 @@ void run(const PreprocessArgs& a) {
 
   std::printf("base       %zu vertices, %zu faces (%.2f%% of the vertices)\n", h.base_vertices.size(), h.base_faces.size(),
               100.0 * static_cast<double>(h.base_vertices.size()) / static_cast<double>(h.vertex_count()));
+  if (h.base_vertices.size() > h.build.requested_base_vertices) {
+    // Asked for fewer than the simplification could reach: say what held the rest.
+    std::string held;
+    for (std::size_t r = 0; r < kBaseRefusals; ++r)
+      if (simplified.refused[r] > 0)
+        held += (held.empty() ? "" : ", ") + std::to_string(simplified.refused[r]) + " " + describe(static_cast<BaseRefusal>(r));
+    std::printf("           not the %llu asked for: no vertex left could be removed (%s)\n",
+                static_cast<unsigned long long>(h.build.requested_base_vertices), held.c_str());
+  }
   std::printf("hierarchy  %zu nodes, depth %zu\n", h.node_count(), h.depth());
   std::printf("time       %.2f s total (%.2f s preprocessing, %d threads)\n", seconds, h.build.build_seconds, a.threads);
   std::printf("memory     %.1f MiB peak\n", static_cast<double>(peak_memory_bytes()) / (1024.0 * 1024.0));

@@ -112,6 +112,7 @@ class Simplifier {
     const std::size_t to_remove = n > target ? n - target : 0;
     std::size_t next_report = 0;
     Plan p;
+    for (;;) {
     while (remaining > target && !heap.empty()) {
       if (opt_.stop && opt_.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
       const Entry e = heap.top();
@@ -146,6 +147,29 @@ class Simplifier {
         next_report = done + std::max<std::size_t>(to_remove / 200, 1);
       }
     }
+    if (remaining <= target) break;
+    // The queue ran dry above the target. A removal that a change two rings
+    // away made valid (a diagonal no longer an edge, a neighbour's valence)
+    // was never queued again: look at every vertex left once more.
+    bool queued_any = false;
+    for (Index v = 0; v < n; ++v) {
+      if (removed_[v] || queued[v] || !plan(v, p)) continue;
+      heap.push({p.cost, v, ++version[v]});
+      queued[v] = true;
+      dirty[v] = false;
+      queued_any = true;
+    }
+    if (!queued_any) break;
+    }
+    if (opt_.report && remaining > target) {
+      // Why every vertex left stays: what a larger base than asked is made of.
+      opt_.report->refused.fill(0);
+      Plan scratch;
+      for (Index v = 0; v < n; ++v) {
+        BaseRefusal why = BaseRefusal::kTopology;
+        if (!removed_[v] && !plan(v, scratch, &why)) ++opt_.report->refused[static_cast<std::size_t>(why)];
+      }
+    }
     finish();
     if (opt_.progress) opt_.progress(1.0);
   }
@@ -153,22 +177,28 @@ class Simplifier {
  private:
   // Plans the removal of v; false if it would break manifoldness, topology,
   // the boundary, flip or produce poor triangles.
-  bool plan(Index v, Plan& p) const {
+  // `why`, when given, says which check refused (set only on refusal).
+  bool plan(Index v, Plan& p, BaseRefusal* why = nullptr) const {
+    const auto refuse = [why](BaseRefusal r) {
+      if (why) *why = r;
+      return false;
+    };
     const auto& x = mesh_.positions();
-    if (!mesh_.ring(v, p.ring)) return false;
+    if (!mesh_.ring(v, p.ring)) return refuse(BaseRefusal::kTopology);
     const std::vector<Index>& r = p.ring.ring;
     const std::size_t k = r.size();
     const bool closed = p.ring.closed;
-    if (k < 3 || k > kMaxRing) return false;
+    if (k < 3) return refuse(BaseRefusal::kTopology);
+    if (k > kMaxRing) return refuse(BaseRefusal::kValence);
     if (!closed) {
       const double turn = std::numbers::pi - angle_at(x[v], x[r[0]], x[r[k - 1]]);
-      if (turn > opt_.max_boundary_turn_deg * std::numbers::pi / 180.0) return false;
-      if (mesh_.has_edge(r[0], r[k - 1])) return false;  // would close the boundary loop
+      if (turn > opt_.max_boundary_turn_deg * std::numbers::pi / 180.0) return refuse(BaseRefusal::kBoundary);
+      if (mesh_.has_edge(r[0], r[k - 1])) return refuse(BaseRefusal::kBoundary);  // would close the boundary loop
     }
     p.uv = conformal_ring_map(x[v], r, x, closed);
-    if (p.uv.empty()) return false;
+    if (p.uv.empty()) return refuse(BaseRefusal::kShape);
     p.tris = triangulate_polygon(p.uv);
-    if (p.tris.empty()) return false;
+    if (p.tris.empty()) return refuse(BaseRefusal::kShape);
 
     // Manifoldness: every diagonal must be a new edge, and every ring vertex
     // must keep valence ≥ 3 (≥ 2 on the boundary); the latter also rejects
@@ -181,13 +211,13 @@ class Simplifier {
         if (a > b) continue;  // each diagonal appears in two triangles; count it once
         const bool ring_edge = b == a + 1 || (closed && a == 0 && b == static_cast<int>(k) - 1);
         if (ring_edge || (!closed && a == 0 && b == static_cast<int>(k) - 1)) continue;
-        if (mesh_.has_edge(r[a], r[b])) return false;
+        if (mesh_.has_edge(r[a], r[b])) return refuse(BaseRefusal::kTopology);
         ++gained[a], ++gained[b];
       }
     }
     for (std::size_t i = 0; i < k; ++i) {
       const std::size_t valence = mesh_.valence(r[i]) - 1 + gained[i];
-      if (valence < (mesh_.is_boundary(r[i]) ? 2u : 3u)) return false;
+      if (valence < (mesh_.is_boundary(r[i]) ? 2u : 3u)) return refuse(BaseRefusal::kTopology);
     }
 
     // Geometry: no flips, no needles/caps worse than what was there.
@@ -205,8 +235,8 @@ class Simplifier {
     for (const auto& t : p.tris) {
       const Vec3 &a = x[r[t[0]]], &b = x[r[t[1]]], &c = x[r[t[2]]];
       const Vec3 n = triangle_area_vector(a, b, c);
-      if (!(n.norm() > 0.0) || triangle_quality(a, b, c) < min_quality) return false;
-      if (fan_len > 0.0 && n.dot(fan_normal) < cos_max * n.norm() * fan_len) return false;
+      if (!(n.norm() > 0.0) || triangle_quality(a, b, c) < min_quality) return refuse(BaseRefusal::kShape);
+      if (fan_len > 0.0 && n.dot(fan_normal) < cos_max * n.norm() * fan_len) return refuse(BaseRefusal::kNormal);
     }
 
     // Error: how far v and the points parameterised in its fan would end up
@@ -335,6 +365,17 @@ class Simplifier {
 };
 
 }  // namespace
+
+const char* describe(BaseRefusal why) {
+  switch (why) {
+    case BaseRefusal::kTopology: return "would change the topology or break the manifold";
+    case BaseRefusal::kValence: return "have more than 32 neighbours";
+    case BaseRefusal::kBoundary: return "hold a boundary's shape";
+    case BaseRefusal::kShape: return "would leave triangles of poor shape";
+    case BaseRefusal::kNormal: return "would turn triangles too far";
+  }
+  return "?";
+}
 
 void simplify(const TriMesh& mesh, const std::vector<double>& curvature, const std::vector<double>& saliency,
               const SimplifyOptions& options, Hierarchy& out) {

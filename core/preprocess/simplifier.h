@@ -3,7 +3,9 @@
 // MAPS parameterisation and each node's ring coordinates as it goes
 // (thesis §3.1.1–3.1.2, DESIGN §2.1 steps 1–5).
 
+#include <array>
 #include <atomic>
+#include <cstdint>
 #include <functional>
 #include <stdexcept>
 #include <vector>
@@ -13,6 +15,23 @@
 namespace filigree {
 
 struct Hierarchy;
+
+// Why a vertex cannot be removed (the first check its removal fails).
+enum class BaseRefusal : std::uint8_t {
+  kTopology,  // the mesh would stop being a manifold of the same topology (a new edge exists, a valence too low)
+  kValence,   // its ring has more than 32 vertices
+  kBoundary,  // a boundary corner, or the last gap of a boundary loop
+  kShape,     // the hole's triangles would be worse than min_triangle_quality (or than those they replace)
+  kNormal,    // a new triangle would turn more than max_normal_change_deg from the fan
+};
+inline constexpr std::size_t kBaseRefusals = 5;
+const char* describe(BaseRefusal why);
+
+// What stopped a simplification above its target: how many of the vertices
+// left fail each check (all zero when the target was reached).
+struct SimplifyReport {
+  std::array<std::size_t, kBaseRefusals> refused{};
+};
 
 struct SimplifyOptions {
   // Stop when this many vertices remain, or earlier when no removal is valid.
@@ -30,6 +49,9 @@ struct SimplifyOptions {
   double saliency_weight = 2.0;
   double curvature_weight = 1.0;
   int threads = 1;
+  // Filled when the simplification stops above its target (may be null;
+  // must outlive the call).
+  SimplifyReport* report = nullptr;
   // Called with the fraction done in [0, 1], at most ~200 times.
   std::function<void(double)> progress;
   // When set and true, the simplification stops with PreprocessingStopped
