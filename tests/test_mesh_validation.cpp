@@ -114,6 +114,34 @@ TEST(MeshValidation, NonFiniteVertices) {
   EXPECT_NE(error.find("non-finite vertices: 2 (first: vertex 3)"), std::string::npos) << error;
 }
 
+// Two polygons of `corners` corners glued along their rims (a flat pillow),
+// each fan-triangulated from its first corner as a writer would: vertex 0
+// and vertex corners − 1 are each in corners − 1 triangles (their own fan's
+// corners − 2 and the other fan's last or first).
+TriMesh fan_pillow(std::size_t corners) {
+  TriMesh m;
+  for (std::size_t i = 0; i < corners; ++i) {
+    const double a = 2.0 * 3.141592653589793 * static_cast<double>(i) / static_cast<double>(corners);
+    m.positions.emplace_back(std::cos(a), std::sin(a), 0.0);
+  }
+  const Index last = static_cast<Index>(corners - 1);
+  for (Index i = 1; i + 1 < corners; ++i) m.faces.push_back({0, i, i + 1});
+  for (Index i = 1; i + 1 < corners; ++i) m.faces.push_back({last, last - i, last - i - 1});
+  return m;
+}
+
+TEST(MeshValidation, AVertexInTooManyFacesIsRefusedNamingTheLimit) {
+  const TriMesh at_limit = fan_pillow(kMaxFacesAtVertex + 1), over = fan_pillow(kMaxFacesAtVertex + 2);
+  EXPECT_EQ(validate_mesh(at_limit).crowded_vertices.count, 0u);
+  const ValidationReport r = validate_mesh(over);
+  EXPECT_EQ(r.crowded_vertices.count, 2u);
+  EXPECT_EQ(r.crowded_vertices.first, 0);
+  EXPECT_TRUE(r.fatal());
+  const std::string error = repair_error(over);
+  EXPECT_TRUE(starts_with(error, "mesh is not usable: 2 vertices are in more than 8192 faces")) << error;
+  EXPECT_NE(error.find("triangulate it evenly"), std::string::npos) << error;
+}
+
 TEST(MeshValidation, NonFiniteUnreferencedVertexIsStillFatal) {
   TriMesh mesh = tetrahedron();
   mesh.positions.emplace_back(std::nan(""), 0, 0);

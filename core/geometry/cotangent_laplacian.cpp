@@ -61,12 +61,17 @@ CotangentLaplacian cotangent_laplacian(std::span<const Vec3> positions, std::spa
         if (d == i) row.push_back({b, half_cot});
       }
     }
-    // Insertion sort: rows are short, and it is stable, so repeats are
-    // summed in face order.
+    // Stable, so repeats are summed in face order: an insertion sort for
+    // the usual short rows, a merge sort for a hub's (a fan-triangulated
+    // polygon's vertex may have thousands).
     Half* const first = row.data();
     Half* const last = first + row.size();
-    for (Half* h = first + 1; h < last; ++h)
-      for (Half* g = h; g > first && g[-1].to > g->to; --g) std::swap(g[-1], g[0]);
+    if (row.size() <= 64) {
+      for (Half* h = first + 1; h < last; ++h)
+        for (Half* g = h; g > first && g[-1].to > g->to; --g) std::swap(g[-1], g[0]);
+    } else {
+      std::stable_sort(first, last, [](const Half& a, const Half& b) { return a.to < b.to; });
+    }
     for (Half* h = first; h != last;) {
       double w = 0.0;
       const Index to = h->to;

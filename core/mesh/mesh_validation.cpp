@@ -253,14 +253,16 @@ Analysis analyze(const TriMesh& mesh) {
 
   std::vector<bool> referenced(n, false);
   DisjointSets components(n);
+  std::vector<std::uint32_t> faces_at(n, 0);
   for (std::size_t f = 0; f < m; ++f) {
     if (flags[f] != 0) continue;
     const Triangle& t = mesh.faces[f];
-    for (const Index v : t) referenced[v] = true;
+    for (const Index v : t) referenced[v] = true, ++faces_at[v];
     components.unite(t[0], t[1]);
     components.unite(t[0], t[2]);
   }
   for (std::size_t v = 0; v < n; ++v) {
+    if (faces_at[v] > kMaxFacesAtVertex) r.crowded_vertices.add(static_cast<std::int64_t>(v));
     if (!referenced[v]) r.unreferenced_vertices.add(static_cast<std::int64_t>(v));
     else if (components.find(v) == v) ++r.components;
   }
@@ -293,6 +295,12 @@ std::string fatal_reason(const ValidationReport& r) {
   if (r.non_manifold_vertices.count) {
     return "non-manifold: " + plural(r.non_manifold_vertices.count, "vertex joins", "vertices join") +
            " separate surface sheets " + first_of(r.non_manifold_vertices, "vertex");
+  }
+  if (r.crowded_vertices.count) {
+    return plural(r.crowded_vertices.count, "vertex is", "vertices are") + " in more than " +
+           std::to_string(kMaxFacesAtVertex) + " faces, the most one vertex may be in " +
+           first_of(r.crowded_vertices, "vertex") +
+           "; a polygon of many corners fan-triangulated makes one: triangulate it evenly before the upload";
   }
   return "inconsistent orientation: " +
          plural(r.inconsistent_orientation.count, "edge is", "edges are") +
@@ -379,7 +387,8 @@ bool ValidationReport::fatal() const {
   const std::size_t usable_faces =
       face_count - out_of_range_faces.count - degenerate_faces.count - duplicate_faces.count;
   return vertex_count == 0 || usable_faces == 0 || non_finite_vertices.count || out_of_range_faces.count ||
-         non_manifold_edges.count || non_manifold_vertices.count || inconsistent_orientation.count;
+         non_manifold_edges.count || non_manifold_vertices.count || inconsistent_orientation.count ||
+         crowded_vertices.count;
 }
 
 bool ValidationReport::repairable() const {
@@ -403,6 +412,8 @@ std::string ValidationReport::to_string() const {
   issue_line("duplicate faces", duplicate_faces, first_of(duplicate_faces, "face"));
   issue_line("unreferenced vertices", unreferenced_vertices, first_of(unreferenced_vertices, "vertex"));
   issue_line("non-manifold edges", non_manifold_edges, first_at(non_manifold_edges));
+  const std::string crowded = "vertices in more than " + std::to_string(kMaxFacesAtVertex) + " faces";
+  issue_line(crowded.c_str(), crowded_vertices, first_of(crowded_vertices, "vertex"));
   issue_line("non-manifold vertices", non_manifold_vertices, first_of(non_manifold_vertices, "vertex"));
   issue_line("inconsistently oriented edges", inconsistent_orientation, first_at(inconsistent_orientation));
   count_line("components", components);

@@ -1,6 +1,7 @@
 #include "preprocess/dynamic_mesh.h"
 
 #include <algorithm>
+#include <utility>
 
 namespace filigree {
 
@@ -26,6 +27,9 @@ DynamicMesh::DynamicMesh(const TriMesh& mesh)
 }
 
 bool DynamicMesh::has_edge(Index a, Index b) const {
+  // From the end with fewer faces: a fan-triangulated polygon's hub has
+  // thousands, and every neighbour's removal asks about edges to it.
+  if (incident_[b].size() < incident_[a].size()) std::swap(a, b);
   for (FaceId f : incident_[a]) {
     const Triangle& t = faces_[f];
     if (t[0] == b || t[1] == b || t[2] == b) return true;

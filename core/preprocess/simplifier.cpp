@@ -184,6 +184,9 @@ class Simplifier {
       return false;
     };
     const auto& x = mesh_.positions();
+    // Before the ring is ordered (quadratic in the valence): a hub of
+    // thousands of faces (a fan-triangulated polygon) is refused at once.
+    if (mesh_.valence(v) > kMaxRing) return refuse(BaseRefusal::kValence);
     if (!mesh_.ring(v, p.ring)) return refuse(BaseRefusal::kTopology);
     const std::vector<Index>& r = p.ring.ring;
     const std::size_t k = r.size();
