@@ -17,9 +17,10 @@
 import * as THREE from 'three';
 
 import { Code, isCode, type Frame, type SessionClient, type SessionHandles } from './client';
+import { PacedCalls } from './paced-calls';
 import type { MeshView } from './scene';
 
-export const MIN_INTERVAL_MS = 250;
+export { MIN_INTERVAL_MS } from './paced-calls';
 
 // Colours of other participants (never this page's cyan and yellow), and
 // whether a label on each needs dark text.
@@ -86,47 +87,23 @@ export function participantsKey(participants: readonly Participant[]): string {
 // one per MIN_INTERVAL_MS; requests meanwhile make one more ask after it.
 // `failed` returns true when asking again is pointless (the server lacks the call).
 export class HandlesFeed<A> {
-  private due = false;
-  private busy = false;
-  private stopped = false;
-  private lastCall = -Infinity;
-  private timer: ReturnType<typeof setTimeout> | undefined;
+  private readonly paced: PacedCalls;
 
-  constructor(private readonly fetch: () => Promise<A>,
-              private readonly answered: (answer: A) => void,
-              private readonly failed: (error: unknown) => boolean,
-              private readonly now: () => number = () => performance.now()) {}
+  constructor(fetch: () => Promise<A>,
+              answered: (answer: A) => void,
+              failed: (error: unknown) => boolean,
+              now: () => number = () => performance.now()) {
+    this.paced = new PacedCalls(() => fetch().then(answered, (error: unknown) => {
+      if (failed(error)) this.paced.enabled = false;
+    }), now);
+  }
 
   request(): void {
-    this.due = true;
-    this.kick();
+    this.paced.request();
   }
 
   get idle(): boolean {
-    return !this.busy && !this.due;
-  }
-
-  private kick(): void {
-    if (this.stopped || !this.due || this.busy || this.timer !== undefined) return;
-    const wait = this.lastCall + MIN_INTERVAL_MS - this.now();
-    if (wait > 0) {
-      this.timer = setTimeout(() => {
-        this.timer = undefined;
-        this.kick();
-      }, wait);
-      return;
-    }
-    this.due = false;
-    this.busy = true;
-    this.lastCall = this.now();
-    this.fetch()
-      .then((answer) => this.answered(answer), (error: unknown) => {
-        if (this.failed(error)) this.stopped = true;
-      })
-      .finally(() => {
-        this.busy = false;
-        this.kick();
-      });
+    return this.paced.idle;
   }
 }
 

@@ -17,7 +17,9 @@ import { join } from 'node:path';
 
 import { chromium } from 'playwright-core';
 
-import { checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, fields, hookState, ROOT, startServer, stopServer } from './harness.mjs';
+import {
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, fields, hookState, openPage, ROOT, startServer, stopServer, waitShowing,
+} from './harness.mjs';
 
 const MESH = join(ROOT, 'tests', 'data', 'head_open.off');
 const HOOK_TIMEOUT_MS = 60_000;
@@ -28,18 +30,9 @@ const STOP_TIMEOUT_MS = 20_000;
 let browser;
 const pageErrors = [];
 
-async function newPage(url) {
-  const context = await browser.newContext({ viewport: { width: 1100, height: 700 } });
-  const page = await context.newPage();
-  page.on('pageerror', (error) => pageErrors.push(`${url}: ${error.message}`));
-  await page.goto(url);
-  return page;
-}
+const newPage = (url) => openPage(browser, url, pageErrors, { width: 1100, height: 700 });
 
-const waitFor = (page, fn, arg, timeout = WAIT_MS) => page.waitForFunction(fn, arg, { timeout }).catch(async (error) => {
-  throw new Error(`${error.message}\nthe page: ${JSON.stringify(await hookState(page).catch(() => null))}\n` +
-    `its text: ${(await page.textContent('body').catch(() => '')).replace(/\s+/g, ' ').slice(0, 1500)}`);
-});
+const waitFor = (page, fn, arg, timeout = WAIT_MS) => waitShowing(page, fn, arg, timeout);
 
 // Live, a frame drawn.
 const live = (page) => waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1 && window.__filigree.framesRendered >= 1

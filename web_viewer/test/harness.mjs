@@ -191,6 +191,23 @@ export function diagonal(path) {
 export const hookState = (page) => page.evaluate(() =>
   Object.fromEntries(Object.entries(window.__filigree).filter(([, v]) => typeof v !== 'function')));
 
+// Opens `url` in a new context of `browser`; the page's uncaught errors are
+// added to `errors`.
+export async function openPage(browser, url, errors, viewport = { width: 1100, height: 700 }) {
+  const context = await browser.newContext({ viewport });
+  const page = await context.newPage();
+  page.on('pageerror', (error) => errors.push(`${url}: ${error.message}`));
+  await page.goto(url);
+  return page;
+}
+
+// page.waitForFunction; on a timeout the error says what the page showed
+// (its hook state and the start of its text).
+export const waitShowing = (page, fn, arg, timeout) => page.waitForFunction(fn, arg, { timeout }).catch(async (error) => {
+  throw new Error(`${error.message}\nthe page: ${JSON.stringify(await hookState(page).catch(() => null))}\n` +
+    `its text: ${(await page.textContent('body').catch(() => '')).replace(/\s+/g, ' ').slice(0, 1500)}`);
+});
+
 // A bumpy UV sphere as binary PLY (smaller and faster to parse than OBJ).
 export function writeBumpySphere(path, rings, segments) {
   const n = (rings - 1) * segments + 2;

@@ -20,7 +20,8 @@ import { join } from 'node:path';
 import { chromium } from 'playwright-core';
 
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, hookState, startServer, stopServer, upload, writeBumpySphere,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, hookState, openPage, startServer, stopServer, upload, waitShowing,
+  writeBumpySphere,
 } from './harness.mjs';
 
 const HOOK_TIMEOUT_MS = 60_000;
@@ -41,18 +42,9 @@ let vertices;
 const faces = 2 * SEGMENTS * (RINGS - 1);
 const pageErrors = [];
 
-async function newPage(url) {
-  const context = await browser.newContext({ viewport: { width: 900, height: 650 } });
-  const page = await context.newPage();
-  page.on('pageerror', (error) => pageErrors.push(`${url}: ${error.message}`));
-  await page.goto(url);
-  return page;
-}
+const newPage = (url) => openPage(browser, url, pageErrors, { width: 900, height: 650 });
 
-const waitFor = (page, fn, arg, timeout = WAIT_MS) => page.waitForFunction(fn, arg, { timeout }).catch(async (error) => {
-  throw new Error(`${error.message}\nthe page: ${JSON.stringify(await hookState(page).catch(() => null))}\n` +
-    `its text: ${(await page.textContent('body').catch(() => '')).replace(/\s+/g, ' ').slice(0, 1500)}`);
-});
+const waitFor = (page, fn, arg, timeout = WAIT_MS) => waitShowing(page, fn, arg, timeout);
 
 // Live, a frame applied and drawn; or the page's first error (a stop, a
 // refused upload, a frame it could not show), at once.
