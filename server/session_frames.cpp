@@ -34,6 +34,7 @@ void fill_stats(const FrameStats& s, double encode_ms, std::size_t bytes, v1::Fr
   out.set_largest_region(static_cast<std::uint32_t>(s.region_sizes.empty() ? 0 : s.region_sizes.front()));
   out.set_region_vertices(static_cast<std::uint32_t>(s.region_vertices));
   out.set_threshold(s.threshold);
+  out.set_cut_converged(s.cut_converged);
   out.set_performance_estimate(s.performance_estimate);
   out.set_factorizations(static_cast<std::uint32_t>(s.factorizations));
   out.set_rotations_ms(s.rotations_ms);

@@ -359,6 +359,34 @@ TEST_P(CutTest, RegionsGoWhereTheDeformationIsAcute) {
                                           << " on average; the whole mesh " << mean_all;
 }
 
+// On an unchanged pose the cut settles and stays settled: converged() once
+// a full round of scoring moved nothing, and 50 further frames move nothing.
+TEST_P(CutTest, OnAnUnchangedPoseTheCutSettlesAndStays) {
+  const std::vector<Vec3> bumped =
+      Deformer(h_).deform(procedural_pose(h_.base_mesh().positions, Motion::kBump, 1.0)).positions;
+  const std::size_t eval = 64 + h_.node_count() / 16, moves = 16 + h_.node_count() / 100;
+  AdaptiveCut cut(*graph_, laplacian_, 2e4);
+  EXPECT_FALSE(cut.converged());
+  int frames = 0;
+  std::size_t moved = 0;
+  for (; frames < 2000 && !cut.converged(); ++frames) moved += cut.update(bumped, eval, moves);
+  ASSERT_TRUE(cut.converged()) << "not settled after " << frames << " frames";
+  EXPECT_GT(moved, 0u) << "the bump moved nothing: the test sees nothing";
+  // A round of scoring (1/16 of the vertices a frame) without a move: at least 16 frames.
+  const std::vector<bool> settled = cut.in_cut();
+  for (int more = 0; more < 50; ++more) {
+    ASSERT_EQ(cut.update(bumped, eval, moves), 0u) << "frame " << frames + more;
+    ASSERT_TRUE(cut.converged());
+  }
+  EXPECT_EQ(cut.in_cut(), settled);
+  // A new T gives the cut somewhere to go: not converged until it has looked again.
+  cut.set_threshold(4e4);
+  EXPECT_FALSE(cut.converged());
+  // T = 0 and T = ∞ never move.
+  EXPECT_TRUE(AdaptiveCut(*graph_, laplacian_, 0.0).converged());
+  EXPECT_TRUE(AdaptiveCut(*graph_, laplacian_, AdaptiveCut::kInfinity).converged());
+}
+
 TEST_P(CutTest, CutMovesDoNotDependOnTheThreadCount) {
   const std::vector<Vec3> bent = bent_result(0.8);
   AdaptiveCut one(*graph_, laplacian_, 2e4), two(*graph_, laplacian_, 2e4);

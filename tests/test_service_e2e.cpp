@@ -788,6 +788,7 @@ TEST_F(ServiceTest, WholeMeshIsFactorisedBeforeItsFirstFrame) {
   } while (!std::isinf(f.stats().threshold()));
   EXPECT_GE(f.stats().largest_region(), 1024u);  // RegionSolver::kSharedMin: a shared factor
   EXPECT_EQ(f.stats().factorizations(), 0u);
+  EXPECT_TRUE(f.stats().cut_converged());  // T = ∞ never moves its cut
 }
 
 // A cached hierarchy replaced by one that loads but whose removals do not

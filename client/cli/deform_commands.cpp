@@ -24,8 +24,9 @@
 namespace filigree::cli {
 namespace {
 
-// A cut that adapts over frames needs a few frames of the same pose to settle.
-constexpr int kSettleFrames = 100;
+// A cut that adapts over frames needs frames of the same pose to settle
+// (FrameStats::cut_converged); deform runs at most this many.
+constexpr int kSettleFrames = 2000;
 
 struct RuntimeArgs {
   std::string hierarchy, output, threshold = "default", rotation = "best-fit", terms = "edge";
@@ -78,10 +79,10 @@ DeformerOptions options_of(const RuntimeArgs& a) {
 }
 
 void print_stats(const FrameStats& s, int frames) {
-  std::printf("{\"frames_run\": %d, \"cut_nodes\": %zu, \"cut_vertices\": %zu, \"regions\": %zu, \"largest_region\": %zu, "
+  std::printf("{\"frames_run\": %d, \"cut_converged\": %s, \"cut_nodes\": %zu, \"cut_vertices\": %zu, \"regions\": %zu, \"largest_region\": %zu, "
               "\"region_vertices\": %zu, \"threshold\": %.9g, \"performance_estimate\": %.9g, \"factorizations\": %zu, "
               "\"rotations_ms\": %.3f, \"cut_update_ms\": %.3f, \"recover_ms\": %.3f, \"regions_ms\": %.3f, \"total_ms\": %.3f}\n",
-              frames, s.cut_nodes, s.cut_vertices, s.regions, s.region_sizes.empty() ? 0 : s.region_sizes.front(),
+              frames, s.cut_converged ? "true" : "false", s.cut_nodes, s.cut_vertices, s.regions, s.region_sizes.empty() ? 0 : s.region_sizes.front(),
               s.region_vertices, std::isinf(s.threshold) ? 1e308 : s.threshold, s.performance_estimate, s.factorizations,
               s.rotations_ms, s.cut_update_ms, s.recover_ms, s.regions_ms, s.total_ms);
 }
@@ -105,7 +106,10 @@ void deform(const DeformArgs& a) {
   Deformer deformer(h, options_of(a));
   DeformResult r = deformer.deform(pose);
   int frames = 1;
-  while (r.stats.cut_moves > 0 && frames < kSettleFrames) r = deformer.deform(pose), ++frames;
+  while (!r.stats.cut_converged && frames < kSettleFrames) r = deformer.deform(pose), ++frames;
+  if (!r.stats.cut_converged)
+    std::fprintf(stderr, "warning: the cut did not settle within %d frames of this pose; the result is that of the last "
+                         "(a larger or smaller --threshold may settle)\n", kSettleFrames);
   TriMesh out = h.original_mesh();
   out.positions = std::move(r.positions);
   write_mesh(out, a.output);

@@ -76,6 +76,7 @@ void AdaptiveCut::release_queues() {
 
 void AdaptiveCut::reset(double threshold) {
   threshold_ = threshold;
+  scored_since_move_ = 0;
   release_queues();
   regions_ = Regions{};
   const std::size_t n = h_.vertex_count();
@@ -104,6 +105,7 @@ void AdaptiveCut::set_threshold(double threshold) {
     reset(threshold);
   } else {
     threshold_ = threshold;
+    scored_since_move_ = 0;  // another T: the cut has somewhere to go
   }
 }
 
@@ -459,6 +461,11 @@ std::size_t AdaptiveCut::update(const std::vector<Vec3>& positions, std::size_t 
     moves += 2;
   }
   if (!changed_.empty()) rebuild_regions();
+  if (moves > 0) {
+    scored_since_move_ = 0;
+  } else {
+    for (std::size_t b = 0; b < blocks; ++b) scored_since_move_ += block_size(b);
+  }
   return moves;
 }
 

@@ -63,6 +63,11 @@ class AdaptiveCut {
   CutSnapshot snapshot() const;
   void restore(const CutSnapshot& snapshot);
 
+  // Whether the cut has settled for the positions it is given: every node
+  // scored since its last move, none moved (a full round of the scoring's
+  // round robin). Always true at T = 0 and T = ∞. A new pose may move it again.
+  bool converged() const { return !adaptive() || scored_since_move_ >= h_.vertex_count(); }
+
   const CutState& state() const { return cut_; }
   const Regions& regions() const { return regions_; }
   const std::vector<bool>& in_cut() const { return in_cut_; }
@@ -145,6 +150,7 @@ class AdaptiveCut {
   NodeHeap<Milder> recoverable_;
   NodeHeap<MoreAcute> removable_;
   std::size_t next_block_ = 0;  // position in the scoring order
+  std::size_t scored_since_move_ = 0;  // vertices whose nodes were scored since the cut last moved
   double estimate_ = 0.0;
   std::vector<Index> uf_parent_;
   std::vector<double> uf_size_, uf_constraints_;

@@ -194,6 +194,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
     const std::size_t moves = options_.cut_move_budget ? options_.cut_move_budget : std::max<std::size_t>(128, nodes / 256);
     stats.cut_moves = s.cut.update(s.positions, eval, moves, options_.threads);
   }
+  stats.cut_converged = !options_.update_cut || s.cut.converged();  // a pinned cut never moves
   stats.cut_update_ms = ms_since(t);
 
   // 2. Direct recovery of the cut, parents first (thesis eq. 3.10).

@@ -67,6 +67,9 @@ struct FrameStats {
   double threshold = 0.0;                 // the T option
   double performance_estimate = 0.0;      // T = Σ (n_i² + c_i²) of this frame's regions
   std::size_t cut_moves = 0;              // nodes the cut update moved before this frame
+  // The cut has settled on this pose (AdaptiveCut::converged): more frames
+  // of it change nothing. Always true at T = 0 and T = ∞.
+  bool cut_converged = true;
   std::size_t factorizations = 0;         // new sparse Cholesky factorisations
   double rotations_ms = 0, cut_update_ms = 0, recover_ms = 0, regions_ms = 0, total_ms = 0;
 };
