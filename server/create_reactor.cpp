@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
+#include <cstring>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -24,6 +26,7 @@
 #include "server/filigree_service.h"
 #include "server/resident_memory.h"
 #include "server/stream_writer.h"
+#include "util/time_left.h"
 #include "skinning/rig_file.h"
 
 namespace filigree::server {
@@ -160,6 +163,11 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     v1::CreateSessionResponse r;
     r.mutable_progress()->set_stage(stage);
     r.mutable_progress()->set_fraction(fraction);
+    if (std::strcmp(stage, "simplifying") == 0) {  // the one long stage
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - simplifying_since_).count();
+      simplifying_left_.add(seconds, fraction);
+      if (const auto left = simplifying_left_.seconds()) r.mutable_progress()->set_seconds_left(*left);
+    }
     writer_.send(std::make_shared<const v1::CreateSessionResponse>(std::move(r)), /*droppable=*/true);
   }
 
@@ -223,6 +231,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       if (o.base_ratio() > 0.0) pre.ratio = o.base_ratio();
       pre.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
       pre.stop = &service_.preprocessing_stop();
+      simplifying_since_ = std::chrono::steady_clock::now();
       pre.progress = [this](double f) { progress("simplifying", f); };
 
       std::string key;
@@ -289,6 +298,8 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   bool begun_ = false;
   std::atomic<bool> cancelled_{false};
   std::string bytes_;
+  std::chrono::steady_clock::time_point simplifying_since_{};  // the preprocessing job's only
+  TimeLeft simplifying_left_;
   std::thread job_;
   std::mutex read_mutex_;  // OnReadDone against expiry (--upload-timeout)
   bool expired_ = false;   // under read_mutex_, except once reads are over

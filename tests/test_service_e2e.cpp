@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <iomanip>
 #include <fstream>
 #include <sstream>
 #include <thread>
@@ -25,6 +26,7 @@
 #include "runtime/procedural_motion.h"
 #include "support/forged_hierarchy.h"
 #include "support/server_process.h"
+#include "support/grpc_upload.h"
 #include "support/test_meshes.h"
 
 namespace filigree {
@@ -520,6 +522,31 @@ TEST_F(ServiceTest, StreamRequestsThatAreNotMessagesAreRefused) {
   }
 
   expect_pose_answered(id, editor, 7);
+}
+
+// While a mesh simplifies for seconds, its progress says how long is left
+// (estimated from the recent rate: never before half a second).
+TEST_F(ServiceTest, UploadProgressSaysTheTimeLeftWhileSimplifying) {
+  const TriMesh sphere = test::icosphere(7);  // 163,842 vertices: seconds of simplification
+  std::ostringstream off;
+  off << std::setprecision(17) << "OFF\n" << sphere.positions.size() << ' ' << sphere.faces.size() << " 0\n";
+  for (const Vec3& p : sphere.positions) off << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+  for (const Triangle& f : sphere.faces) off << "3 " << f[0] << ' ' << f[1] << ' ' << f[2] << '\n';
+  grpc::ChannelArguments unbounded;  // its SessionInfo is over gRPC's default 4 MiB
+  unbounded.SetMaxReceiveMessageSize(-1);
+  const auto stub = v1::Filigree::NewStub(
+      grpc::CreateCustomChannel(server_->address(), grpc::InsecureChannelCredentials(), unbounded));
+  const test::Uploaded made = test::upload_mesh(*stub, off.str(), "off", 2000);
+  ASSERT_TRUE(made.status.ok()) << made.status.error_message();
+  std::size_t estimated = 0;
+  for (const auto& p : made.progress) {
+    EXPECT_GE(p.seconds_left(), 0.0);
+    if (p.stage() != "simplifying") {
+      EXPECT_EQ(p.seconds_left(), 0.0) << p.stage();
+    }
+    if (p.seconds_left() > 0.0) ++estimated;
+  }
+  EXPECT_GT(estimated, 0u) << made.progress.size() << " progress messages, none with a time left";
 }
 
 TEST_F(ServiceTest, UnknownSessionIsNotFound) {

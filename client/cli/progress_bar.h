@@ -5,6 +5,8 @@
 #include <chrono>
 #include <string>
 
+#include "util/time_left.h"
+
 namespace filigree::cli {
 
 class ProgressBar {
@@ -20,6 +22,7 @@ class ProgressBar {
   bool finished_ = false;
   int last_percent_ = -1;
   std::chrono::steady_clock::time_point start_;
+  TimeLeft left_;
 };
 
 }  // namespace filigree::cli

@@ -28,8 +28,10 @@ Uploaded upload_mesh(v1::Filigree::Stub& stub, const std::string& bytes, const s
   stream->WritesDone();
   Uploaded out;
   v1::CreateSessionResponse r;
-  while (stream->Read(&r))
+  while (stream->Read(&r)) {
     if (r.has_created()) out.created = r.created();
+    if (r.has_progress()) out.progress.push_back(r.progress());
+  }
   out.status = stream->Finish();
   return out;
 }

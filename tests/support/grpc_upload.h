@@ -8,6 +8,8 @@
 
 #include <grpcpp/support/status.h>
 
+#include <vector>
+
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree::test {
@@ -15,6 +17,7 @@ namespace filigree::test {
 struct Uploaded {
   grpc::Status status;
   v1::CreateSessionResponse::Created created;  // set when status is OK
+  std::vector<v1::CreateSessionResponse::Progress> progress;  // as they came
 };
 
 // Uploads `bytes` (a mesh in `format`) with `base_vertices`; waits for the end of the call.

@@ -18,7 +18,8 @@ export const CHUNK_BYTES = 512 << 10;
 export interface Created { sessionId: string; editorToken: string; viewerToken: string; cached: boolean; vertexCount: number }
 
 // 'sending': the body is on its way (fetch cannot tell how far); then the server's stages.
-export type Progress = { stage: 'sending'; bytes: number } | { stage: string; fraction: number };
+// secondsLeft: the server's estimate of the stage's time left (0: none yet).
+export type Progress = { stage: 'sending'; bytes: number } | { stage: string; fraction: number; secondsLeft: number };
 
 // The request body: begin, then the file's bytes in chunks, each a data
 // frame. A Blob of slices: the file is not copied into memory here.
@@ -98,7 +99,9 @@ export async function createSession(serverUrl: string, file: Blob, format: strin
   await call(serverUrl, 'CreateSession', body, options.apiKey ?? '', (payload) => {
     const message = fromBinary(CreateSessionResponseSchema, payload);
     if (message.kind.case === 'progress') {
-      options.onProgress?.({ stage: message.kind.value.stage, fraction: message.kind.value.fraction });
+      options.onProgress?.({
+        stage: message.kind.value.stage, fraction: message.kind.value.fraction, secondsLeft: message.kind.value.secondsLeft,
+      });
     } else if (message.kind.case === 'created') {
       const c = message.kind.value;
       created = {

@@ -227,7 +227,8 @@ export class FrontDoor {
       text.textContent = `Sending ${name} (${megabytes(progress.bytes)})…`;
       bar.removeAttribute('value');
     } else {
-      text.textContent = `${STAGES[progress.stage] ?? progress.stage}… ${Math.round(100 * progress.fraction)} %`;
+      const left = progress.secondsLeft > 0 ? `, about ${Math.max(1, Math.round(progress.secondsLeft))} s left` : '';
+      text.textContent = `${STAGES[progress.stage] ?? progress.stage}… ${Math.round(100 * progress.fraction)} %${left}`;
       bar.max = 1;
       bar.value = progress.fraction;
     }
