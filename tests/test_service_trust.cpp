@@ -353,22 +353,21 @@ TEST_F(TrustTest, ASigkillLosesNoAcknowledgedPoseAndVersionsNeverRepeat) {
 }
 
 
-// One flat polygon of `corners` corners: fan-triangulated, its first corner
-// gets a valence of `corners` (2,000 took 21 s to preprocess, 8,000 minutes).
-std::string polygon_obj(int corners) {
+// A closed sphere of 12·4^levels vertices as OBJ text: seconds of
+// preprocessing (levels 7: 164k vertices, ~5 s here; 8: 655k, ~20 s).
+std::string sphere_obj(int levels) {
+  const TriMesh m = test::icosphere(levels);
   std::string obj;
+  obj.reserve(40 * (m.positions.size() + m.faces.size()));
   char line[96];
-  for (int i = 0; i < corners; ++i) {
-    const double a = 2.0 * 3.14159265358979 * i / corners;
-    std::snprintf(line, sizeof line, "v %.9f %.9f 0\n", std::cos(a), std::sin(a));
+  for (const Vec3& p : m.positions) {
+    std::snprintf(line, sizeof line, "v %.9f %.9f %.9f\n", p.x(), p.y(), p.z());
     obj += line;
   }
-  obj += 'f';
-  for (int i = 1; i <= corners; ++i) {
-    obj += ' ';
-    obj += std::to_string(i);
+  for (const Triangle& f : m.faces) {
+    std::snprintf(line, sizeof line, "f %u %u %u\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    obj += line;
   }
-  obj += '\n';
   return obj;
 }
 
@@ -411,17 +410,19 @@ struct UploadInFlight {
   grpc::Status status;
 };
 
-// SIGTERM waited for preprocessing to finish: with an 8,000-corner polygon
-// in flight the server had not stopped after 45 s. Preprocessing stops at
-// its next check; the upload (not yet a session) hears UNAVAILABLE.
+// SIGTERM waited for preprocessing to finish: with a long preprocessing in
+// flight the server had not stopped after 45 s. Preprocessing stops at its
+// next check (every candidate removal); the upload (not yet a session)
+// hears UNAVAILABLE. The mesh takes ~20 s to preprocess: waiting for it
+// would be far over the bound.
 TEST_F(TrustTest, ShutdownDoesNotWaitForPreprocessing) {
   ChildServer server;
-  UploadInFlight upload(*server.stub, polygon_obj(8000));
+  UploadInFlight upload(*server.stub, sphere_obj(8));
   ASSERT_TRUE(upload.wait_until_simplifying());
   const auto start = std::chrono::steady_clock::now();
   EXPECT_EQ(server.process.terminate(), 0);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  EXPECT_LT(seconds, 10.0) << "the server took " << seconds << " s to stop";
+  EXPECT_LT(seconds, 3.0) << "the server took " << seconds << " s to stop";
   upload.thread.join();
   EXPECT_EQ(upload.status.error_code(), grpc::StatusCode::UNAVAILABLE) << upload.status.error_message();
   EXPECT_FALSE(upload.created);
@@ -436,7 +437,7 @@ TEST_F(TrustTest, AnUploadCancelledWhilePreprocessingLeavesNoSession) {
   // first has finished (and made its session, or not).
   ChildServer server({"--preprocessing-slots", "1", "--data-dir", data.string()});
   {
-    UploadInFlight cancelled(*server.stub, polygon_obj(3000));
+    UploadInFlight cancelled(*server.stub, sphere_obj(7));
     ASSERT_TRUE(cancelled.wait_until_simplifying());
     cancelled.context.TryCancel();
   }
