@@ -138,6 +138,10 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       return {grpc::StatusCode::INVALID_ARGUMENT, "quantization_bits must be between 8 and 24"};
     if (!(o.threshold() >= 0.0) || std::isinf(o.threshold()))
       return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
+    if (!(o.regions_budget_ms() >= 0.0) || std::isinf(o.regions_budget_ms()))
+      return {grpc::StatusCode::INVALID_ARGUMENT, "regions_budget_ms must be a finite number of ms ≥ 0"};
+    if (o.regions_budget_ms() > 0.0 && o.whole_mesh())
+      return {grpc::StatusCode::INVALID_ARGUMENT, "whole_mesh optimises the whole mesh: it has no regions' budget"};
     if (!v1::SkinningMethod_IsValid(o.skinning()))
       return {grpc::StatusCode::INVALID_ARGUMENT, "skinning method " + std::to_string(o.skinning()) + " is unknown"};
     // 0 is "not set"; otherwise a share of the vertices.

@@ -56,6 +56,7 @@ using Clock = std::chrono::steady_clock;
 DeformerOptions deformer_options(const v1::SessionOptions& o) {
   DeformerOptions d;
   d.threshold = o.whole_mesh() ? DeformerOptions::kInfinity : o.threshold();
+  d.regions_budget_ms = o.whole_mesh() ? 0.0 : o.regions_budget_ms();
   // One compute thread per session: sessions run side by side.
   d.threads = 1;
   return d;

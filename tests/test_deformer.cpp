@@ -364,6 +364,32 @@ TEST_F(DeformerTest, ErrorToTheWholeMeshResultShrinksAsTGrows) {
   EXPECT_LT(previous, 0.01 * direct_only);
 }
 
+// A time budget instead of T: T follows the regions' time, at most ×2 or
+// ÷2 a frame. A budget no frame can meet brings T down to its floor; one
+// every frame meets takes it up to its ceiling; the frames say which T they used.
+TEST_F(DeformerTest, ARegionsBudgetMovesTTowardIt) {
+  for (const double budget : {1e-6, 1e6}) {
+    DeformerOptions o;
+    o.regions_budget_ms = budget;
+    Deformer d(*h_, o);
+    double previous = DeformerOptions::kBudgetStartT;
+    for (int frame = 0; frame < 40; ++frame) {
+      const FrameStats s = d.deform(bend(0.5 + 0.01 * frame)).stats;
+      EXPECT_EQ(s.threshold, previous) << "frame " << frame;  // the T this frame ran at
+      previous = budget < 1.0 ? std::max(previous / 2.0, DeformerOptions::kMinBudgetT)
+                              : std::min(previous * 2.0, DeformerOptions::kMaxBudgetT);
+    }
+    EXPECT_EQ(previous, budget < 1.0 ? DeformerOptions::kMinBudgetT : DeformerOptions::kMaxBudgetT);
+  }
+  DeformerOptions inf;
+  inf.threshold = kInf;
+  inf.regions_budget_ms = 5.0;
+  EXPECT_THROW(Deformer(*h_, inf), std::invalid_argument);
+  DeformerOptions nan;
+  nan.regions_budget_ms = std::nan("");
+  EXPECT_THROW(Deformer(*h_, nan), std::invalid_argument);
+}
+
 TEST_F(DeformerTest, BadPosesAreRejectedAndTheDeformerKeepsWorking) {
   Deformer d(*h_);
   Pose short_pose = rest_pose();

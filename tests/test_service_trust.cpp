@@ -268,6 +268,46 @@ TEST_F(TrustTest, InvalidOptionsAndMeshesWithoutATriangleAreRefused) {
     b.mutable_options()->set_base_ratio(0.5);
   });
   EXPECT_TRUE(half.status.ok()) << half.status.error_message();
+  // A regions' budget: finite and ≥ 0, and not with whole_mesh; a good one
+  // makes a session whose frames run at the T it moves to.
+  for (const double budget : {std::nan(""), -1.0, std::numeric_limits<double>::infinity()}) {
+    const Created c = upload(*server.stub, test::file_bytes(kBunny), "obj",
+                             [&](v1::CreateSessionRequest::Begin& b) { b.mutable_options()->set_regions_budget_ms(budget); });
+    EXPECT_EQ(c.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << budget;
+    EXPECT_NE(c.status.error_message().find("regions_budget_ms"), std::string::npos) << c.status.error_message();
+  }
+  const Created whole = upload(*server.stub, test::file_bytes(kBunny), "obj", [](v1::CreateSessionRequest::Begin& b) {
+    b.mutable_options()->set_whole_mesh(true);
+    b.mutable_options()->set_regions_budget_ms(2.0);
+  });
+  EXPECT_EQ(whole.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << whole.status.error_message();
+  const Created budgeted = upload(*server.stub, test::file_bytes(kBunny), "obj", [](v1::CreateSessionRequest::Begin& b) {
+    b.mutable_options()->set_regions_budget_ms(1e-6);  // no frame meets it: T halves down to 100
+  });
+  ASSERT_TRUE(budgeted.status.ok()) << budgeted.status.error_message();
+  {
+    v1::WatchRequest wr;
+    wr.set_session_id(budgeted.id());
+    auto watch_ctx = with(budgeted.created.viewer_token());
+    auto watch = server.stub->Watch(watch_ctx.get(), wr);
+    v1::Frame f;
+    ASSERT_TRUE(watch->Read(&f));
+    EXPECT_EQ(f.stats().threshold(), 1e4);  // the first frame, at the start
+    for (int k = 1; k <= 3; ++k) {
+      v1::DriveRequest pose;
+      pose.set_session_id(budgeted.id());
+      pose.add_indices(3);
+      pose.add_positions(0.01f * k), pose.add_positions(0.0f), pose.add_positions(0.0f);
+      v1::SubmitPoseResponse accepted;
+      ASSERT_TRUE(server.stub->SubmitPose(with(budgeted.created.editor_token()).get(), pose, &accepted).ok());
+      do {
+        ASSERT_TRUE(watch->Read(&f)) << "no frame answered the pose";
+      } while (f.version() <= accepted.accepted_at_version());
+      EXPECT_LT(f.stats().threshold(), 1e4) << "frame " << f.version();  // T went down toward the budget
+    }
+    watch_ctx->TryCancel();
+    watch->Finish();
+  }
 
   // Every face has a repeated corner or three collinear corners.
   const std::string flat = "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 4\nf 2 3 3\n";

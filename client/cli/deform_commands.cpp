@@ -32,6 +32,7 @@ struct RuntimeArgs {
   std::string hierarchy, output, threshold = "default", rotation = "best-fit", terms = "edge";
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   int iterations = 0;
+  double regions_budget_ms = 0.0;
 };
 
 struct DeformArgs : RuntimeArgs {
@@ -75,6 +76,7 @@ DeformerOptions options_of(const RuntimeArgs& a) {
     throw std::invalid_argument("--terms takes edge or vertex, not '" + a.terms + "'");
   }
   o.local_global_iterations = a.iterations;
+  o.regions_budget_ms = a.regions_budget_ms;
   return o;
 }
 
@@ -97,6 +99,10 @@ void add_runtime_options(CLI::App* cmd, RuntimeArgs& a) {
                   "vertex (each differential coordinate by its vertex's rotation, the thesis' form)");
   cmd->add_option("--iterations", a.iterations, "Local-global (as-rigid-as-possible) iterations; each lowers the energy or leaves it")
       ->check(CLI::Range(0, 100));
+  cmd->add_option("--regions-budget-ms", a.regions_budget_ms,
+                  "A time budget for each frame's region optimisation, in ms, instead of a fixed --threshold: T follows it "
+                  "frame by frame (starting at --threshold, or 1e4)")
+      ->check(CLI::NonNegativeNumber);
   cmd->add_option("--threads", a.threads, "Worker threads")->check(CLI::Range(1, 256));
 }
 

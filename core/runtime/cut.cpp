@@ -104,8 +104,8 @@ void AdaptiveCut::set_threshold(double threshold) {
   if (special(threshold) || special(threshold_)) {
     reset(threshold);
   } else {
+    if (threshold != threshold_) scored_since_move_ = 0;  // another T: the cut has somewhere to go
     threshold_ = threshold;
-    scored_since_move_ = 0;  // another T: the cut has somewhere to go
   }
 }
 

@@ -68,6 +68,12 @@ Deformer::Deformer(std::shared_ptr<const DeformerModel> model, const DeformerOpt
   check_threshold(options.threshold);
   if (options.threads < 1) throw std::invalid_argument("threads must be ≥ 1");
   if (options.local_global_iterations < 0) throw std::invalid_argument("local-global iterations must be ≥ 0");
+  if (!(options.regions_budget_ms >= 0.0) || std::isinf(options.regions_budget_ms))
+    throw std::invalid_argument("the regions' time budget must be a finite number of ms ≥ 0");
+  if (options.regions_budget_ms > 0.0) {
+    if (std::isinf(options.threshold)) throw std::invalid_argument("T = ∞ has no time budget: it optimises the whole mesh");
+    if (options_.threshold <= 0.0) options_.threshold = DeformerOptions::kBudgetStartT;
+  }
   if (options_.threshold > 0.0) optimised();
 }
 
@@ -235,6 +241,17 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
     local_global(s, x);
   }
   stats.regions_ms = ms_since(t);
+  if (options_.regions_budget_ms > 0.0 && !std::isinf(options_.threshold)) {
+    // The next frame's T, toward the budget: T bounds Σ(n_i² + c_i²), and
+    // the regions' time grows with it. Within 25% of the budget T stays, so
+    // that the cut can settle.
+    const double scale = std::clamp(options_.regions_budget_ms / std::max(stats.regions_ms, 1e-3), 0.5, 2.0);
+    const double next = std::clamp(options_.threshold * scale, DeformerOptions::kMinBudgetT, DeformerOptions::kMaxBudgetT);
+    if ((scale < 0.8 || scale > 1.25) && next != options_.threshold) {
+      options_.threshold = next;
+      s.cut.set_threshold(next);
+    }
+  }
   std::copy(x.begin(), x.end(), out.begin());
 
   stats.cut_nodes = cut.recovered_count();

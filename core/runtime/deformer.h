@@ -41,6 +41,14 @@ struct DeformerOptions {
   double threshold = kDefaultThreshold;
   RotationMethod rotation = RotationMethod::kBestFit;
   RegionTerms region_terms = RegionTerms::kEdgeRotations;
+  // A time budget for a frame's region optimisation instead of a fixed T
+  // (milliseconds; 0: off): after a frame whose regions took over 125% or
+  // under 80% of it, T is scaled by the budget over that time (at most ×2
+  // or ÷2, within [kMinBudgetT, kMaxBudgetT]), so later frames spend about
+  // that, and a cut can settle. `threshold` is where
+  // it starts (a finite T > 0; 0 starts at 1e4); T = ∞ has no budget.
+  double regions_budget_ms = 0.0;
+  static constexpr double kMinBudgetT = 100.0, kMaxBudgetT = 1e9, kBudgetStartT = 1e4;
   // Local–global refinements (as-rigid-as-possible: re-fit each rotation to
   // its ring on the result, solve again with edge terms); each lowers the
   // ARAP energy of the edges at the regions, or leaves it. Off by default.
