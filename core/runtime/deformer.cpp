@@ -39,12 +39,14 @@ struct Deformer::Optimised {
   RegionSolver solver;
   std::vector<Vec3> positions;  // the last frame's result (rest before the first): the cut scores it
   std::vector<Eigen::Quaterniond> base_q;
-  // Local–global iterations: the vertices whose rotations the ARAP energy
-  // uses (the region vertices and their cut neighbours), those rotations,
-  // and a mark per vertex (all 0 between frames).
+  // Edge terms: the vertices whose rotations they read (the region vertices
+  // and their cut neighbours), each one's slot in `fit` (kNone for the
+  // others), and those rotations: 4 bytes a vertex, and 72 a fitted one (a
+  // small finite T's regions are a few thousand).
   std::vector<Index> fitted;
+  std::vector<Index> slot;
   std::vector<Eigen::Matrix3d> fit;
-  std::vector<std::uint8_t> marked;
+  const Eigen::Matrix3d& rotation_of(Index v) const { return fit[slot[v]]; }
 
   Optimised(const DeformerModel& m, const DeformerOptions& o)
       : rotations(m.hierarchy().base_mesh(), o.rotation), cut(m.node_graph(), m.laplacian(), o.threshold),
@@ -137,7 +139,7 @@ std::size_t Deformer::memory_bytes() const {
   std::size_t bytes = s_->workspace.xyzw.capacity() * sizeof(float);
   if (const Optimised* o = s_->optimised.get())
     bytes += o->positions.capacity() * sizeof(Vec3) + o->cut.memory_bytes() + o->solver.memory_bytes() +
-             o->fitted.capacity() * sizeof(Index) + o->fit.capacity() * sizeof(Eigen::Matrix3d) + o->marked.capacity();
+             (o->fitted.capacity() + o->slot.capacity()) * sizeof(Index) + o->fit.capacity() * sizeof(Eigen::Matrix3d);
   return bytes;
 }
 
@@ -231,7 +233,7 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
   };
   if (regions.count() > 0 && options_.region_terms == RegionTerms::kEdgeRotations) {
     collect_fitted(s);
-    parallel_for(s.fitted.size(), options_.threads, [&](std::size_t i) { s.fit[s.fitted[i]] = interpolated(s.fitted[i]); });
+    parallel_for(s.fitted.size(), options_.threads, [&](std::size_t i) { s.fit[i] = interpolated(s.fitted[i]); });
     stats.factorizations = solve_edge_terms(s, x);
   } else {
     stats.factorizations = s.solver.solve(regions, x, options_.threads, interpolated);
@@ -268,16 +270,19 @@ FrameStats Deformer::deform(const Pose& pose, std::span<Vec3> out) {
 void Deformer::collect_fitted(Optimised& s) const {
   const CotangentLaplacian& laplacian = model_->laplacian();
   const std::size_t n = model_->hierarchy().vertex_count();
-  if (s.marked.size() != n) s.marked.assign(n, 0), s.fit.resize(n);
+  if (s.slot.size() != n) s.slot.assign(n, kNone);
+  for (const Index v : s.fitted) s.slot[v] = kNone;  // the last frame's
   s.fitted.clear();
+  const auto take = [&](Index v) {
+    if (s.slot[v] != kNone) return;
+    s.slot[v] = static_cast<Index>(s.fitted.size());
+    s.fitted.push_back(v);
+  };
   for (const Index v : s.cut.regions().vertices) {
-    if (!s.marked[v]) s.marked[v] = 1, s.fitted.push_back(v);
-    for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) {
-      const Index j = laplacian.neighbors[k];
-      if (!s.marked[j]) s.marked[j] = 1, s.fitted.push_back(j);
-    }
+    take(v);
+    for (Index k = laplacian.offsets[v]; k < laplacian.offsets[v + 1]; ++k) take(laplacian.neighbors[k]);
   }
-  for (const Index v : s.fitted) s.marked[v] = 0;
+  s.fit.resize(s.fitted.size());
 }
 
 std::size_t Deformer::solve_edge_terms(Optimised& s, std::vector<Vec3>& x) const {
@@ -290,9 +295,9 @@ std::size_t Deformer::solve_edge_terms(Optimised& s, std::vector<Vec3>& x) const
       const Index j = laplacian.neighbors[k];
       const Vec3 e = laplacian.weights[k] * (h.rest_positions[v] - h.rest_positions[j]);
       own += e;
-      others += s.fit[j] * e;
+      others += s.rotation_of(j) * e;
     }
-    return Vec3(0.5 * (s.fit[v] * own + others));
+    return Vec3(0.5 * (s.rotation_of(v) * own + others));
   });
 }
 
@@ -315,7 +320,7 @@ void Deformer::local_global(Optimised& s, std::vector<Vec3>& x) const {
         const Index j = laplacian.neighbors[k];
         cov += laplacian.weights[k] * (h.rest_positions[j] - h.rest_positions[v]) * (x[j] - x[v]).transpose();
       }
-      s.fit[v] = best_fit_rotation(cov);
+      s.fit[i] = best_fit_rotation(cov);
     });
     solve_edge_terms(s, x);
   }
