@@ -4,7 +4,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstring>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -163,15 +162,12 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     return grpc::Status::OK;
   }
 
-  void progress(const char* stage, double fraction) {
+  // `seconds_left`: the stage's estimate, 0 for none.
+  void progress(const char* stage, double fraction, double seconds_left = 0.0) {
     v1::CreateSessionResponse r;
     r.mutable_progress()->set_stage(stage);
     r.mutable_progress()->set_fraction(fraction);
-    if (std::strcmp(stage, "simplifying") == 0) {  // the one long stage
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - simplifying_since_).count();
-      simplifying_left_.add(seconds, fraction);
-      if (const auto left = simplifying_left_.seconds()) r.mutable_progress()->set_seconds_left(*left);
-    }
+    r.mutable_progress()->set_seconds_left(seconds_left);
     writer_.send(std::make_shared<const v1::CreateSessionResponse>(std::move(r)), /*droppable=*/true);
   }
 
@@ -235,8 +231,11 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       if (o.base_ratio() > 0.0) pre.ratio = o.base_ratio();
       pre.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
       pre.stop = &service_.preprocessing_stop();
-      simplifying_since_ = std::chrono::steady_clock::now();
-      pre.progress = [this](double f) { progress("simplifying", f); };
+      // The one long stage: its progress says the time left.
+      pre.progress = [this, since = std::chrono::steady_clock::now(), left = TimeLeft()](double f) mutable {
+        left.add(std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count(), f);
+        progress("simplifying", f, left.seconds().value_or(0.0));
+      };
 
       std::string key;
       bool built = false;
@@ -302,8 +301,6 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   bool begun_ = false;
   std::atomic<bool> cancelled_{false};
   std::string bytes_;
-  std::chrono::steady_clock::time_point simplifying_since_{};  // the preprocessing job's only
-  TimeLeft simplifying_left_;
   std::thread job_;
   std::mutex read_mutex_;  // OnReadDone against expiry (--upload-timeout)
   bool expired_ = false;   // under read_mutex_, except once reads are over

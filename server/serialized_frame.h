@@ -1,6 +1,6 @@
 #pragma once
 // A frame's wire bytes, serialized once and written by every stream that
-// sends it (issue 11: encode once per frame, shared by every subscriber).
+// sends it (encoded once per frame, shared by every subscriber).
 // At 1.25M vertices a frame is ~1 MB: gRPC serialized it once per stream,
 // each time into freshly allocated (so freshly faulted-in) memory, ~1.5 ms
 // a stream, and a driver's stream first deep-copied the message (~0.7 ms)

@@ -112,8 +112,23 @@ class Simplifier {
     const std::size_t to_remove = n > target ? n - target : 0;
     std::size_t next_report = 0;
     Plan p;
-    for (;;) {
-    while (remaining > target && !heap.empty()) {
+    // The queue ran dry above the target: a removal that a change two rings
+    // away made valid (a diagonal no longer an edge, a neighbour's valence)
+    // was never queued again. Look at every vertex left once more; false if
+    // none can go.
+    const auto queue_what_is_left = [&] {
+      bool any = false;
+      for (Index v = 0; v < n; ++v) {
+        if (removed_[v] || queued[v] || !plan(v, p)) continue;
+        heap.push({p.cost, v, ++version[v]});
+        queued[v] = true;
+        dirty[v] = false;
+        any = true;
+      }
+      return any;
+    };
+    while (remaining > target) {
+      if (heap.empty() && !queue_what_is_left()) break;
       if (opt_.stop && opt_.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
       const Entry e = heap.top();
       heap.pop();
@@ -147,20 +162,6 @@ class Simplifier {
         next_report = done + std::max<std::size_t>(to_remove / 200, 1);
       }
     }
-    if (remaining <= target) break;
-    // The queue ran dry above the target. A removal that a change two rings
-    // away made valid (a diagonal no longer an edge, a neighbour's valence)
-    // was never queued again: look at every vertex left once more.
-    bool queued_any = false;
-    for (Index v = 0; v < n; ++v) {
-      if (removed_[v] || queued[v] || !plan(v, p)) continue;
-      heap.push({p.cost, v, ++version[v]});
-      queued[v] = true;
-      dirty[v] = false;
-      queued_any = true;
-    }
-    if (!queued_any) break;
-    }
     if (opt_.report && remaining > target) {
       // Why every vertex left stays: what a larger base than asked is made of.
       opt_.report->refused.fill(0);
@@ -191,8 +192,7 @@ class Simplifier {
     const std::vector<Index>& r = p.ring.ring;
     const std::size_t k = r.size();
     const bool closed = p.ring.closed;
-    if (k < 3) return refuse(BaseRefusal::kTopology);
-    if (k > kMaxRing) return refuse(BaseRefusal::kValence);
+    if (k < 3) return refuse(BaseRefusal::kTopology);  // (k ≤ kMaxRing: the valence was checked)
     if (!closed) {
       const double turn = std::numbers::pi - angle_at(x[v], x[r[0]], x[r[k - 1]]);
       if (turn > opt_.max_boundary_turn_deg * std::numbers::pi / 180.0) return refuse(BaseRefusal::kBoundary);

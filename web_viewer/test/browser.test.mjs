@@ -23,7 +23,7 @@ import { chromium } from 'playwright-core';
 import { PNG } from 'pngjs';
 
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, upload,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, diagonal, driveArgs, hookState, ROOT, startServer, stopServer, stopServerCleanly, upload,
   waitForHealth, writeEllipsoidObj,
 } from './harness.mjs';
 
@@ -121,9 +121,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
   after(async () => {
     await browser?.close();
     if (server && server.child.exitCode === null && server.child.signalCode === null) {
-      const stopped = await stopServer(server, STOP_TIMEOUT_MS);
-      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-      assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
+      await stopServerCleanly(server, STOP_TIMEOUT_MS);
     }
     if (dataDir) rmSync(dataDir, { recursive: true, force: true });
     assert.deepEqual(pageErrors, [], 'no uncaught errors in any page');
@@ -672,9 +670,7 @@ describe('the web viewer over HTTPS (--tls-cert on the --http port)', { timeout:
   after(async () => {
     await browser?.close();
     if (server && server.child.exitCode === null && server.child.signalCode === null) {
-      const stopped = await stopServer(server, STOP_TIMEOUT_MS);
-      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-      assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
+      await stopServerCleanly(server, STOP_TIMEOUT_MS);
     }
     for (const dir of [dataDir, certDir]) if (dir) rmSync(dir, { recursive: true, force: true });
     assert.deepEqual(pageErrors, [], 'no uncaught errors in any page');

@@ -18,7 +18,7 @@ import { join } from 'node:path';
 import { chromium } from 'playwright-core';
 
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, fields, hookState, openPage, ROOT, startServer, stopServer, waitShowing,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, cli, fields, hookState, openPage, ROOT, startServer, stopServerCleanly, waitShowing,
 } from './harness.mjs';
 
 const MESH = join(ROOT, 'tests', 'data', 'head_open.off');
@@ -61,9 +61,7 @@ function withServer(extraArgs = () => []) {
   }, { timeout: HOOK_TIMEOUT_MS });
   after(async () => {
     if (state.server) {
-      const stopped = await stopServer(state.server, STOP_TIMEOUT_MS);
-      assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-      assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${state.server.stderr()}`);
+      await stopServerCleanly(state.server, STOP_TIMEOUT_MS);
     }
     if (state.dataDir) for (const path of [state.dataDir, `${state.dataDir}-keys`]) rmSync(path, { recursive: true, force: true });
   }, { timeout: HOOK_TIMEOUT_MS });

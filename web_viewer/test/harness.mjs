@@ -7,6 +7,7 @@
 //   FILIGREE_CLI     the filigree CLI (default: ../client/filigree beside the server's directory)
 //   CHROMIUM         the browser (default /usr/bin/chromium)
 
+import assert from 'node:assert/strict';
 import { execFile, spawn } from 'node:child_process';
 import { closeSync, existsSync, openSync, readFileSync, writeFileSync, writeSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -73,6 +74,13 @@ export async function stopServer(server, timeoutMs) {
   clearTimeout(timer);
   if (stopped === null) server.child.kill('SIGKILL');
   return stopped;
+}
+
+// stopServer, failing the test unless the server exited 0 within `timeoutMs`.
+export async function stopServerCleanly(server, timeoutMs) {
+  const stopped = await stopServer(server, timeoutMs);
+  assert.ok(stopped, `filigree-server did not exit within ${timeoutMs} ms of SIGTERM`);
+  assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
 }
 
 // Runs the CLI; resolves with its stdout, rejects with its stderr.

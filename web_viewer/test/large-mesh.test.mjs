@@ -20,7 +20,7 @@ import { join } from 'node:path';
 import { chromium } from 'playwright-core';
 
 import {
-  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, hookState, openPage, startServer, stopServer, upload, waitShowing,
+  checkTools, CHROMIUM, CHROMIUM_ARGS, CLI, driveArgs, hookState, openPage, startServer, stopServerCleanly, upload, waitShowing,
   writeBumpySphere,
 } from './harness.mjs';
 
@@ -87,9 +87,7 @@ before(async () => {
 after(async () => {
   await browser?.close();
   if (server) {
-    const stopped = await stopServer(server, STOP_TIMEOUT_MS);
-    assert.ok(stopped, `filigree-server did not exit within ${STOP_TIMEOUT_MS} ms of SIGTERM`);
-    assert.equal(stopped.code, 0, `filigree-server exits 0 on SIGTERM: ${server.stderr()}`);
+    await stopServerCleanly(server, STOP_TIMEOUT_MS);
   }
   if (dataDir) rmSync(dataDir, { recursive: true, force: true });
   assert.deepEqual(pageErrors, [], 'no uncaught errors in any page');
