@@ -48,11 +48,13 @@ class DriveReactor final : public FrameStreamReactor<DriveReactor, grpc::ServerB
  private:
   void start(const grpc::Status& status, const std::shared_ptr<StreamStart>& started,
              const std::shared_ptr<FrameStream<DriveReactor>>& stream) override {
-    if (status.ok()) {
-      stream_->set_format(request_.frame_format());
-      session_->subscribe(stream_, session_->version());
-      take_request();  // may end the stream: `this` is not touched after it
-    }
+    if (!status.ok()) return end_start(started, stream, status);
+    stream_->set_format(request_.frame_format());
+    if (const grpc::Status detail = serve_detail(*stream_, *session_, request_.frame_format(), request_.max_vertices());
+        !detail.ok())
+      return end_start(started, stream, detail);
+    session_->subscribe(stream_, session_->version());
+    take_request();  // may end the stream: `this` is not touched after it
     end_start(started, stream, status);
   }
 

@@ -421,6 +421,22 @@ grpc::ServerUnaryReactor* FiligreeService::GetHandles(grpc::CallbackServerContex
   });
 }
 
+grpc::ServerUnaryReactor* FiligreeService::SetDetail(grpc::CallbackServerContext* context,
+                                                     const v1::SetDetailRequest* request, v1::SetDetailResponse* response) {
+  if (request->max_vertices() == 0)
+    return finish_unary(context, {grpc::StatusCode::INVALID_ARGUMENT, "max_vertices must be at least 1"});
+  const std::uint64_t stream_id = request->stream_id();
+  const std::uint32_t max_vertices = request->max_vertices();
+  return unary_on_session(context, request->session_id(), Role::kViewer, [=](Session& s) {
+    const std::optional<std::uint32_t> level = stream_id == 0 ? std::nullopt : s.set_detail(stream_id, max_vertices);
+    if (!level)
+      return grpc::Status(grpc::StatusCode::NOT_FOUND,
+                          "no stream " + std::to_string(stream_id) + " at a level of detail in this session");
+    response->set_vertex_count(*level);
+    return grpc::Status::OK;
+  });
+}
+
 grpc::ServerUnaryReactor* FiligreeService::GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                                        grpc::ByteBuffer* response) {
   v1::GetOverlaysRequest r;

@@ -55,7 +55,7 @@ using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCa
         rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<
-                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::WithCallbackMethod_GetRestMesh<rpc::Service>>>>>>>>>>>>>>>>;
+                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::WithCallbackMethod_GetRestMesh<rpc::WithCallbackMethod_SetDetail<rpc::Service>>>>>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
  public:
@@ -85,6 +85,8 @@ class FiligreeService final : public FiligreeServiceBase {
                                                           const v1::GetRestMeshRequest* request) override;
   grpc::ServerUnaryReactor* GetHandles(grpc::CallbackServerContext* context, const v1::GetHandlesRequest* request,
                                        v1::SessionHandles* response) override;
+  grpc::ServerUnaryReactor* SetDetail(grpc::CallbackServerContext* context, const v1::SetDetailRequest* request,
+                                      v1::SetDetailResponse* response) override;
   // Request: a GetOverlaysRequest; answer: an Overlays serialized once per frame.
   grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                         grpc::ByteBuffer* response) override;

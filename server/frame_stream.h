@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <random>
 #include <string>
 #include <utility>
 
@@ -28,6 +29,7 @@ struct OutgoingFrame {
   grpc::ByteBuffer bytes;
   std::uint64_t version = 0;
   std::optional<std::uint64_t> keyframe;
+  std::uint64_t level_message = 0;  // a DetailLevel message: its number on this stream
 };
 inline const grpc::ByteBuffer& wire(const OutgoingFrame& f) { return f.bytes; }
 
@@ -41,6 +43,7 @@ class FrameStream : public FrameSink {
   FrameStream(Reactor* reactor, std::uint64_t driver) : writer_(reactor), driver_(driver) {
     writer_.on_start_write([this](const OutgoingFrame& f) {
       if (f.keyframe) written_keyframe_ = *f.keyframe;
+      if (f.level_message) written_level_message_ = f.level_message;
       // Only a stream that acknowledges keeps what it wrote: on Drive and
       // Watch nothing would ever take it off again.
       if (!acknowledged_) return;
@@ -77,6 +80,16 @@ class FrameStream : public FrameSink {
 
   // Set once, before the stream subscribes.
   void set_format(v1::FrameFormat format) { format_ = format; }
+  // Set once, before the stream subscribes (with the chunked format): the
+  // stream is served at level `level` (Session::level_for) and can switch
+  // (SetDetail) by `id`, which must not be 0.
+  void serve_levels(std::uint64_t id, std::uint32_t level) {
+    stream_id_ = id;
+    level_ = level;
+  }
+  std::uint64_t stream_id() const override { return stream_id_; }
+  std::uint32_t level() const override { return level_; }
+  void switch_level(std::uint32_t level) override { level_ = level; }
   // Set once, before the stream subscribes (PlayClip): the clip time of
   // this stream's poses, written with the pose id into its frames.
   void set_clip_times(std::shared_ptr<const ClipTimes> times) { clip_times_ = std::move(times); }
@@ -88,12 +101,25 @@ class FrameStream : public FrameSink {
 
   void offer(std::shared_ptr<const PublishedFrame> frame) override {
     // The session offers from its workers and, once, from subscribe(): one at
-    // a time, and never an older frame after a newer one.
+    // a time, and never an older frame after a newer one (but after a level
+    // switch, the frame already written at the old level).
     std::lock_guard lock(offer_mutex_);
-    if (offered_any_ && frame->frame.version() <= offered_version_) return;
+    const std::uint32_t level = level_;
+    const bool switching = stream_id_ != 0 && level != level_sent_;
+    if (!switching && offered_any_ && frame->frame.version() <= offered_version_) return;
+    // A stream at a level of detail writes the level's frame; a frame computed
+    // before anyone wanted the level has none, and the next one will.
+    const PublishedFrame* at = stream_id_ != 0 ? frame->at_level(level) : frame.get();
+    if (at == nullptr) return;
+    if (switching) {
+      level_sent_ = level;
+      level_pending_ = true;  // write() sends the DetailLevel first
+      written_keyframe_ = kNone;
+      queued_keyframe_ = kNone;
+    }
     offered_any_ = true;
-    offered_version_ = frame->frame.version();
-    write(frame);
+    offered_version_ = std::max(offered_version_, frame->frame.version());
+    write(*at);
     if (observer_) observer_(frame.get());
   }
   void close(bool session_closed, const std::string& why) override {
@@ -103,25 +129,49 @@ class FrameStream : public FrameSink {
   StreamWriter<Reactor, OutgoingFrame>& writer() { return writer_; }
 
  private:
-  void write(const std::shared_ptr<const PublishedFrame>& frame) {
+  void write(const PublishedFrame& frame) {
     try {
       if (format_ == v1::FRAME_FORMAT_SINGLE) {
-        if (frame->single) writer_.send(outgoing(*frame, *frame->single, frame->single_bytes()), /*droppable=*/true);
+        if (frame.single) writer_.send(outgoing(frame, *frame.single, frame.single_bytes()), /*droppable=*/true);
         return;
       }
-      const PublishedFrame* key = frame->keyframe.get();
+      // A DetailLevel not written yet goes again before a newer keyframe (which
+      // supersedes what is queued); sent first, it supersedes the old level's
+      // queued keyframes itself.
+      const bool level_unwritten = stream_id_ != 0 && (level_pending_ || written_level_message_ != level_messages_);
+      const PublishedFrame* key = frame.keyframe.get();
       if (key != nullptr) {
         const std::uint64_t version = key->frame.version();
         if (written_keyframe_ != version && queued_keyframe_ != version) {
           queued_keyframe_ = version;
-          writer_.send(outgoing(*key, key->frame, key->frame_bytes()), /*droppable=*/false, /*supersede=*/true);
+          if (level_unwritten) send_level(frame);
+          writer_.send(outgoing(*key, key->frame, key->frame_bytes()), /*droppable=*/false, /*supersede=*/!level_unwritten);
         }
       }
-      writer_.send(outgoing(*frame, frame->frame, frame->frame_bytes()), /*droppable=*/true);
+      if (level_pending_) send_level(frame);
+      writer_.send(outgoing(frame, frame.frame, frame.frame_bytes()), /*droppable=*/true);
     } catch (const std::exception& e) {  // the frame could not be serialized: this stream cannot go on
-      spdlog::error("event=frame_serialization_failed version={} error=\"{}\"", frame->frame.version(), e.what());
+      spdlog::error("event=frame_serialization_failed version={} error=\"{}\"", frame.frame.version(), e.what());
       writer_.finish({grpc::StatusCode::INTERNAL, std::string("a frame could not be serialized: ") + e.what()});
     }
+  }
+
+  // Queues the DetailLevel of `frame`'s level (offer_mutex_ held), ahead of
+  // anything of an older level still queued.
+  void send_level(const PublishedFrame& frame) {
+    v1::Frame message;
+    v1::DetailLevel& level = *message.mutable_level();
+    level.set_vertex_count(frame.frame.vertex_count());
+    if (frame.geometry) {
+      level.set_face_count(frame.geometry->face_count);
+      level.set_mesh(frame.geometry->mesh);
+    }
+    level.set_stream_id(stream_id_);
+    auto out = std::make_shared<OutgoingFrame>();
+    out->bytes = SerializedFrame(message, frame.wire_pool).for_stream(0);
+    out->level_message = ++level_messages_;
+    level_pending_ = false;
+    writer_.send(std::move(out), /*droppable=*/false, /*supersede=*/true);
   }
 
   // Every stream writes the frame's one serialized copy; a driver's also
@@ -150,10 +200,37 @@ class FrameStream : public FrameSink {
   std::uint64_t queued_keyframe_ = kNone;  // offer_mutex_
   bool offered_any_ = false;               // offer_mutex_
   std::uint64_t offered_version_ = 0;
+  // Levels of detail: the stream's id (0: none asked), the level it wants,
+  // the level of the frames it writes (offer_mutex_), whether that level's
+  // DetailLevel must go out with the next write, and the numbers of the
+  // DetailLevel messages queued (offer_mutex_) and written.
+  std::uint64_t stream_id_ = 0;
+  std::atomic<std::uint32_t> level_{0};
+  std::uint32_t level_sent_ = 0;
+  bool level_pending_ = false;
+  std::uint64_t level_messages_ = 0;
+  std::atomic<std::uint64_t> written_level_message_{0};
   std::atomic<bool> acknowledged_{false};  // a Follow stream
   std::mutex unread_mutex_;
   std::deque<std::uint64_t> unread_;  // versions written and not acknowledged (Follow)
 };
+
+// Serves `stream` at the level of detail for `max_vertices` (proto
+// WatchRequest.max_vertices; 0: full detail, no levels), under a fresh
+// random stream id. Call before the stream subscribes. INVALID_ARGUMENT for
+// a level in the single-buffer format.
+template <class Reactor>
+grpc::Status serve_detail(FrameStream<Reactor>& stream, const Session& session, v1::FrameFormat format,
+                          std::uint32_t max_vertices) {
+  if (max_vertices == 0) return grpc::Status::OK;
+  if (format != v1::FRAME_FORMAT_CHUNKED)
+    return {grpc::StatusCode::INVALID_ARGUMENT, "max_vertices needs frame_format FRAME_FORMAT_CHUNKED"};
+  std::random_device random;
+  std::uint64_t id = 0;
+  while (id == 0) id = (std::uint64_t{random()} << 32) ^ random();
+  stream.serve_levels(id, session.level_for(max_vertices));
+  return grpc::Status::OK;
+}
 
 // A frame stream's end (OnDone): it no longer subscribes or drives (a
 // watcher's driver 0 drives nothing), and its writer never touches the

@@ -17,6 +17,7 @@
 #include "codec/draco_writer.h"
 #include "codec/keyed_deltas.h"
 #include "hierarchy/cut_state.h"
+#include "hierarchy/detail_level.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/deformer.h"
 #include "runtime/deformer_model.h"
@@ -62,21 +63,12 @@ DeformerOptions deformer_options(const v1::SessionOptions& o) {
   return d;
 }
 
-FrameEncoderOptions encoder_options(const v1::SessionOptions& o, const SessionAssets& assets) {
-  FrameEncoderOptions e;
-  e.chunk_vertices = assets.chunk_vertices;
-  e.bits = o.quantization_bits();
-  e.max_error = assets.automatic_max_error;
-  e.staging = assets.staging;
-  return e;
-}
-
 }  // namespace
 
 Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
                  Journal journal)
     : assets_(std::move(assets)), scheduler_(scheduler), lane_(scheduler.lane()),
-      encoder_(assets_->hierarchy().rest_positions, encoder_options(record.options, *assets_)),
+      encoder_(assets_->hierarchy().rest_positions, frame_encoder_options(record.options, *assets_)),
       record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = assets_->hierarchy();
   const v1::BaseMesh& base = assets_->base;
@@ -234,6 +226,7 @@ void Session::subscribe(const std::shared_ptr<FrameSink>& sink, std::optional<st
     }
     sinks_.push_back(sink);
     if (current_ && (!after_version || current_->frame.version() > *after_version)) now = current_;
+    compute_if_level_missing_locked();
     touch();
   }
   // A single-buffer subscriber of a frame made without that buffer: the
@@ -254,6 +247,50 @@ void Session::request_keyframe() {
   keyframe_requested_ = true;
   pending_ = true;
   maybe_compute_locked();
+}
+
+std::uint32_t Session::level_for(std::uint32_t max_vertices) const {
+  return detail_level_vertices(max_vertices, assets_->hierarchy().base_vertices.size(), assets_->hierarchy().vertex_count());
+}
+
+std::vector<std::uint32_t> Session::wanted_levels_locked() const {
+  const std::uint32_t full = static_cast<std::uint32_t>(assets_->hierarchy().vertex_count());
+  std::vector<std::uint32_t> levels;
+  for (const auto& w : sinks_)
+    if (const auto sink = w.lock()) {
+      const std::uint32_t level = sink->level();
+      if (level != 0 && level != full && std::find(levels.begin(), levels.end(), level) == levels.end()) levels.push_back(level);
+    }
+  return levels;
+}
+
+void Session::compute_if_level_missing_locked() {
+  for (std::uint32_t level : wanted_levels_locked())
+    if (!current_ || !current_->at_level(level)) {
+      pending_ = true;
+      maybe_compute_locked();
+      return;
+    }
+}
+
+std::optional<std::uint32_t> Session::set_detail(std::uint64_t stream_id, std::uint32_t max_vertices) {
+  const std::uint32_t level = level_for(max_vertices);
+  std::shared_ptr<FrameSink> sink;
+  std::shared_ptr<const PublishedFrame> now;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& w : sinks_)
+      if (auto s = w.lock(); s && s->stream_id() == stream_id) sink = std::move(s);
+    if (!sink) return std::nullopt;
+    sink->switch_level(level);
+    now = current_;
+    compute_if_level_missing_locked();
+    touch();
+  }
+  // The current frame at once if it has the level; else the frame computing
+  // now for it.
+  if (now && now->at_level(level)) sink->offer(now);
+  return level;
 }
 
 void Session::unsubscribe(const FrameSink* sink) {
@@ -523,6 +560,14 @@ void Session::describe(v1::ListSessionsResponse::Entry& entry) const {
   // Each takes mutex_ itself.
   entry.set_drivers(static_cast<std::uint32_t>(drivers()));
   entry.set_watchers(static_cast<std::uint32_t>(subscriber_count()));
+  std::lock_guard lock(mutex_);
+  for (std::uint32_t level : wanted_levels_locked()) {
+    v1::DetailLevelUse& use = *entry.add_levels();
+    use.set_vertex_count(level);
+    for (const auto& w : sinks_)
+      if (const auto sink = w.lock(); sink && sink->level() == level) use.set_streams(use.streams() + 1);
+    if (const auto it = level_frames_encoded_.find(level); it != level_frames_encoded_.end()) use.set_frames_encoded(it->second);
+  }
 }
 
 grpc::ByteBuffer Session::state_wire(v1::FrameFormat format) {

@@ -31,6 +31,7 @@
 #include "runtime/deformer.h"  // FrameStats
 #include "runtime/pose.h"
 #include "server/frame_scheduler.h"
+#include "server/level_frames.h"
 #include "server/serialized_frame.h"
 #include "server/session_assets.h"
 #include "server/session_record.h"
@@ -55,6 +56,18 @@ struct PublishedFrame {
   // FRAME_FORMAT_SINGLE, encoded only while a subscriber wants it.
   std::shared_ptr<const v1::Frame> single;
   std::unordered_map<std::uint64_t, std::uint64_t> pose_of_driver;
+  // The same frame at each level of detail a stream wanted when it was
+  // computed, by the level's vertex count (proto DetailLevel).
+  std::vector<std::pair<std::uint32_t, std::shared_ptr<const PublishedFrame>>> levels;
+  // A frame at a level of detail: the level's mesh (null at full detail).
+  std::shared_ptr<const LevelGeometry> geometry;
+  // The frame at `level` (the full mesh's vertex count: this one), or null.
+  const PublishedFrame* at_level(std::uint32_t level) const {
+    if (level == frame.vertex_count()) return this;
+    for (const auto& [vertices, f] : levels)
+      if (vertices == level) return f.get();
+    return nullptr;
+  }
   // Where the wire bytes below are serialized (the mesh's pool).
   std::shared_ptr<BufferPool<char>> wire_pool;
 
@@ -89,6 +102,14 @@ class FrameSink {
   // The driver whose poses this stream answers (PublishedFrame::pose_of_driver),
   // or 0 for a watcher (fixed for its life).
   virtual std::uint64_t driver() const { return 0; }
+  // Streams at a level of detail (proto DetailLevel): their id for
+  // SetDetail (0: a stream that asked for none, always at full detail) and
+  // the level they want now (a vertex count; the full mesh's at full detail).
+  virtual std::uint64_t stream_id() const { return 0; }
+  virtual std::uint32_t level() const { return 0; }
+  // Goes to `level` (one of Session::level_for's): the next frame offered is
+  // written after the level's DetailLevel even if its version was written.
+  virtual void switch_level(std::uint32_t /*level*/) {}
   // The session is closing (session_closed) or leaves this process (the
   // server stops, or the session moves to another replica): finish the
   // stream, with `why` as the UNAVAILABLE message in the second case.
@@ -161,6 +182,13 @@ class Session {
   void driver_left(std::uint64_t driver);
   // The next frame is a keyframe (a client lost its decoded state).
   void request_keyframe();
+  // The level of detail (its vertex count, the full mesh's at full detail)
+  // that serves a budget of `max_vertices` ≥ 1 (hierarchy/detail_level.h).
+  std::uint32_t level_for(std::uint32_t max_vertices) const;
+  // Moves subscriber `stream_id` (FrameSink::stream_id) to the level that
+  // serves `max_vertices` ≥ 1 and returns it; nullopt when no subscriber
+  // has that id.
+  std::optional<std::uint32_t> set_detail(std::uint64_t stream_id, std::uint32_t max_vertices);
 
   // Throws HierarchyError (and changes nothing) if a finite T is asked of a
   // hierarchy whose node graph cannot be derived. Returns the version when
@@ -264,8 +292,19 @@ class Session {
     DeltaQuantization single_quantization;
     double single_error = 0.0;
     std::string single_bytes;
+    // The levels of detail streams want (their geometry), encoded in a
+    // part of their own; a level whose encoding failed is left out.
+    std::vector<std::shared_ptr<const LevelGeometry>> levels;
+    std::vector<std::uint32_t> levels_failed;
     std::atomic<bool> failed{false};
   };
+  enum class PartKind { kChunks, kSingle, kLevels };
+  static PartKind part_kind(const InFlight& f, std::size_t p);
+  // The levels the subscribers want now, but the full mesh (mutex_ held).
+  std::vector<std::uint32_t> wanted_levels_locked() const;
+  // A frame with every wanted level is computed unless the current one has
+  // them (mutex_ held).
+  void compute_if_level_missing_locked();
 
   // The session's first frame (the rest mesh, or the restored pose),
   // computed and encoded on the caller's thread, then published.
@@ -338,6 +377,10 @@ class Session {
   Pose scratch_pose_;        // compute_frame's buffers (one compute at a time)
   std::vector<Vec3> frame_;  // positions of the frame computed last, from compute to quantization (empty between)
   FrameEncoder encoder_;
+  // Each level of detail's encoder, while streams want it (touched by the
+  // encoding frame's levels part and publish(), one frame at a time).
+  std::map<std::uint32_t, std::unique_ptr<LevelFrames>> level_frames_;
+  std::map<std::uint32_t, std::uint64_t> level_frames_encoded_;  // mutex_; for ListSessions
   std::unique_ptr<InFlight> computed_;  // computed, waiting for the encoder
   std::unique_ptr<InFlight> encoding_;  // being encoded
 

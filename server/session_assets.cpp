@@ -5,6 +5,7 @@
 #include "codec/frame_encoder.h"
 #include "hierarchy/hierarchy.h"
 #include "runtime/deformer_model.h"
+#include "server/level_geometry.h"
 #include "server/session_info_wire.h"
 
 namespace filigree::server {
@@ -48,10 +49,20 @@ std::shared_ptr<const SessionAssets> make_assets(const std::shared_ptr<const Hie
   const std::size_t chunks = FrameEncoder::chunk_count(h.vertex_count(), a->chunk_vertices);
   a->staging = std::make_shared<BufferPool<float>>(2 * chunks + 2);
   a->wire = std::make_shared<BufferPool<char>>(2);
+  a->levels = std::make_shared<LevelGeometries>(*a->model);
   return a;
 }
 
 }  // namespace
+
+FrameEncoderOptions frame_encoder_options(const v1::SessionOptions& o, const SessionAssets& assets) {
+  FrameEncoderOptions e;
+  e.chunk_vertices = assets.chunk_vertices;
+  e.bits = o.quantization_bits();
+  e.max_error = assets.automatic_max_error;
+  e.staging = assets.staging;
+  return e;
+}
 
 v1::RestMesh rest_mesh_message(const Hierarchy& h) {
   v1::RestMesh rest;

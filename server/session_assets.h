@@ -10,6 +10,7 @@
 #include <memory>
 #include <mutex>
 
+#include "codec/frame_encoder.h"
 #include "filigree/v1/filigree.pb.h"
 #include "mesh/tri_mesh.h"
 #include "util/buffer_pool.h"
@@ -22,6 +23,7 @@ class DeformerModel;
 namespace filigree::server {
 
 class MeshWire;
+class LevelGeometries;
 
 // The rest mesh as clients receive it: positions (float) and faces, in
 // original order, without uploaded_ids.
@@ -57,9 +59,15 @@ struct SessionAssets {
   // Frames' wire bytes (SerializedFrame), from publishing until the last
   // stream has written them.
   std::shared_ptr<BufferPool<char>> wire;
+  // The levels of detail streams asked for (built on demand).
+  std::shared_ptr<LevelGeometries> levels;
 
   const Hierarchy& hierarchy() const;
 };
+
+// The frame encoder's options for a session of these assets with `options`
+// (its full frames and its levels of detail alike).
+FrameEncoderOptions frame_encoder_options(const v1::SessionOptions& options, const SessionAssets& assets);
 
 class SessionAssetsCache {
  public:

@@ -158,6 +158,7 @@ void Session::release_frame() { assets_->frames->give(std::exchange(frame_, {}))
 
 void Session::compute_task() {
   auto f = std::make_unique<InFlight>();
+  std::vector<std::uint32_t> levels;
   {
     std::lock_guard lock(mutex_);
     if (stopping_) {
@@ -165,6 +166,16 @@ void Session::compute_task() {
       return;
     }
     f->single = want_single_locked();
+    levels = wanted_levels_locked();
+  }
+  // A level's mesh is built by the first frame that needs it (then shared by
+  // the mesh's sessions); a level that cannot be built is left out.
+  for (std::uint32_t level : levels) {
+    try {
+      f->levels.push_back(assets_->levels->get(level));
+    } catch (const std::exception& e) {
+      spdlog::error("session={} event=level_failed level={} error=\"{}\"", record_.id, level, e.what());
+    }
   }
   // Alone on the machine a session's compute uses every core; sharing it,
   // one (the other sessions keep the rest busy).
@@ -186,7 +197,7 @@ void Session::start_encode_locked() {
   encoder_.begin(f->force_keyframe);
   f->encode_start = Clock::now();
   f->chunk_parts = encoding_parts(encoder_.chunk_count(), scheduler_.threads(), scheduler_.busy_lanes() <= 1);
-  const std::size_t parts = f->chunk_parts + (f->single ? 1 : 0);
+  const std::size_t parts = f->chunk_parts + (f->single ? 1 : 0) + (f->levels.empty() ? 0 : 1);
   positions_busy_ = parts_left_ = parts;
   for (std::size_t p = 0; p < parts; ++p) scheduler_.post(*lane_, [this, f, p] { part_task(f, p); });
 }
@@ -200,10 +211,31 @@ std::pair<std::size_t, std::size_t> Session::chunks_of_part(const InFlight& f, s
   return {first, first + size + (p < longer ? 1 : 0)};
 }
 
+Session::PartKind Session::part_kind(const InFlight& f, std::size_t p) {
+  if (p < f.chunk_parts) return PartKind::kChunks;
+  return p == f.chunk_parts && f.single ? PartKind::kSingle : PartKind::kLevels;
+}
+
 void Session::quantize_part_of(InFlight& f, std::size_t p) {
-  if (p < f.chunk_parts) {
+  if (part_kind(f, p) == PartKind::kChunks) {
     const auto [first, end] = chunks_of_part(f, p);
     for (std::size_t c = first; c < end; ++c) encoder_.quantize_chunk(c, frame_);
+    return;
+  }
+  if (part_kind(f, p) == PartKind::kLevels) {
+    // Every level from the same positions as the full frame; one that fails
+    // is left out of this frame (its next is a keyframe), the others go on.
+    for (const auto& geometry : f.levels) {
+      std::unique_ptr<LevelFrames>& level = level_frames_[geometry->vertex_count];
+      try {
+        if (!level) level = std::make_unique<LevelFrames>(geometry, frame_encoder_options(record_.options, *assets_));
+        level->quantize(frame_, f.force_keyframe);
+      } catch (const std::exception& e) {
+        spdlog::error("session={} event=level_encode_failed level={} error=\"{}\"", record_.id, geometry->vertex_count, e.what());
+        if (level) level->discard();
+        f.levels_failed.push_back(geometry->vertex_count);
+      }
+    }
     return;
   }
   // The single buffer: every delta over one range (FRAME_FORMAT_SINGLE).
@@ -231,9 +263,24 @@ void Session::quantize_part_of(InFlight& f, std::size_t p) {
 }
 
 void Session::encode_part_of(InFlight& f, std::size_t p) {
-  if (p < f.chunk_parts) {
+  if (part_kind(f, p) == PartKind::kChunks) {
     const auto [first, end] = chunks_of_part(f, p);
     return encoder_.encode_chunks(first, end - first);
+  }
+  if (part_kind(f, p) == PartKind::kLevels) {
+    for (const auto& geometry : f.levels) {
+      const std::uint32_t vertices = geometry->vertex_count;
+      if (std::find(f.levels_failed.begin(), f.levels_failed.end(), vertices) != f.levels_failed.end()) continue;
+      LevelFrames& level = *level_frames_.at(vertices);
+      try {
+        level.encode();
+      } catch (const std::exception& e) {
+        spdlog::error("session={} event=level_encode_failed level={} error=\"{}\"", record_.id, vertices, e.what());
+        level.discard();
+        f.levels_failed.push_back(vertices);
+      }
+    }
+    return;
   }
   f.single_bytes = encode_draco(f.single_values, f.single_quantization);
 }
@@ -265,6 +312,7 @@ void Session::part_task(InFlight* f, std::size_t p) {
     publish(*f);
   } else {
     encoder_.finish();
+    for (auto& [vertices, level] : level_frames_) level->discard();
     std::lock_guard lock(mutex_);
     keyframe_needed_ = true;  // clients' state must not depend on a frame never sent
   }
@@ -437,24 +485,26 @@ void Session::publish(InFlight& f) {
     published->single = std::move(single);
   }
   v1::Frame& out = published->frame;
-  out = std::move(common);
-  std::uint32_t bits = 0;
-  for (std::size_t c = 0; c < encoder_.chunk_count(); ++c) {
-    EncodedChunk& chunk = encoder_.chunk(c);
-    if (chunk.kind == EncodedChunk::Kind::kAbsent) continue;
-    v1::DeltaChunk& d = *out.add_chunks();
-    d.set_first_vertex(chunk.first);
-    d.set_vertex_count(chunk.count);
-    d.mutable_runs()->Add(chunk.runs.begin(), chunk.runs.end());
-    d.set_deltas(std::move(chunk.bytes));
-    d.set_quantization_bits(chunk.quantization.bits);
-    d.set_delta_min(chunk.quantization.min);
-    d.set_delta_range(chunk.quantization.range);
-    bits = std::max(bits, chunk.quantization.bits);
+  // Each level of detail's frame: the same version and changes, the core's
+  // stats, the level's own chunks.
+  v1::FrameStats core_stats;
+  fill_stats(f.stats, encode_ms, summary.bytes, core_stats);
+  std::map<std::uint32_t, std::uint64_t> encoded;
+  for (const auto& geometry : f.levels) {
+    const std::uint32_t vertices = geometry->vertex_count;
+    if (std::find(f.levels_failed.begin(), f.levels_failed.end(), vertices) != f.levels_failed.end()) continue;
+    LevelFrames& level = *level_frames_.at(vertices);
+    published->levels.emplace_back(vertices, level.publish(common, core_stats, published->pose_of_driver, assets_->wire));
+    encoded[vertices] = level.frames_encoded();
   }
-  out.set_quantization_bits(bits);
+  // Encoders no stream wanted for this frame go.
+  std::erase_if(level_frames_, [&](const auto& entry) {
+    return std::none_of(f.levels.begin(), f.levels.end(), [&](const auto& g) { return g->vertex_count == entry.first; });
+  });
+  out = std::move(common);
+  out.set_quantization_bits(move_chunks(encoder_, out));
   out.set_max_error(float_at_least(summary.max_error));
-  fill_stats(f.stats, encode_ms, summary.bytes, *out.mutable_stats());
+  *out.mutable_stats() = core_stats;
   out.mutable_stats()->set_present_vertices(static_cast<std::uint32_t>(summary.present_vertices));
 
   {
@@ -484,6 +534,7 @@ void Session::publish(InFlight& f) {
   {
     std::lock_guard lock(mutex_);
     record_.version = f.version;
+    level_frames_encoded_ = std::move(encoded);
     if (f.overlays) f.overlays->set_version(record_.version);
     // Only the current frame's overlays are answered: a frame without them
     // lets the previous ones (megabytes at 1.25M vertices) go.

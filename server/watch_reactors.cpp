@@ -19,6 +19,9 @@ void start_watching(FiligreeService& service, const grpc::Status& status, const 
                     const std::shared_ptr<FrameStream<Reactor>>& stream) {
   if (!status.ok()) return end_start(started, stream, status);
   stream->set_format(request.frame_format());
+  if (const grpc::Status detail = serve_detail(*stream, *session, request.frame_format(), request.max_vertices());
+      !detail.ok())
+    return end_start(started, stream, detail);
   // 0: the client has seen nothing yet and gets the current frame, even the rest frame.
   const std::optional<std::uint64_t> after =
       request.after_version() == 0 ? std::nullopt : std::optional<std::uint64_t>(request.after_version());
