@@ -1,8 +1,9 @@
 #pragma once
 // A level of detail's mesh on the wire (proto DetailLevel.mesh): a Draco
-// mesh, sequential encoding so the vertex order is kept, whose one attribute
-// (GENERIC, 1 component, UINT32) is each vertex's original id. The ids
-// ascend, so Draco's difference prediction stores their gaps.
+// mesh, Edgebreaker (0.8 bytes a face), whose one attribute (POSITION, 1
+// component, UINT32) is each point's original id. Edgebreaker reorders
+// points and faces; the level's vertex order, the order of its frames'
+// deltas, is ascending original id, which the decoder restores.
 
 #include <cstdint>
 #include <span>
@@ -21,10 +22,12 @@ struct LevelMesh {
 // index is below original_ids.size(). Throws DeltaCodecError if Draco fails.
 std::string encode_level_mesh(const LevelMesh& mesh);
 
-// Decodes what encode_level_mesh wrote. Throws DeltaCodecError for a buffer
-// that is no such mesh (not Draco, not a mesh, no UINT32 id attribute), ids
-// that do not ascend or reach `vertex_limit` (the full mesh's vertex count),
-// or faces that index past the level's vertices.
+// Decodes what encode_level_mesh wrote: the distinct ids ascending (Draco
+// may split a vertex into points with one id), faces remapped to them, in
+// Draco's order with their orientation kept. Throws DeltaCodecError for a
+// buffer that is no such mesh (not Draco, not a mesh, no UINT32 id
+// attribute), or an id at or past `vertex_limit` (the full mesh's vertex
+// count). Callers check the vertex count against DetailLevel.vertex_count.
 LevelMesh decode_level_mesh(std::string_view bytes, std::uint32_t vertex_limit);
 
 }  // namespace filigree
