@@ -179,13 +179,15 @@ export class StatsTracker {
   }
 
   snapshot(now: number): StatsSnapshot {
+    // Trimmed to the window first: the list is trimmed in place.
+    const framesPerSecond = this.arrivals.perSecond(now);
     const times = this.arrivals.list;
     const n = times.length;
     const bytes = this.last ? this.lastBytes : 0;
     const behind = this.newestArrived === null ? 0
       : Number(this.newestArrived - (this.drawnVersion ?? 0n));
     return {
-      framesPerSecond: this.arrivals.perSecond(now),
+      framesPerSecond,
       appliedPerSecond: this.applied.perSecond(now),
       drawnPerSecond: this.drawn.perSecond(now),
       lastIntervalMs: this.lastInterval,

@@ -93,6 +93,13 @@ describe('StatsTracker', () => {
     expect(stats.snapshot(10_000).framesPerSecond).toBe(0);
   });
 
+  it('takes the mean interval over the window once older arrivals left it', () => {
+    const stats = new StatsTracker();
+    for (let t = 0; t <= 3000; t += 100) stats.frameArrived(frame(1 + t / 100), t);
+    // At 3050 the window holds 1100…3000 (those before were trimmed, in place, by the rate).
+    expect(stats.snapshot(3050).meanIntervalMs).toBe(100);
+  });
+
   it('times an own pose to the first frame with a larger version than it was accepted at', () => {
     const stats = new StatsTracker();
     const accepted = stats.poseSent(100);
