@@ -7,9 +7,16 @@
 
 namespace filigree::server {
 
-std::shared_ptr<const LevelGeometry> LevelGeometries::get(std::uint32_t vertices) {
+std::shared_ptr<const LevelGeometry> LevelGeometries::find(std::uint32_t vertices) const {
   std::lock_guard lock(mutex_);
-  if (const auto it = levels_.find(vertices); it != levels_.end()) return it->second;
+  const auto it = levels_.find(vertices);
+  return it == levels_.end() ? nullptr : it->second;
+}
+
+std::shared_ptr<const LevelGeometry> LevelGeometries::get(std::uint32_t vertices) {
+  if (auto built = find(vertices)) return built;
+  std::lock_guard building(build_mutex_);
+  if (auto built = find(vertices)) return built;  // built while this call waited
   const DetailLevelMesh level = detail_level_mesh(model_.node_graph(), vertices);
   auto g = std::make_shared<LevelGeometry>();
   g->vertex_count = static_cast<std::uint32_t>(level.original_ids.size());
@@ -23,6 +30,7 @@ std::shared_ptr<const LevelGeometry> LevelGeometries::get(std::uint32_t vertices
   wire.faces.reserve(3 * level.faces.size());
   for (const Triangle& t : level.faces) wire.faces.insert(wire.faces.end(), t.begin(), t.end());
   g->mesh = encode_level_mesh(wire);
+  std::lock_guard lock(mutex_);
   levels_.emplace(vertices, g);
   return g;
 }

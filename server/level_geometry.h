@@ -34,16 +34,18 @@ class LevelGeometries {
   // The level of `vertices` vertices (detail_level_vertices' answer, below
   // the full mesh): built on the caller's thread the first time (the node
   // graph first, if no finite T built it: ~0.4 s at 1.25M), shared after.
-  // Thread-safe; callers of one level being built wait for it. Throws what
-  // building throws.
+  // Thread-safe; builds run one at a time. Throws what building throws.
   std::shared_ptr<const LevelGeometry> get(std::uint32_t vertices);
+  // The level if it is built; null otherwise (never waits for a build).
+  std::shared_ptr<const LevelGeometry> find(std::uint32_t vertices) const;
 
   // Levels built so far.
   std::size_t built() const;
 
  private:
   const DeformerModel& model_;
-  mutable std::mutex mutex_;  // held while building: levels are rare and few
+  std::mutex build_mutex_;     // held while building
+  mutable std::mutex mutex_;  // guards levels_
   std::map<std::uint32_t, std::shared_ptr<const LevelGeometry>> levels_;
 };
 

@@ -265,12 +265,32 @@ std::vector<std::uint32_t> Session::wanted_levels_locked() const {
 }
 
 void Session::compute_if_level_missing_locked() {
-  for (std::uint32_t level : wanted_levels_locked())
-    if (!current_ || !current_->at_level(level)) {
+  bool missing = false;
+  for (std::uint32_t level : wanted_levels_locked()) {
+    if (current_ && current_->at_level(level)) continue;
+    if (assets_->levels->find(level)) {
+      missing = true;
+      continue;
+    }
+    // Built on a task of its own (up to a second at 1.25M vertices), not in
+    // a compute, so that no driver's frame waits for it; then a frame with it.
+    if (!levels_building_.insert(level).second) continue;
+    scheduler_.post(*lane_, [this, level] {
+      try {
+        assets_->levels->get(level);
+      } catch (const std::exception& e) {
+        spdlog::error("session={} event=level_failed level={} error=\"{}\"", record_.id, level, e.what());
+      }
+      std::lock_guard lock(mutex_);
+      levels_building_.erase(level);
       pending_ = true;
       maybe_compute_locked();
-      return;
-    }
+    });
+  }
+  if (missing) {
+    pending_ = true;
+    maybe_compute_locked();
+  }
 }
 
 std::optional<std::uint32_t> Session::set_detail(std::uint64_t stream_id, std::uint32_t max_vertices) {

@@ -20,6 +20,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <span>
 #include <string>
 #include <unordered_map>
@@ -381,6 +382,7 @@ class Session {
   // encoding frame's levels part and publish(), one frame at a time).
   std::map<std::uint32_t, std::unique_ptr<LevelFrames>> level_frames_;
   std::map<std::uint32_t, std::uint64_t> level_frames_encoded_;  // mutex_; for ListSessions
+  std::set<std::uint32_t> levels_building_;                      // mutex_: meshes being built for this session
   std::unique_ptr<InFlight> computed_;  // computed, waiting for the encoder
   std::unique_ptr<InFlight> encoding_;  // being encoded
 

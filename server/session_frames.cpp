@@ -168,15 +168,10 @@ void Session::compute_task() {
     f->single = want_single_locked();
     levels = wanted_levels_locked();
   }
-  // A level's mesh is built by the first frame that needs it (then shared by
-  // the mesh's sessions); a level that cannot be built is left out.
-  for (std::uint32_t level : levels) {
-    try {
-      f->levels.push_back(assets_->levels->get(level));
-    } catch (const std::exception& e) {
-      spdlog::error("session={} event=level_failed level={} error=\"{}\"", record_.id, level, e.what());
-    }
-  }
+  // Levels whose mesh is being built join the frame after it is
+  // (compute_if_level_missing_locked).
+  for (std::uint32_t level : levels)
+    if (auto geometry = assets_->levels->find(level)) f->levels.push_back(std::move(geometry));
   // Alone on the machine a session's compute uses every core; sharing it,
   // one (the other sessions keep the rest busy).
   deformer_->set_threads(scheduler_.busy_lanes() <= 1 ? static_cast<int>(scheduler_.threads()) : 1);
