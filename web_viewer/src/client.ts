@@ -3,11 +3,11 @@ import { Code, ConnectError, createClient, type Client, type Interceptor } from 
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
 import {
-  Filigree, FrameFormat, type Frame, type ListSessionsResponse_Entry, type Overlays, type RestMeshPart, type SessionHandles,
+  Filigree, FrameFormat, type DetailLevel, type Frame, type ListSessionsResponse_Entry, type Overlays, type RestMeshPart, type SessionHandles,
   type SessionInfo, type SessionState, type SetHandlesResponse,
 } from './gen/filigree/v1/filigree_pb';
 
-export type { Frame, Overlays, RestMeshPart, SessionHandles, SessionInfo, SessionState };
+export type { DetailLevel, Frame, Overlays, RestMeshPart, SessionHandles, SessionInfo, SessionState };
 export type SessionEntry = ListSessionsResponse_Entry;
 
 // A handle as this page keeps it: a vertex of the detailed mesh (original
@@ -51,9 +51,19 @@ export class SessionClient {
   // so afterVersion 0 is how to get the current keyframe again. A server
   // without that format sends single frames, which the page reads too.
   // `onHeader`: the server answered (the stream is open), before any frame.
-  watch(afterVersion: bigint, signal: AbortSignal, onHeader?: () => void): AsyncIterable<Frame> {
-    return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED },
+  // `maxVertices` > 0: at a level of detail (levels.ts), announced by a
+  // message with only Frame.level set, and switchable with setDetail.
+  watch(afterVersion: bigint, signal: AbortSignal, onHeader?: () => void, maxVertices = 0): AsyncIterable<Frame> {
+    return this.client.watch({ sessionId: this.sessionId, afterVersion, frameFormat: FrameFormat.CHUNKED, maxVertices },
       { signal, ...(onHeader ? { onHeader } : {}) });
+  }
+
+  // Moves the live stream `streamId` (DetailLevel.stream_id) to the level a
+  // budget of `maxVertices` gets; resolves with that level's vertex count.
+  // The stream then sends the level and its keyframe (viewer token).
+  async setDetail(streamId: bigint, maxVertices: number): Promise<number> {
+    const answer = await this.client.setDetail({ sessionId: this.sessionId, streamId, maxVertices });
+    return answer.vertexCount;
   }
 
   // Plays one of the session's clips on the server (editor token): its

@@ -12,12 +12,19 @@
 // is doing; the page gets the newest applied state whenever it has a buffer
 // set free, so a page slowed down by drawing skips frames it cannot draw but
 // the worker does not fall behind the stream.
+//
+// A stream at a level of detail (levels.ts) announces its level before the
+// level's frames: the worker decodes the level's mesh, gathers its rest
+// positions and applies the level's frames to them; once the level's first
+// frame is applied it hands the page the whole new geometry at once (a
+// 'level' message: positions, normals, faces, stand-in, original ids), so the
+// page swaps it in within one short task and never shows the level at rest.
 import createDecoderModule from 'draco3d/draco_decoder_nodejs.js';
 import wasmUrl from 'draco3d/draco_decoder.wasm?url';
 
 import { ConnectError } from '@connectrpc/connect';
 
-import { SessionClient, type Frame } from './client';
+import { SessionClient, type DetailLevel, type Frame } from './client';
 import { frameBytes } from './stats';
 import {
   applyDeltaRanges, applyDeltas, decodeChunk, decodeDeltas, FrameError, isChunked, isKeyframe, KeyedDeltas, largestDelta,
@@ -25,6 +32,7 @@ import {
 } from './frame';
 import { coarseIndex, frameMesh, vertexNormals } from './geometry';
 import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVertexColours } from './overlay-build';
+import { decodeLevelMesh, facesOnLevel, gather1, gather3, levelIndices, type DracoMeshModule } from './levels';
 import { FrameMailbox } from './mailbox';
 import { RestAssembler } from './rest-parts';
 import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
@@ -42,9 +50,26 @@ draco.catch(() => {});
 
 const post = (message: FromWorker, transfer: Transferable[] = []) => self.postMessage(message, { transfer });
 
-// The session's mesh and the deformation state.
-let rest = new Float32Array(0);
-let faces = new Uint32Array(0);
+// A mesh the frames can be at: the full mesh, or a level of detail (its
+// vertices' original ids, ascending; rest positions gathered from the full
+// mesh's).
+interface Level {
+  vertexCount: number;
+  ids: Uint32Array | null;       // null: the full mesh
+  rest: Float32Array;
+  faces: Uint32Array;
+  bytes: Uint8Array | null;      // DetailLevel.mesh, to know the same level again
+  coarse?: Uint32Array | null;   // the stand-in (geometry.ts), once computed
+  edges?: Set<number>;           // for the cut overlay, once computed
+}
+const emptyLevel = (): Level => ({ vertexCount: 0, ids: null, rest: new Float32Array(0), faces: new Uint32Array(0), bytes: null });
+let full = emptyLevel();
+let level = full;   // the one the frames are at (the last DetailLevel read)
+let shown = full;   // the one the page draws
+let baseIds = new Uint32Array(0);  // the base mesh's original ids
+// The session's mesh as the frames are at it (level's arrays), and the deformation state.
+let rest: Float32Array = new Float32Array(0);
+let faces: Uint32Array = new Uint32Array(0);
 let keyed = new KeyedDeltas(0);
 // rest + the latest deltas: what the next buffers start from.
 let positions = new Float32Array(0);
@@ -57,7 +82,6 @@ let stretchValues = new Float32Array(0);
 let vertexStretch = new Float32Array(0);
 let stretchMax = 0;
 let client: SessionClient | null = null;
-let fineEdges: Set<number> | null = null;  // of the detailed mesh, for the cut overlay
 
 // ------------------------------------------------------------------ join
 
@@ -159,6 +183,9 @@ async function join(serverUrl: string, sessionId: string, token: string): Promis
   base.originalIds = [];
   const facesForPage = faces.slice();
   const coarseFaces = coarseIndex(rest, faces);
+  full = { vertexCount: n, ids: null, rest, faces, bytes: null, coarse: coarseFaces };
+  level = shown = full;
+  baseIds = originalIds.slice();
   post({
     type: 'joined', info, faces: facesForPage, coarseFaces, buffers: { positions: rest.slice(), normals, colors: null }, framing,
     basePositions, baseFaces, originalIds, restParts, joinMs: joined - started, buildMs: performance.now() - joined,
@@ -177,8 +204,14 @@ function takeBuffers(): Buffers | null {
   return set;
 }
 
-// A frame off the Watch stream, read here: the chunked or the single format.
-interface FrameIn { stream: number; chunked?: ChunkedFrameData; single?: { version: bigint; vertexCount: number; deltas: Uint8Array } }
+// A message off the Watch stream, read here: a frame in the chunked or the
+// single format, or the start of a level of detail.
+interface FrameIn {
+  stream: number;
+  chunked?: ChunkedFrameData & { levelVertices: number; maxError: number };
+  single?: { version: bigint; vertexCount: number; deltas: Uint8Array; levelVertices: number; maxError: number };
+  level?: DetailLevel;
+}
 const isKeyframeIn = (m: FrameIn) => m.chunked !== undefined && isKeyframe(m.chunked);
 // The frames not applied yet, in order. Frames come in bursts (the page's
 // thread reads the stream between its own tasks), and each is applied while
@@ -189,16 +222,23 @@ const MAX_WAITING = 8;
 let waiting: FrameIn[] = [];
 let working = false;
 // The latest applied frame, not yet handed to the page (it had no buffer set free).
-let pending: { version: bigint; kind: 'single' | 'keyframe' | 'sparse'; decodeMs: number; applyMs: number; displacement: number } | null = null;
+let pending: {
+  version: bigint; kind: 'single' | 'keyframe' | 'sparse'; decodeMs: number; applyMs: number; displacement: number;
+  maxError: number;
+} | null = null;
 
 function put(message: FrameIn): void {
   waiting.push(message);
   if (waiting.length > MAX_WAITING) {
+    // The newest level message waiting starts over (frames before it are of
+    // the state it resets); of the frames after it, the newest and its keyframe.
+    let start = waiting.length - 1;
+    while (start >= 0 && !waiting[start].level) --start;
+    let superseded = Math.max(0, start);
     const box = new FrameMailbox<FrameIn>(isKeyframeIn);
-    let superseded = 0;
-    for (const m of waiting) superseded += box.put(m);
-    waiting = [box.take(), box.take()].filter((m): m is FrameIn => m !== null);
-    post({ type: 'applied', version: -1n, decodeMs: 0, applyMs: 0, skipped: superseded });
+    for (const m of waiting.slice(start + 1)) superseded += box.put(m);
+    waiting = [...(start >= 0 ? [waiting[start]] : []), box.take(), box.take()].filter((m): m is FrameIn => m !== null);
+    post({ type: 'applied', version: -1n, decodeMs: 0, applyMs: 0, maxError: 0, skipped: superseded });
   }
   if (!working) void work();
 }
@@ -208,10 +248,61 @@ function put(message: FrameIn): void {
 async function work(): Promise<void> {
   working = true;
   for (let next = waiting.shift(); next !== undefined; next = waiting.shift()) {
-    await applyFrame(next);
+    if (next.level) await applyLevel(next.stream, next.level);
+    else await applyFrame(next);
     await new Promise((resolve) => setTimeout(resolve, 0));
   }
   working = false;
+}
+
+// Whether DetailLevel `d` is level `l` (the same vertex count and mesh).
+function isLevel(l: Level, d: DetailLevel): boolean {
+  if (l.vertexCount !== d.vertexCount) return false;
+  if (l.bytes === null) return d.mesh.length === 0;
+  if (l.bytes.length !== d.mesh.length) return false;
+  for (let i = 0; i < l.bytes.length; ++i) if (l.bytes[i] !== d.mesh[i]) return false;
+  return true;
+}
+
+// The start of a level (the stream's first message, or after a SetDetail):
+// its frames follow, from a fresh keyframe state. A level already held
+// (the one drawn, the full mesh) is not decoded again.
+async function applyLevel(stream: number, d: DetailLevel): Promise<void> {
+  let next: Level;
+  let decodeMs = 0;
+  try {
+    if (isLevel(level, d)) next = level;
+    else if (isLevel(shown, d)) next = shown;
+    else if (isLevel(full, d)) next = full;
+    else {
+      if (d.mesh.length === 0 || d.vertexCount >= full.vertexCount) {
+        throw new FrameError(`a level of ${d.vertexCount} vertices without its mesh, on a mesh of ${full.vertexCount}`);
+      }
+      const module = await draco;
+      const t0 = performance.now();
+      const { ids, faces: levelFaces } = decodeLevelMesh(module as unknown as DracoMeshModule, d.mesh, d.vertexCount,
+        d.faceCount, full.vertexCount);
+      next = { vertexCount: d.vertexCount, ids, rest: gather3(full.rest, ids), faces: levelFaces, bytes: d.mesh.slice() };
+      decodeMs = performance.now() - t0;
+    }
+  } catch (error) {
+    // The level's frames cannot be applied to anything held: ask for the stream again.
+    const text = error instanceof Error ? error.message : String(error);
+    post({ type: 'frameFailed', stream, version: 0n, message: text, resync: !waiting.some((m) => m.level) });
+    return;
+  }
+  keyed = new KeyedDeltas(next.vertexCount);
+  if (next !== level) {
+    level = next;
+    rest = next.rest;
+    faces = next.faces;
+    // Rewritten whole by the level's first frame, a keyframe: nothing is handed on before it.
+    positions = next.rest.slice();
+    positionsFollowKeyed = true;
+    pending = null;
+    stretch = null;
+  }
+  post({ type: 'levelRead', stream, vertexCount: next.vertexCount, decodeMs });
 }
 
 async function applyFrame(message: FrameIn): Promise<void> {
@@ -222,6 +313,10 @@ async function applyFrame(message: FrameIn): Promise<void> {
   let kind: 'single' | 'keyframe' | 'sparse';
   let displacement: number;
   try {
+    const levelVertices = level === full ? 0 : level.vertexCount;
+    if (frame.levelVertices !== levelVertices) {
+      throw new FrameError(`a frame of level ${frame.levelVertices || 'full'} for the level of ${level.vertexCount} vertices`);
+    }
     if (frame.vertexCount !== rest.length / 3) {
       throw new FrameError(`a frame of ${frame.vertexCount} vertices for a mesh of ${rest.length / 3}`);
     }
@@ -256,13 +351,14 @@ async function applyFrame(message: FrameIn): Promise<void> {
     const text = error instanceof Error ? error.message : String(error);
     // The frames after a keyframe that failed, or after one that never came,
     // cannot be read, unless a newer keyframe waits.
-    const resync = chunked !== undefined && !waiting.some(isKeyframeIn)
-      && (isKeyframe(chunked) || chunked.keyframeVersion !== keyed.keyframeVersion);
+    const resync = chunked !== undefined && !waiting.some((m) => isKeyframeIn(m) || m.level !== undefined)
+      && (isKeyframe(chunked) || chunked.keyframeVersion !== keyed.keyframeVersion
+        || chunked.levelVertices !== (level === full ? 0 : level.vertexCount));
     post({ type: 'frameFailed', stream, version: frame.version, message: text, resync });
     return;
   }
-  post({ type: 'applied', version: frame.version, decodeMs, applyMs, skipped: 0 });
-  pending = { version: frame.version, kind, decodeMs, applyMs, displacement };
+  post({ type: 'applied', version: frame.version, decodeMs, applyMs, maxError: frame.maxError, skipped: 0 });
+  pending = { version: frame.version, kind, decodeMs, applyMs, displacement, maxError: frame.maxError };
   output();
 }
 
@@ -270,6 +366,10 @@ async function applyFrame(message: FrameIn): Promise<void> {
 // positions, normals and, while shown, the stretch colours.
 function output(): void {
   if (pending === null) return;
+  if (level !== shown) {
+    swapLevel();
+    return;
+  }
   const out = takeBuffers();
   if (out === null) return;  // the page holds both sets: once it hands one back
   const p = pending;
@@ -284,7 +384,41 @@ function output(): void {
   if (out.colors) transfer.push(out.colors.buffer);
   post({
     type: 'ready', version: p.version, buffers: out, kind: p.kind, decodeMs: p.decodeMs, applyMs: p.applyMs,
-    normalsMs: t3 - t2, stretchMs, displacement: p.displacement, stretchMax: out.colors ? stretchMax : 0,
+    normalsMs: t3 - t2, stretchMs, displacement: p.displacement, stretchMax: out.colors ? stretchMax : 0, maxError: p.maxError,
+  }, transfer);
+}
+
+// The first applied frame of a level the page does not draw: the level's
+// whole geometry for the page, in buffers of the level's size (the page's
+// sets of the old size are dropped when they come back), and a second set.
+function swapLevel(): void {
+  const p = pending!;
+  pending = null;
+  const n3 = rest.length;
+  const t0 = performance.now();
+  const out: Buffers = { positions: positions.slice(), normals: new Float32Array(n3), colors: stretchOn ? new Float32Array(n3) : null };
+  vertexNormals(positions, faces, out.normals);
+  const t1 = performance.now();
+  if (out.colors) stretchColors(out.colors);
+  const stretchMs = performance.now() - t1;
+  if (level.coarse === undefined) level.coarse = coarseIndex(rest, faces);
+  const isFull = level === full;
+  // The full mesh's faces and stand-in the page holds since the join.
+  const levelFaces = isFull ? null : faces.slice();
+  const coarse = isFull || !level.coarse ? null : level.coarse.slice();
+  const ids = level.ids ? level.ids.slice() : null;
+  const baseIndex = levelIndices(level.ids, baseIds);
+  shown = level;
+  spare.length = 0;
+  spare.push({ positions: new Float32Array(n3), normals: new Float32Array(n3), colors: null });
+  const transfer: Transferable[] = [out.positions.buffer, out.normals.buffer, baseIndex.buffer];
+  if (out.colors) transfer.push(out.colors.buffer);
+  for (const array of [levelFaces, coarse, ids]) if (array) transfer.push(array.buffer);
+  post({
+    type: 'level', version: p.version, vertexCount: level.vertexCount, fullVertexCount: full.vertexCount, buffers: out,
+    faces: levelFaces, coarseFaces: coarse, ids, baseIndex, kind: p.kind, decodeMs: p.decodeMs, applyMs: p.applyMs,
+    normalsMs: t1 - t0, stretchMs, buildMs: performance.now() - t0, displacement: p.displacement,
+    stretchMax: out.colors ? stretchMax : 0, maxError: p.maxError,
   }, transfer);
 }
 
@@ -294,7 +428,7 @@ function output(): void {
 // keyframe is megabytes): the page gets what its panel shows of each frame.
 let watching: { stream: number; abort: AbortController } | null = null;
 
-async function watch(stream: number, afterVersion: bigint): Promise<void> {
+async function watch(stream: number, afterVersion: bigint, maxVertices: number): Promise<void> {
   watching?.abort.abort();
   const abort = new AbortController();
   watching = { stream, abort };
@@ -305,9 +439,15 @@ async function watch(stream: number, afterVersion: bigint): Promise<void> {
     post({ type: 'streamOpened', stream });
   };
   let error: CallError | null = null;
+  let first = true;
   try {
-    for await (const frame of client!.watch(afterVersion, abort.signal, open)) {
+    for await (const frame of client!.watch(afterVersion, abort.signal, open, maxVertices)) {
       open();
+      if (first && maxVertices > 0 && !frame.level) {
+        // A budget asked, a frame first: this server has no levels of detail.
+        post({ type: 'levelArrived', stream, streamId: null, vertexCount: full.vertexCount });
+      }
+      first = false;
       arrived(stream, frame);
     }
   } catch (e) {
@@ -318,6 +458,11 @@ async function watch(stream: number, afterVersion: bigint): Promise<void> {
 }
 
 function arrived(stream: number, frame: Frame): void {
+  if (frame.level) {
+    put({ stream, level: frame.level });
+    post({ type: 'levelArrived', stream, streamId: frame.level.streamId, vertexCount: frame.level.vertexCount });
+    return;
+  }
   const bytes = frameBytes(frame);
   put(isChunked(frame) ? { stream, chunked: frame } : { stream, single: frame });
   // The panel's copy without the delta bytes.
@@ -377,19 +522,23 @@ async function overlays(id: number): Promise<void> {
     post({ type: 'overlaysFailed', id, error: callError(error) });
     return;
   }
-  const n = rest.length / 3;
+  // Over the mesh the page draws: at a level, its vertices' regions and the
+  // cut's triangles whose corners it holds.
+  const on = shown;
+  const n = on.vertexCount;
   const regionColors = new Float32Array(3 * n);
   let regionEdges: Uint32Array = new Uint32Array(0);
   let cutEdges: Uint32Array = new Uint32Array(0);
   const refined = new Float32Array(3 * n);
   let refinedTriangles = 0;
-  if (answer.ready && answer.regionOf.length === n) {
-    regionVertexColours(answer.regionOf, colourRegions(answer.regionOf, faces), regionColors);
-    regionEdges = regionBoundaryEdges(answer.regionOf, faces);
+  if (answer.ready && answer.regionOf.length === full.vertexCount) {
+    const regionOf = on.ids ? gather1(answer.regionOf, on.ids, new Uint32Array(n)) : answer.regionOf;
+    regionVertexColours(regionOf, colourRegions(regionOf, on.faces), regionColors);
+    regionEdges = regionBoundaryEdges(regionOf, on.faces);
   }
   if (answer.ready) {
-    fineEdges ??= edgeSet(faces, n);
-    const cut = cutForDrawing(answer.cutFaces, fineEdges, n);
+    on.edges ??= edgeSet(on.faces, n);
+    const cut = cutForDrawing(on.ids ? facesOnLevel(on.ids, answer.cutFaces) : answer.cutFaces, on.edges, n);
     cutEdges = cut.coarse;
     refinedTriangles = cut.refinedTriangles;
     // Refined: a cyan tint; elsewhere the mesh's own colour (linear RGB of 0xc9bfae and of 0x5fd3f0).
@@ -401,7 +550,7 @@ async function overlays(id: number): Promise<void> {
     }
   }
   post({
-    type: 'overlays', id, ready: answer.ready, version: answer.version, regionCount: answer.regionCount,
+    type: 'overlays', id, ready: answer.ready, version: answer.version, vertexCount: n, regionCount: answer.regionCount,
     cutTriangles: Math.floor(answer.cutFaces.length / 3), refinedTriangles, regionColors, regionEdges, cutEdges, refined,
   }, [regionColors.buffer, regionEdges.buffer, cutEdges.buffer, refined.buffer]);
 }
@@ -415,7 +564,7 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       void join(message.serverUrl, message.sessionId, message.token);
       break;
     case 'watch':
-      void watch(message.stream, message.afterVersion);
+      void watch(message.stream, message.afterVersion, message.maxVertices);
       break;
     case 'stopWatch':
       if (watching?.stream === message.stream) watching.abort.abort();
@@ -424,7 +573,8 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       waiting = [];
       break;
     case 'recycle':
-      if (message.buffers.positions.length === rest.length) spare.push(message.buffers);
+      // Sets of a level no longer drawn are dropped.
+      if (message.buffers.positions.length === shown.rest.length && spare.length < 2) spare.push(message.buffers);
       output();
       break;
     case 'overlays':
@@ -432,7 +582,7 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       break;
     case 'stretch':
       stretchOn = message.on;
-      if (stretchOn && rest.length > 0) {
+      if (stretchOn && rest.length > 0 && level === shown) {
         const colors = new Float32Array(rest.length);
         stretchColors(colors);
         post({ type: 'colors', colors, stretchMax }, [colors.buffer]);

@@ -14,7 +14,9 @@
 // one handle). A right-click on a handle drops it.
 //
 // In both, the target moves in the plane facing the camera, and presses on
-// the background orbit as usual. The frames come back on Watch.
+// the background orbit as usual. The frames come back on Watch. Vertices are
+// original ids whatever level of detail is drawn (MeshView maps them).
+
 import * as THREE from 'three';
 
 import { Code, isCode, type HandleTarget, type SessionClient } from './client';
@@ -38,6 +40,8 @@ export interface HandleEvents {
   describe(error: unknown): string;
   // An edit was sent; call the result with the version it was accepted at.
   sent(): (acceptedAt: bigint) => void;
+  // A pull or a handle drag started (frames will follow).
+  started?(): void;
 }
 
 export class HandleEditor {
@@ -107,6 +111,11 @@ export class HandleEditor {
     return this.spheres.size;
   }
 
+  // A pull or a handle drag is in progress.
+  get interacting(): boolean {
+    return this.drag !== null || this.pull !== null;
+  }
+
   // A SetHandles or SubmitPose call is running or waiting.
   get sending(): boolean {
     return !this.sender.idle || !this.poses.idle;
@@ -148,7 +157,9 @@ export class HandleEditor {
         this.events.status(EDITOR_NEEDED, true);
         return;
       }
-      this.addSphere(vertex, new THREE.Vector3().fromArray(this.view.positions, 3 * vertex));
+      const at = this.view.positionOf(vertex);
+      if (at === null) return;
+      this.addSphere(vertex, at);
     }
     stop(event);
     const sphere = this.spheres.get(vertex)!;
@@ -156,6 +167,7 @@ export class HandleEditor {
     this.view.setOrbitEnabled(false);
     this.view.canvas.setPointerCapture(event.pointerId);
     this.drag = { vertex, pointerId: event.pointerId, plane: this.view.facingPlane(sphere.position) };
+    this.events.started?.();
     this.changed();
   }
 
@@ -167,15 +179,19 @@ export class HandleEditor {
       this.events.status(EDITOR_NEEDED, true);
       return;
     }
+    const start = this.view.positionOf(vertex);
+    if (start === null) return;
     stop(event);
     const p = this.view.positions;
-    const start = new THREE.Vector3().fromArray(p, 3 * vertex);
     const indices: number[] = [];
     const from: number[] = [];
     const weights: number[] = [];
     const r2 = this.radius * this.radius;
     for (let i = 0; i < this.originalIds.length; ++i) {
-      const o = 3 * this.originalIds[i];
+      // Base vertices are in every level of detail (levels grow from the base).
+      const at = this.view.indexOf(this.originalIds[i]);
+      if (at < 0) continue;
+      const o = 3 * at;
       const d2 = (p[o] - start.x) ** 2 + (p[o + 1] - start.y) ** 2 + (p[o + 2] - start.z) ** 2;
       if (d2 >= r2) continue;
       const w = falloff(Math.sqrt(d2), this.radius);
@@ -200,6 +216,7 @@ export class HandleEditor {
     this.view.setOrbitEnabled(false);
     this.view.canvas.setPointerCapture(event.pointerId);
     this.view.invalidate();
+    this.events.started?.();
     this.events.status(`Pulling ${indices.length} base ${indices.length === 1 ? 'vertex' : 'vertices'}.`);
   }
 

@@ -8,8 +8,30 @@ export interface TestHook {
   state: 'starting' | 'usage' | 'joining' | 'live' | 'reconnecting' | 'closed' | 'error';
   error: string | null;     // the last error shown in the page
   sessionId: string | null;
-  vertexCount: number;      // of the detailed mesh drawn
+  vertexCount: number;      // of the detailed mesh drawn (a level of detail's, at one)
   baseVertexCount: number;
+  // Levels of detail (detail-control.ts): the mesh's vertex count, the level
+  // drawn (== fullVertexCount at full detail) and the original ids of its
+  // vertices (null at full detail); what the page asks for (mode, budget;
+  // the budget is fullVertexCount for full detail) and why it changed.
+  fullVertexCount: number;
+  levelVertices: number;
+  levelIds(): number[] | null;
+  detailMode: 'auto' | 'full' | 'fixed' | '';
+  detailBudget: number;
+  detailLog: { at: number; budget: number; reason: string }[];
+  levelsArrived: number;    // level messages read off the streams (a stream's first, and after each SetDetail)
+  levelSwaps: number;       // geometries swapped for another level
+  levelSwapMs: number;      // this thread's time for the last swap
+  levelSwapMsMax: number;   // and the longest
+  levelDecodeMs: number;    // the worker's decode of the last level's mesh (0: one it held)
+  framesAtLevel: number;    // states swapped in since the last level swap (that one included)
+  lastNewFrameAt: number;   // performance.now() when the newest version arrived (Auto's idle clock)
+  streamId: string;         // DetailLevel.stream_id of the current stream ('' before one)
+  watchStreams: number;     // Watch streams opened (a SetDetail switches without a new one)
+  setDetailCalls: number;
+  setDetailAnswers: number;
+  maxError: number;         // Frame.max_error of the last frame drawn
   version: number;          // of the last applied frame
   framesReceived: number;
   framesApplied: number;
@@ -96,6 +118,9 @@ declare global {
 
 export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
+  fullVertexCount: 0, levelVertices: 0, levelIds: () => null, detailMode: '', detailBudget: 0, detailLog: [],
+  levelsArrived: 0, levelSwaps: 0, levelSwapMs: 0, levelSwapMsMax: 0, levelDecodeMs: 0, framesAtLevel: 0, lastNewFrameAt: 0, streamId: '',
+  watchStreams: 0, setDetailCalls: 0, setDetailAnswers: 0, maxError: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
   displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null,
   participants: [], participantsAnswers: 0, participantsVersion: 0, participantsFetching: false, otherHandles: () => [],

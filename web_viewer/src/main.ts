@@ -6,11 +6,14 @@
 // computes normals and stretch colours; this thread reads the Watch stream,
 // hands frames on (the newest first), swaps finished buffers into the
 // geometry and draws on requestAnimationFrame when something changed.
+// Streams are at a level of detail (detail-control.ts): the worker hands a
+// new level's whole geometry over once, and this thread swaps it in.
 import { ChangeLog } from './changes';
 import { Code, describeError, isCode, SessionClient, type SessionInfo } from './client';
 import { Role } from './gen/filigree/v1/filigree_pb';
 import { HandleEditor, type EditMode } from './handles';
 import { connectLines } from './connect';
+import { DetailControl } from './detail-control';
 import { FrontDoor, rememberedTokens, serverJson } from './front';
 import { FRAME_EVENT, hook } from './hook';
 import { CutWireframe } from './overlay-cut';
@@ -21,7 +24,9 @@ import { BaseWireframe, type Overlay } from './overlays';
 import { byId, fail, setNote, setStatus, showError, showOverlayToggles, showSession, showStats } from './panel';
 import { readParams, tokenOutOfQuery, type ViewerParams } from './params';
 import { participantColour, ParticipantsLayer } from './participants';
-import { FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined, type Ready } from './pipeline';
+import {
+  FramePipeline, type Applied, type Arrival, type DrawableOverlays, type Failed, type Joined, type LevelReady, type Ready,
+} from './pipeline';
 import type { LoadStage } from './pipeline-protocol';
 import { pollPresence } from './presence';
 import { isFinal, lossReason, retryDelay } from './reconnect';
@@ -45,13 +50,20 @@ class Viewer {
   private view!: MeshView;
   private overlays: Overlay[] = [];
   private readonly shown = new Set<Overlay>();
+  private wireframe!: BaseWireframe;
   private cut!: CutWireframe;
   private regions!: RegionsOverlay;
   private stretch!: StretchOverlay;
   private feed!: OverlayFeed<DrawableOverlays>;
   private handles: HandleEditor | null = null;
   private participants!: ParticipantsLayer;
+  private detail!: DetailControl;
+  // The full mesh's faces, stand-in and base ids (join): drawn again at full detail.
+  private fullFaces: Uint32Array = new Uint32Array(0);
+  private fullCoarse: Uint32Array | null = null;
+  private baseIds: Uint32Array = new Uint32Array(0);
   private lastVersion = 0n;
+  private lastNewFrameAt: number | null = null;  // when the newest version arrived
   private stream = 0;  // the current Watch stream's number
   private streamOpen = false;
   private resyncAsked = false;
@@ -70,6 +82,9 @@ class Viewer {
       progress: (stage, loaded, total) => this.loading(stage, loaded, total),
       applied: (result) => this.applied(result),
       ready: (result) => this.ready(result),
+      levelArrived: ({ stream, streamId, vertexCount }) => this.detail.levelArrived(stream, streamId, vertexCount),
+      levelRead: ({ decodeMs }) => { hook.levelDecodeMs = decodeMs; },
+      level: (result) => this.levelReady(result),
       failed: (result) => this.failed(result),
       skipped: (count) => {
         hook.framesSkipped += count;
@@ -138,7 +153,10 @@ class Viewer {
     const { info, buffers, faces, framing } = joined;
     const vertexCount = buffers.positions.length / 3;  // as drawn (info.rest.vertexCount announced it)
     this.view = new MeshView(byId('view'), buffers.positions, buffers.normals, faces, framing, joined.coarseFaces !== null);
-    if (joined.coarseFaces) this.view.setCoarse(joined.coarseFaces);
+    this.view.setCoarse(joined.coarseFaces);
+    this.fullFaces = faces;
+    this.fullCoarse = joined.coarseFaces;
+    this.baseIds = joined.originalIds;
     hook.coarseTriangles = joined.coarseFaces ? joined.coarseFaces.length / 3 : 0;
     this.view.onDrawn = (drawMs, at) => {
       this.stats.frameDrawn(this.appliedVersion, drawMs, at);
@@ -176,7 +194,10 @@ class Viewer {
     hook.screenPointOfVertex = (i) => this.view.vertexOnScreen(i);
     hook.nearestVertexToCamera = () => this.view.nearestVertexToCamera();
     hook.vertexAt = (x, y) => this.handles?.vertexAt(x, y) ?? null;
-    hook.vertexPosition = (i) => Array.from(this.view.positions.subarray(3 * i, 3 * i + 3));
+    hook.vertexPosition = (i) => {
+      const p = this.view.positionOf(i);
+      return p === null ? null : [p.x, p.y, p.z];
+    };
     hook.screenExtent = () => this.view.screenExtent();
     hook.viewDirection = () => this.view.viewDirection();
     hook.statsSnapshot = () => {
@@ -184,6 +205,17 @@ class Viewer {
       return { ...s, frame: null, drawnVersion: s.drawnVersion === null ? null : Number(s.drawnVersion) };
     };
     showSession(info, this.params.serverUrl, CLIENT_NAME, faces.length / 3, joined.originalIds.length);
+    this.detail = new DetailControl(this.client, vertexCount, joined.originalIds.length, this.params.detail, {
+      sample: () => {
+        const now = performance.now();
+        const s = this.stats.snapshot(now);
+        return {
+          now, lastArrivalAt: this.lastNewFrameAt, arrivedPerSecond: s.framesPerSecond, appliedPerSecond: s.appliedPerSecond,
+          drawnPerSecond: s.drawnPerSecond, interacting: this.handles?.interacting ?? false,
+        };
+      },
+      describe: (error) => this.describe(error),
+    });
     this.setupEditing(joined);
     this.setupParticipants();
     this.setupOptions(info);
@@ -284,6 +316,7 @@ class Viewer {
       },
       describe: (error) => this.describe(error),
       sent: () => this.stats.poseSent(performance.now()),
+      started: () => this.detail.nudge(),
     });
     byId('clear-handles').addEventListener('click', () => this.handles?.clear());
     const mode = byId<HTMLSelectElement>('edit-mode');
@@ -323,6 +356,7 @@ class Viewer {
   // worker; the cut and the regions from GetOverlays, polled while one of them is shown.
   private setupOverlays(joined: Joined): void {
     const wireframe = new BaseWireframe(joined.basePositions, joined.baseFaces, joined.originalIds);
+    this.wireframe = wireframe;
     this.cut = new CutWireframe(this.view.geometry);
     this.regions = new RegionsOverlay(this.view.geometry);
     this.stretch = new StretchOverlay(this.view.geometry, (on) => this.pipeline.setStretch(on));
@@ -341,6 +375,11 @@ class Viewer {
   }
 
   private showServerOverlays(overlays: DrawableOverlays): void {
+    if (overlays.vertexCount !== this.view.vertexCount) {
+      // Built for the level drawn before a swap: ask again for this one.
+      this.feed.frameArrived();
+      return;
+    }
     this.cut.setCut(overlays.cutEdges, overlays.refined, overlays.cutTriangles, overlays.refinedTriangles);
     this.regions.setRegions(overlays.regionColors, overlays.regionEdges);
     hook.regionCount = overlays.regionCount;
@@ -365,11 +404,15 @@ class Viewer {
   private async follow(): Promise<void> {
     for (;;) {
       const stream = ++this.stream;
+      hook.watchStreams = stream;
       this.streamOpen = false;
-      const afterVersion = this.resyncAsked ? 0n : this.lastVersion;
+      // A stream at another level than the one drawn sends that level's
+      // keyframe only with a newer frame: from version 0, the current one comes at once.
+      const afterVersion = this.resyncAsked || !this.detail.levelKept ? 0n : this.lastVersion;
       this.resyncAsked = false;
       if (this.attempt > 0) setStatus(`Reconnecting (attempt ${this.attempt})…`);
-      const end = await this.pipeline.watch(stream, afterVersion);
+      this.detail.streamOpening(stream);
+      const end = await this.pipeline.watch(stream, afterVersion, this.detail.budget);
       if (end.aborted) {
         // resync(): again at once the first time, then backing off, in
         // case the server's keyframe itself cannot be decoded here.
@@ -451,7 +494,11 @@ class Viewer {
     const { frame } = arrival;
     this.stats.frameArrived(frame, start, arrival.bytes);
     ++hook.framesReceived;
-    if (frame.version > this.lastVersion) this.lastVersion = frame.version;
+    if (frame.version > this.lastVersion) {
+      this.lastVersion = frame.version;
+      this.lastNewFrameAt = start;  // a level's keyframe sent again after a switch is no new frame
+      hook.lastNewFrameAt = start;
+    }
     hook.newestVersion = Number(this.lastVersion);
     this.changes.add(frame);
     this.participants.frameArrived(frame);
@@ -486,7 +533,44 @@ class Viewer {
       }
     }
     this.pipeline.recycle({ ...old, colors: oldColors });
+    this.drawn(result, start);
+  }
+
+  // A new level of detail with its first frame: its geometry swapped in
+  // whole (one short task: the worker built it; three.js uploads it at the
+  // next draw), the overlays rebound to it. The old buffers are not handed
+  // back: the worker has a set of the new size.
+  private levelReady(result: LevelReady): void {
+    const start = performance.now();
+    const full = result.faces === null;
+    const faces = result.faces ?? this.fullFaces;
+    this.view.setLevel(result.buffers.positions, result.buffers.normals, faces, full ? this.fullCoarse : result.coarseFaces,
+      result.ids);
+    this.wireframe.setLevel(full ? this.baseIds : result.baseIndex);
+    this.cut.rebind();
+    this.regions.rebind();
+    const colors = result.buffers.colors;
+    this.stretch.rebind();
+    if (colors !== null && this.shown.has(this.stretch)) {
+      this.stretch.setColors(colors, result.stretchMax);
+      hook.stretchMax = result.stretchMax;
+    }
+    this.feed.frameArrived();  // the cut and the regions again, for this level (while shown)
+    hook.vertexCount = result.vertexCount;
+    hook.triangleCount = faces.length / 3;
+    hook.coarseTriangles = ((full ? this.fullCoarse : result.coarseFaces)?.length ?? 0) / 3;
+    hook.framesAtLevel = 0;
+    this.detail.levelShown(result.vertexCount, result.ids);
+    hook.levelSwapMs = performance.now() - start;
+    hook.levelSwapMsMax = Math.max(hook.levelSwapMsMax, hook.levelSwapMs);
+    this.drawn(result, start);
+  }
+
+  // After a state was swapped in: what the panel and the hook show of it.
+  private drawn(result: Ready | LevelReady, start: number): void {
     for (const overlay of this.overlays) if (overlay.id === 'base' && this.shown.has(overlay)) overlay.update(this.view.positions);
+    ++hook.framesAtLevel;
+    hook.maxError = result.maxError;
     this.appliedVersion = result.version;
     this.resyncDelayMs = 0;
     hook.version = Number(result.version);
@@ -505,7 +589,8 @@ class Viewer {
     // One bad frame is reported; the next good one repairs the view (a
     // sparse frame is whole against its keyframe), unless the next ones
     // need the keyframe that failed or never came: then it is asked again.
-    showError(`Frame ${result.version} could not be shown: ${result.message}`);
+    showError(result.version === 0n ? `The level of detail could not be shown: ${result.message}`
+      : `Frame ${result.version} could not be shown: ${result.message}`);
     if (result.resync && result.stream === this.stream) this.resync();
   }
 

@@ -7,16 +7,16 @@
 // builds both (overlay-build.ts); this only swaps them in.
 import * as THREE from 'three';
 
-import type { Overlay } from './overlays';
+import { shareMesh, type MeshOverlay } from './overlays';
 
-export class CutWireframe implements Overlay {
+export class CutWireframe implements MeshOverlay {
   readonly id = 'cut';
   readonly label = 'Cut mesh (lines: coarse, cyan: refined)';
   readonly fromServer = true;
   readonly object = new THREE.Group();
   private readonly lines: THREE.LineSegments;
   private readonly tint: THREE.Mesh;
-  private readonly colors: THREE.BufferAttribute;
+  private colors: THREE.BufferAttribute;
   triangleCount = 0;
   refinedTriangles = 0;
 
@@ -28,11 +28,8 @@ export class CutWireframe implements Overlay {
     this.lines.frustumCulled = false;
     this.lines.renderOrder = 1;
     const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', mesh.getAttribute('position'));
-    geometry.setAttribute('normal', mesh.getAttribute('normal'));
-    geometry.setIndex(mesh.getIndex());
     this.colors = new THREE.BufferAttribute(new Float32Array(mesh.getAttribute('position').count * 3), 3);
-    geometry.setAttribute('color', this.colors);
+    shareMesh(geometry, mesh, this.colors);
     this.tint = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({
       vertexColors: true, roughness: 0.55, polygonOffset: true, polygonOffsetFactor: -1, polygonOffsetUnits: -1,
     }));
@@ -47,6 +44,14 @@ export class CutWireframe implements Overlay {
   }
 
   update(): void {}  // the shared position attribute moves it
+
+  // Another level of detail drawn: nothing shown until the next answer for it.
+  rebind(): void {
+    this.colors = new THREE.BufferAttribute(new Float32Array(this.mesh.getAttribute('position').count * 3), 3);
+    shareMesh(this.tint.geometry, this.mesh, this.colors);
+    this.setCut(new Uint32Array(0), new Float32Array(0), 0, 0);
+    this.tint.visible = false;
+  }
 
   // A new cut: its coarse edges (index pairs) and the per-vertex tint.
   setCut(coarse: Uint32Array, tint: Float32Array, triangles: number, refined: number): void {

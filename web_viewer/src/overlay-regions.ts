@@ -6,26 +6,22 @@
 // worker builds both; this only swaps them in.
 import * as THREE from 'three';
 
-import type { Overlay } from './overlays';
+import { shareMesh, type MeshOverlay } from './overlays';
 
-export class RegionsOverlay implements Overlay {
+export class RegionsOverlay implements MeshOverlay {
   readonly id = 'regions';
   readonly label = 'Regions';
   readonly fromServer = true;
   readonly object = new THREE.Group();
   private readonly fill: THREE.Mesh;
   private readonly outline: THREE.LineSegments;
-  private readonly colors: THREE.BufferAttribute;
+  private colors: THREE.BufferAttribute;
 
   // `mesh`: the detailed mesh's geometry, whose attributes this shares.
-  constructor(mesh: THREE.BufferGeometry) {
+  constructor(private readonly mesh: THREE.BufferGeometry) {
     const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', mesh.getAttribute('position'));
-    geometry.setAttribute('normal', mesh.getAttribute('normal'));
-    geometry.setIndex(mesh.getIndex());
-    const count = mesh.getAttribute('position').count;
-    this.colors = new THREE.BufferAttribute(new Float32Array(3 * count).fill(0.27), 3);  // grey until the server answers
-    geometry.setAttribute('color', this.colors);
+    this.colors = RegionsOverlay.grey(mesh);
+    shareMesh(geometry, mesh, this.colors);
     const material = new THREE.MeshStandardMaterial({
       vertexColors: true, roughness: 0.6, polygonOffset: true, polygonOffsetFactor: -1, polygonOffsetUnits: -1,
     });
@@ -41,6 +37,18 @@ export class RegionsOverlay implements Overlay {
     this.object.visible = false;
   }
 
+  // Grey until the server answers.
+  private static grey(mesh: THREE.BufferGeometry): THREE.BufferAttribute {
+    return new THREE.BufferAttribute(new Float32Array(3 * mesh.getAttribute('position').count).fill(0.27), 3);
+  }
+
+  // Another level of detail drawn: grey again until the next answer for it.
+  rebind(): void {
+    this.colors = RegionsOverlay.grey(this.mesh);
+    shareMesh(this.fill.geometry, this.mesh, this.colors);
+    this.setEdges(new Uint32Array(0));
+  }
+
   setVisible(visible: boolean): void {
     this.object.visible = visible;
   }
@@ -52,9 +60,13 @@ export class RegionsOverlay implements Overlay {
     if (colors.length !== this.colors.array.length) return;  // not this mesh's (never expected)
     this.colors.array = colors;
     this.colors.needsUpdate = true;
+    this.setEdges(edges);
+  }
+
+  private setEdges(edges: Uint32Array): void {
     const old = this.outline.geometry;
     const lines = new THREE.BufferGeometry();
-    lines.setAttribute('position', old.getAttribute('position'));
+    lines.setAttribute('position', this.mesh.getAttribute('position'));
     lines.setIndex(new THREE.BufferAttribute(edges, 1));
     this.outline.geometry = lines;
     // Disposing a geometry frees its attributes' GPU buffers: not the shared one.

@@ -5,25 +5,21 @@
 // mesh drawn again over itself; the page only swaps the colour array in.
 import * as THREE from 'three';
 
-import type { Overlay } from './overlays';
+import { shareMesh, type MeshOverlay } from './overlays';
 
-export class StretchOverlay implements Overlay {
+export class StretchOverlay implements MeshOverlay {
   readonly id = 'stretch';
   readonly label = 'Stretch (|L2 − 1|)';
   readonly fromServer = false;
   readonly object: THREE.Mesh;
-  private readonly colors: THREE.BufferAttribute;
+  private colors: THREE.BufferAttribute;
   maxDeviation = 0;  // the largest |L2 − 1| of the last colours (for the panel and tests)
 
   // `mesh`: the detailed mesh's geometry, whose position and normal attributes this shares.
-  constructor(mesh: THREE.BufferGeometry, private readonly visibility: (visible: boolean) => void) {
+  constructor(private readonly mesh: THREE.BufferGeometry, private readonly visibility: (visible: boolean) => void) {
     const geometry = new THREE.BufferGeometry();
-    geometry.setAttribute('position', mesh.getAttribute('position'));
-    geometry.setAttribute('normal', mesh.getAttribute('normal'));
-    geometry.setIndex(mesh.getIndex());
-    this.colors = new THREE.BufferAttribute(new Float32Array(mesh.getAttribute('position').count * 3), 3)
-      .setUsage(THREE.DynamicDrawUsage);
-    geometry.setAttribute('color', this.colors);
+    this.colors = StretchOverlay.blank(mesh);
+    shareMesh(geometry, mesh, this.colors);
     // Drawn just in front of the mesh it colours.
     const material = new THREE.MeshStandardMaterial({
       vertexColors: true, roughness: 0.6, polygonOffset: true, polygonOffsetFactor: -2, polygonOffsetUnits: -2,
@@ -31,6 +27,17 @@ export class StretchOverlay implements Overlay {
     this.object = new THREE.Mesh(geometry, material);
     this.object.frustumCulled = false;
     this.object.visible = false;
+  }
+
+  private static blank(mesh: THREE.BufferGeometry): THREE.BufferAttribute {
+    return new THREE.BufferAttribute(new Float32Array(mesh.getAttribute('position').count * 3), 3).setUsage(THREE.DynamicDrawUsage);
+  }
+
+  // Another level of detail drawn; its colours come with its frames (the
+  // level's first ones too, when shown: setColors).
+  rebind(): void {
+    this.colors = StretchOverlay.blank(this.mesh);
+    shareMesh(this.object.geometry, this.mesh, this.colors);
   }
 
   // Shown once the worker has coloured a frame; it starts colouring now.

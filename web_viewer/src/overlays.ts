@@ -15,6 +15,29 @@ export interface Overlay {
   update(positions: Float32Array): void;
 }
 
+// Overlays drawn from the mesh's own attributes (sharing its position,
+// normal and index): after the mesh is swapped for another level of detail,
+// rebind() takes the new ones and frees the old geometries' own buffers.
+export interface MeshOverlay extends Overlay {
+  rebind(): void;
+}
+
+// Points `geometry` at `mesh`'s position, normal and index (after freeing
+// its own GPU buffers, not the shared ones, which the mesh frees), with a
+// colour attribute of `colors` when given.
+export function shareMesh(geometry: THREE.BufferGeometry, mesh: THREE.BufferGeometry, colors?: THREE.BufferAttribute): void {
+  if (geometry.getAttribute('position')) {
+    geometry.deleteAttribute('position');
+    geometry.deleteAttribute('normal');
+    geometry.setIndex(null);
+    geometry.dispose();
+  }
+  geometry.setAttribute('position', mesh.getAttribute('position'));
+  geometry.setAttribute('normal', mesh.getAttribute('normal'));
+  geometry.setIndex(mesh.getIndex());
+  if (colors) geometry.setAttribute('color', colors);
+}
+
 // Each undirected edge of the triangles once, as index pairs.
 export function uniqueEdges(faces: ArrayLike<number>): Uint32Array {
   const seen = new Set<number>();
@@ -36,9 +59,11 @@ export function uniqueEdges(faces: ArrayLike<number>): Uint32Array {
 }
 
 // out[i] = positions[ids[i]] (x y z): the base vertices' current positions.
+// A negative id (a vertex the level drawn lacks) leaves out[i] as it is.
 export function gatherVertices(positions: Float32Array, ids: ArrayLike<number>, out: Float32Array): void {
   for (let i = 0; i < ids.length; ++i) {
     const id = ids[i];
+    if (id < 0) continue;
     out[3 * i] = positions[3 * id];
     out[3 * i + 1] = positions[3 * id + 1];
     out[3 * i + 2] = positions[3 * id + 2];
@@ -55,8 +80,12 @@ export class BaseWireframe implements Overlay {
   readonly fromServer = false;
   readonly object: THREE.LineSegments;
   private readonly positions: Float32Array;
+  // Where each base vertex is in the positions drawn: its original id, or
+  // its index in the level of detail drawn (setLevel).
+  private index: ArrayLike<number>;
 
-  constructor(restPositions: ArrayLike<number>, faces: ArrayLike<number>, private readonly originalIds: Uint32Array) {
+  constructor(restPositions: ArrayLike<number>, faces: ArrayLike<number>, originalIds: Uint32Array) {
+    this.index = originalIds;
     this.positions = Float32Array.from(restPositions);
     const geometry = new THREE.BufferGeometry();
     const position = new THREE.BufferAttribute(this.positions, 3);
@@ -75,8 +104,13 @@ export class BaseWireframe implements Overlay {
     this.object.visible = visible;
   }
 
+  // The positions drawn are a level's: base vertex i is its vertex index[i] (−1: not in it).
+  setLevel(index: ArrayLike<number>): void {
+    this.index = index;
+  }
+
   update(positions: Float32Array): void {
-    gatherVertices(positions, this.originalIds, this.positions);
+    gatherVertices(positions, this.index, this.positions);
     this.object.geometry.getAttribute('position').needsUpdate = true;
   }
 }

@@ -6,6 +6,7 @@ export interface ViewerParams {
   sessionId: string;
   token: string;
   serverUrl: string;  // the gRPC-Web endpoint, no trailing slash
+  detail?: string;    // detail=: the level of detail asked for (detail.ts, parseDetail)
 }
 
 export type ParamsResult =
@@ -35,7 +36,8 @@ export function readParams(search: string, origin: string, hash = ''): ParamsRes
   if (url.protocol !== 'http:' && url.protocol !== 'https:') {
     return { kind: 'error', message: `server=${server} must be an http:// or https:// address.` };
   }
-  return { kind: 'ok', params: { sessionId, token, serverUrl: url.href.replace(/\/+$/, '') } };
+  const detail = get('detail') || undefined;
+  return { kind: 'ok', params: { sessionId, token, serverUrl: url.href.replace(/\/+$/, ''), ...(detail ? { detail } : {}) } };
 }
 
 // The address with the token moved from the query into the fragment (for

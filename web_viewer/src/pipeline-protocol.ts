@@ -11,8 +11,10 @@ export interface Buffers { positions: Float32Array; normals: Float32Array; color
 
 export type ToWorker =
   | { type: 'join'; serverUrl: string; sessionId: string; token: string }
-  // Open the Watch stream `stream` (numbered by the page, from 1) after `afterVersion`, ending any other.
-  | { type: 'watch'; stream: number; afterVersion: bigint }
+  // Open the Watch stream `stream` (numbered by the page, from 1) after
+  // `afterVersion`, ending any other; maxVertices: its level of detail
+  // (WatchRequest.max_vertices; 0: full detail, no switching).
+  | { type: 'watch'; stream: number; afterVersion: bigint; maxVertices: number }
   // End the Watch stream (a resync: it is opened again from version 0).
   | { type: 'stopWatch'; stream: number }
   // Drop the frames waiting (they need a keyframe that was lost).
@@ -45,17 +47,35 @@ export type FromWorker =
   // The stream ended: OK (error null), failed, or stopped (aborted) by the page.
   | { type: 'streamEnded'; stream: number; error: CallError | null; aborted: boolean }
   // A frame applied to the worker's state (every frame it gets, unless a newer one superseded it while it was busy).
-  | { type: 'applied'; version: bigint; decodeMs: number; applyMs: number; skipped: number }
+  | { type: 'applied'; version: bigint; decodeMs: number; applyMs: number; maxError: number; skipped: number }
   // The state to draw, when the page has a buffer set free: the newest applied frame, with normals (and stretch colours).
   | {
     type: 'ready'; version: bigint; buffers: Buffers; kind: 'single' | 'keyframe' | 'sparse';
     decodeMs: number; applyMs: number; normalsMs: number; stretchMs: number; displacement: number; stretchMax: number;
+    maxError: number;
+  }
+  // A level of detail announced on stream `stream` (Frame.level, read off the
+  // stream): its id for SetDetail and its vertex count. streamId null: the
+  // stream asked for a level and got frames (a server without levels).
+  | { type: 'levelArrived'; stream: number; streamId: bigint | null; vertexCount: number }
+  // The level's mesh decoded (0 ms: one already held), its frames next.
+  | { type: 'levelRead'; stream: number; vertexCount: number; decodeMs: number }
+  // A new level to draw, with its first applied frame (as 'ready'): its
+  // buffers; faces and coarseFaces over its vertices (null faces: the full
+  // mesh's, with its stand-in, as joined); ids: each vertex's original id
+  // (null: the full mesh); baseIndex: the level index of each base vertex
+  // (−1: not in the level). buildMs: the worker's time for the geometry.
+  | {
+    type: 'level'; version: bigint; vertexCount: number; fullVertexCount: number; buffers: Buffers;
+    faces: Uint32Array | null; coarseFaces: Uint32Array | null; ids: Uint32Array | null; baseIndex: Int32Array;
+    kind: 'single' | 'keyframe' | 'sparse'; decodeMs: number; applyMs: number; normalsMs: number; stretchMs: number;
+    buildMs: number; displacement: number; stretchMax: number; maxError: number;
   }
   // The stretch colours of the frame held, when the overlay is turned on.
   | { type: 'colors'; colors: Float32Array; stretchMax: number }
   // GetOverlays made drawable (overlay-build.ts); ready false: not built yet, ask after the next frame.
   | {
-    type: 'overlays'; id: number; ready: boolean; version: bigint; regionCount: number; cutTriangles: number;
+    type: 'overlays'; id: number; ready: boolean; version: bigint; vertexCount: number; regionCount: number; cutTriangles: number;
     refinedTriangles: number; regionColors: Float32Array; regionEdges: Uint32Array; cutEdges: Uint32Array;
     refined: Float32Array;
   }

@@ -12,6 +12,9 @@ import type { Buffers, CallError, FromWorker, LoadStage, ToWorker } from './pipe
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
 export type Applied = Extract<FromWorker, { type: 'applied' }>;
 export type Ready = Extract<FromWorker, { type: 'ready' }>;
+export type LevelReady = Extract<FromWorker, { type: 'level' }>;
+export type LevelArrived = Extract<FromWorker, { type: 'levelArrived' }>;
+export type LevelRead = Extract<FromWorker, { type: 'levelRead' }>;
 export type Failed = Extract<FromWorker, { type: 'frameFailed' }>;
 export type DrawableOverlays = Extract<FromWorker, { type: 'overlays' }>;
 
@@ -29,6 +32,11 @@ export interface PipelineEvents {
   applied(result: Applied): void;
   // The state to draw.
   ready(result: Ready): void;
+  // A level announced on a stream (read off it, before its frames are applied).
+  levelArrived(arrival: LevelArrived): void;
+  levelRead(read: LevelRead): void;
+  // A new level to draw, with its first frame.
+  level(result: LevelReady): void;
   failed(result: Failed): void;
   // Superseded in the worker's mailbox before it applied them.
   skipped(count: number): void;
@@ -68,11 +76,12 @@ export class FramePipeline {
   }
 
   // Follows the session on Watch stream `stream` from after `afterVersion`
-  // (the worker reads it); resolves when that stream ends.
-  watch(stream: number, afterVersion: bigint): Promise<StreamEnd> {
+  // (the worker reads it), at a level of detail of at most `maxVertices`
+  // (0: full detail, no switching); resolves when that stream ends.
+  watch(stream: number, afterVersion: bigint, maxVertices = 0): Promise<StreamEnd> {
     return new Promise((resolve) => {
       this.streamWaiters.set(stream, resolve);
-      this.send({ type: 'watch', stream, afterVersion });
+      this.send({ type: 'watch', stream, afterVersion, maxVertices });
     });
   }
 
@@ -147,6 +156,15 @@ export class FramePipeline {
         break;
       case 'ready':
         this.events.ready(message);
+        break;
+      case 'levelArrived':
+        this.events.levelArrived(message);
+        break;
+      case 'levelRead':
+        this.events.levelRead(message);
+        break;
+      case 'level':
+        this.events.level(message);
         break;
       case 'frameFailed':
         this.events.failed(message);

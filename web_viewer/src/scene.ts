@@ -6,10 +6,16 @@
 // Draws on requestAnimationFrame only when something changed, and times the
 // draw apart from the page's own JavaScript (SwiftShader runs the vertex stage
 // on the CPU, inside the draw call).
+//
+// At a level of detail (levels.ts) the geometry is the level's (setLevel
+// swaps it whole) and vertex i of it is original vertex ids[i]: everything
+// here that names a vertex to the outside (picking, projection, positions)
+// names it by its original id.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 import { fitDistance, type Framing } from './geometry';
+import { levelIndexOf } from './levels';
 
 const FOV = 40;
 const REFINE_MS = 300;
@@ -25,13 +31,16 @@ export class MeshView {
   private readonly renderer: THREE.WebGLRenderer;
   private readonly camera: THREE.PerspectiveCamera;
   private readonly controls: OrbitControls;
-  private readonly positionAttribute: THREE.BufferAttribute;
-  private readonly normalAttribute: THREE.BufferAttribute;
+  private positionAttribute: THREE.BufferAttribute;
+  private normalAttribute: THREE.BufferAttribute;
   private dirty = true;
   // The coarse stand-in (geometry.ts, coarseIndex), drawn while frames
-  // stream or the view moves; the full index when things are still.
-  private readonly fullIndex: THREE.BufferAttribute;
-  private coarse: THREE.BufferAttribute | null = null;
+  // stream or the view moves, in a geometry of its own sharing the position
+  // and normal attributes; `geometry` (its full index) when things are still.
+  private coarse: THREE.BufferGeometry | null = null;
+  // The original id of each vertex drawn (a level of detail); null: the full
+  // mesh, whose vertex indices are the ids.
+  private ids: Uint32Array | null = null;
   private lastChange = -Infinity;
   private refineTimer: ReturnType<typeof setTimeout> | undefined;
   framesRendered = 0;
@@ -69,8 +78,7 @@ export class MeshView {
     this.normalAttribute = new THREE.BufferAttribute(normals, 3).setUsage(THREE.DynamicDrawUsage);
     this.geometry.setAttribute('position', this.positionAttribute);
     this.geometry.setAttribute('normal', this.normalAttribute);
-    this.fullIndex = new THREE.BufferAttribute(faces, 1);
-    this.geometry.setIndex(this.fullIndex);
+    this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
     const [cx, cy, cz] = framing.center;
     this.geometry.boundingSphere = new THREE.Sphere(new THREE.Vector3(cx, cy, cz), framing.radius);
 
@@ -186,9 +194,73 @@ export class MeshView {
     this.camera.updateProjectionMatrix();
   }
 
-  // Draw the coarse stand-in (index pairs of the same vertices) while busy.
-  setCoarse(faces: Uint32Array): void {
-    this.coarse = new THREE.BufferAttribute(faces, 1);
+  // Draw the coarse stand-in (triangles over the same vertices) while busy; null: none.
+  setCoarse(faces: Uint32Array | null): void {
+    this.disposeCoarse();
+    if (faces === null) return;
+    this.coarse = new THREE.BufferGeometry();
+    this.coarse.setAttribute('position', this.positionAttribute);
+    this.coarse.setAttribute('normal', this.normalAttribute);
+    this.coarse.setIndex(new THREE.BufferAttribute(faces, 1));
+    this.coarse.boundingSphere = this.geometry.boundingSphere;
+  }
+
+  // Frees the stand-in's own GPU buffer (its index), not the shared ones.
+  private disposeCoarse(): void {
+    if (this.coarse === null) return;
+    if (this.mesh.geometry === this.coarse) this.mesh.geometry = this.geometry;
+    this.coarse.deleteAttribute('position');
+    this.coarse.deleteAttribute('normal');
+    this.coarse.dispose();
+    this.coarse = null;
+  }
+
+  // Another mesh to draw: a level of detail (ids: each vertex's original id)
+  // or the full mesh again (ids null), with its first state. The old
+  // geometry's GPU buffers are freed; overlays sharing its attributes must
+  // rebind to the new ones (this.geometry, the same object, holds them).
+  // Returns the arrays replaced. The uploads happen at the next draw.
+  setLevel(positions: Float32Array, normals: Float32Array, faces: Uint32Array, coarse: Uint32Array | null,
+    ids: Uint32Array | null): { positions: Float32Array; normals: Float32Array } {
+    const old = { positions: this.positions, normals: this.normals };
+    this.disposeCoarse();
+    this.geometry.dispose();
+    this.positionAttribute = new THREE.BufferAttribute(positions, 3).setUsage(THREE.DynamicDrawUsage);
+    this.normalAttribute = new THREE.BufferAttribute(normals, 3).setUsage(THREE.DynamicDrawUsage);
+    this.geometry.setAttribute('position', this.positionAttribute);
+    this.geometry.setAttribute('normal', this.normalAttribute);
+    this.geometry.setIndex(new THREE.BufferAttribute(faces, 1));
+    this.setCoarse(coarse);
+    this.ids = ids;
+    this.fullShowMs = 0;  // of the old mesh
+    this.moved();
+    return old;
+  }
+
+  // Vertices drawn.
+  get vertexCount(): number {
+    return this.positionAttribute.count;
+  }
+
+  // The original ids of the vertices drawn (null: the full mesh, every id).
+  get levelIds(): Uint32Array | null {
+    return this.ids;
+  }
+
+  // The index drawn of original vertex `id`, −1 when the level lacks it.
+  indexOf(id: number): number {
+    return levelIndexOf(this.ids, id, this.vertexCount);
+  }
+
+  // The original id of drawn vertex `index`.
+  idOf(index: number): number {
+    return this.ids === null ? index : this.ids[index];
+  }
+
+  // Where original vertex `id` is now (null: not drawn at this level).
+  positionOf(id: number): THREE.Vector3 | null {
+    const i = this.indexOf(id);
+    return i < 0 ? null : new THREE.Vector3().fromArray(this.positions, 3 * i);
   }
 
   // Something moves (a frame, the camera): coarse for a while if there is a stand-in.
@@ -236,19 +308,20 @@ export class MeshView {
     return raycaster;
   }
 
-  // The vertex a press at the page point takes: the corner nearest to the
-  // hit of the triangle under it (null: the background). On a mesh with a
-  // stand-in the ray is cast against the stand-in (tens of thousands of
-  // triangles, not millions: a press answers at once) and the vertex is the
-  // mesh's nearest to that hit.
+  // The vertex a press at the page point takes (its original id): the
+  // corner nearest to the hit of the triangle under it (null: the
+  // background). On a mesh with a stand-in the ray is cast against the
+  // stand-in (tens of thousands of triangles, not millions: a press answers
+  // at once) and the vertex is the mesh's nearest to that hit.
   pickVertex(clientX: number, clientY: number): number | null {
     // three.js skips meshes whose bounding sphere the ray misses, and frames
     // move vertices out of the rest sphere: refresh it (one pass, per press).
     this.geometry.computeBoundingSphere();
-    const drawn = this.geometry.getIndex();
-    this.geometry.setIndex(this.coarse ?? this.fullIndex);
+    const drawn = this.mesh.geometry;
+    this.mesh.geometry = this.coarse ?? this.geometry;
+    this.mesh.geometry.boundingSphere = this.geometry.boundingSphere;
     const hit = this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
-    this.geometry.setIndex(drawn);
+    this.mesh.geometry = drawn;
     if (!hit?.face) return null;
     const p = this.positions;
     const { x, y, z } = hit.point;
@@ -262,7 +335,7 @@ export class MeshView {
       const d = distance(v);
       if (d < bestDistance) [best, bestDistance] = [v, d];
     }
-    return best < 0 ? null : best;
+    return best < 0 ? null : this.idOf(best);
   }
 
   // Where a world point is drawn, in page coordinates.
@@ -278,12 +351,13 @@ export class MeshView {
     return new THREE.Plane().setFromNormalAndCoplanarPoint(normal, point);
   }
 
-  // Where vertex i is drawn now, in page coordinates.
-  vertexOnScreen(i: number): { x: number; y: number } {
-    return this.toScreen(new THREE.Vector3().fromArray(this.positions, 3 * i));
+  // Where original vertex `id` is drawn now, in page coordinates (null: not at this level).
+  vertexOnScreen(id: number): { x: number; y: number } | null {
+    const p = this.positionOf(id);
+    return p === null ? null : this.toScreen(p);
   }
 
-  // The vertex nearest to the camera now: nothing hides it.
+  // The vertex nearest to the camera now (its original id): nothing hides it.
   nearestVertexToCamera(): number {
     const eye = this.camera.position;
     const p = this.positions;
@@ -293,7 +367,7 @@ export class MeshView {
       const d = (p[3 * i] - eye.x) ** 2 + (p[3 * i + 1] - eye.y) ** 2 + (p[3 * i + 2] - eye.z) ** 2;
       if (d < bestDistance) [best, bestDistance] = [i, d];
     }
-    return best;
+    return best < 0 ? best : this.idOf(best);
   }
 
   // The bounding rectangle of the mesh as drawn, as fractions of the canvas
@@ -392,7 +466,7 @@ export class MeshView {
       // Full detail once nothing has moved for refineMs().
       const quiet = this.refineMs();
       const busy = start - this.lastChange < quiet;
-      this.geometry.setIndex(busy ? this.coarse : this.fullIndex);
+      this.mesh.geometry = busy ? this.coarse : this.geometry;
       this.lastDrawFull = !busy;
       if (busy) {
         ++this.coarseDraws;

@@ -103,3 +103,51 @@ export async function encodeChunks(deltas: Float32Array, chunkVertices: number, 
   }
   return chunks;
 }
+
+interface MeshEncoderModule {
+  Mesh: new () => object;
+  MeshBuilder: new () => {
+    AddFacesToMesh(mesh: object, count: number, faces: Uint32Array): boolean;
+    AddUInt32Attribute(mesh: object, type: number, count: number, size: number, data: Uint32Array): number;
+    AddFloatAttribute(mesh: object, type: number, count: number, size: number, data: Float32Array): number;
+  };
+  ExpertEncoder: new (mesh: object) => {
+    SetEncodingMethod(method: number): void;
+    EncodeToDracoBuffer(deduplicate: boolean, out: object): number;
+  };
+  DracoInt8Array: new () => { GetValue(i: number): number };
+  POSITION: number;
+  MESH_SEQUENTIAL_ENCODING: number;
+  MESH_EDGEBREAKER_ENCODING: number;
+  destroy(object: unknown): void;
+}
+
+// A level of detail's mesh as the server encodes it (core/codec/level_mesh_codec.cpp):
+// a Draco mesh, Edgebreaker (which reorders points and faces), one POSITION
+// attribute of 1 UINT32 component, each point's original id.
+export async function encodeLevelMesh(ids: Uint32Array, faces: Uint32Array, method: 'edgebreaker' | 'sequential' = 'edgebreaker'):
+  Promise<Uint8Array> {
+  const M = await (encoder ??= draco3d.createEncoderModule({}) as Promise<EncoderModule>) as unknown as MeshEncoderModule;
+  const mesh = new M.Mesh();
+  const builder = new M.MeshBuilder();
+  const out = new M.DracoInt8Array();
+  try {
+    builder.AddFacesToMesh(mesh, faces.length / 3, faces);
+    builder.AddUInt32Attribute(mesh, M.POSITION, ids.length, 1, ids);
+    const expert = new M.ExpertEncoder(mesh);
+    try {
+      expert.SetEncodingMethod(method === 'edgebreaker' ? M.MESH_EDGEBREAKER_ENCODING : M.MESH_SEQUENTIAL_ENCODING);
+      const length = expert.EncodeToDracoBuffer(false, out);
+      if (length <= 0) throw new Error('Draco encoding failed');
+      const bytes = new Uint8Array(length);
+      for (let i = 0; i < length; ++i) bytes[i] = out.GetValue(i) & 0xff;
+      return bytes;
+    } finally {
+      M.destroy(expert);
+    }
+  } finally {
+    M.destroy(out);
+    M.destroy(builder);
+    M.destroy(mesh);
+  }
+}
