@@ -159,6 +159,7 @@ export class DetailControl {
   private publish(reason: string): void {
     hook.detailMode = this.choice.mode;
     hook.detailBudget = this.wanted;
+    hook.detailTarget = levelVerticesFor(this.wanted, this.baseVertices, this.fullVertices);
     hook.detailLog.push({ at: performance.now(), budget: this.wanted, reason });
     if (hook.detailLog.length > 100) hook.detailLog.shift();
   }

@@ -19,6 +19,7 @@ export interface TestHook {
   levelIds(): number[] | null;
   detailMode: 'auto' | 'full' | 'fixed' | '';
   detailBudget: number;
+  detailTarget: number;     // the level that budget gets (as the server rounds it)
   detailLog: { at: number; budget: number; reason: string }[];
   levelsArrived: number;    // level messages read off the streams (a stream's first, and after each SetDetail)
   levelSwaps: number;       // geometries swapped for another level
@@ -118,7 +119,7 @@ declare global {
 
 export const hook: TestHook = window.__filigree = {
   state: 'starting', error: null, sessionId: null, vertexCount: 0, baseVertexCount: 0, version: 0,
-  fullVertexCount: 0, levelVertices: 0, levelIds: () => null, detailMode: '', detailBudget: 0, detailLog: [],
+  fullVertexCount: 0, levelVertices: 0, levelIds: () => null, detailMode: '', detailBudget: 0, detailTarget: 0, detailLog: [],
   levelsArrived: 0, levelSwaps: 0, levelSwapMs: 0, levelSwapMsMax: 0, levelDecodeMs: 0, framesAtLevel: 0, lastNewFrameAt: 0, streamId: '',
   watchStreams: 0, setDetailCalls: 0, setDetailAnswers: 0, maxError: 0,
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,

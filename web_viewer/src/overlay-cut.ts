@@ -7,7 +7,7 @@
 // builds both (overlay-build.ts); this only swaps them in.
 import * as THREE from 'three';
 
-import { shareMesh, type MeshOverlay } from './overlays';
+import { shareMesh, unshareMesh, type MeshOverlay } from './overlays';
 
 export class CutWireframe implements MeshOverlay {
   readonly id = 'cut';
@@ -17,6 +17,7 @@ export class CutWireframe implements MeshOverlay {
   private readonly lines: THREE.LineSegments;
   private readonly tint: THREE.Mesh;
   private colors: THREE.BufferAttribute;
+  private bound = true;  // the tint, to the mesh's attributes (rebind)
   triangleCount = 0;
   refinedTriangles = 0;
 
@@ -40,17 +41,27 @@ export class CutWireframe implements MeshOverlay {
   }
 
   setVisible(visible: boolean): void {
+    if (visible) this.bind();
     this.object.visible = visible;
   }
 
   update(): void {}  // the shared position attribute moves it
 
-  // Another level of detail drawn: nothing shown until the next answer for it.
+  // Another level of detail drawn: nothing shown until the next answer for
+  // it (the tint bound to it when shown).
   rebind(): void {
-    this.colors = new THREE.BufferAttribute(new Float32Array(this.mesh.getAttribute('position').count * 3), 3);
-    shareMesh(this.tint.geometry, this.mesh, this.colors);
+    unshareMesh(this.tint.geometry);
+    this.bound = false;
     this.setCut(new Uint32Array(0), new Float32Array(0), 0, 0);
     this.tint.visible = false;
+    if (this.object.visible) this.bind();
+  }
+
+  private bind(): void {
+    if (this.bound) return;
+    this.bound = true;
+    this.colors = new THREE.BufferAttribute(new Float32Array(this.mesh.getAttribute('position').count * 3), 3);
+    shareMesh(this.tint.geometry, this.mesh, this.colors);
   }
 
   // A new cut: its coarse edges (index pairs) and the per-vertex tint.
@@ -62,7 +73,7 @@ export class CutWireframe implements MeshOverlay {
     // Disposing a geometry frees its attributes' GPU buffers: not the shared one.
     old.deleteAttribute('position');
     old.dispose();
-    if (tint.length === this.colors.array.length) {
+    if (this.bound && tint.length === this.colors.array.length) {
       this.colors.array = tint;
       this.colors.needsUpdate = true;
       this.tint.visible = refined > 0;

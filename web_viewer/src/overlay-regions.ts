@@ -6,7 +6,7 @@
 // worker builds both; this only swaps them in.
 import * as THREE from 'three';
 
-import { shareMesh, type MeshOverlay } from './overlays';
+import { shareMesh, unshareMesh, type MeshOverlay } from './overlays';
 
 export class RegionsOverlay implements MeshOverlay {
   readonly id = 'regions';
@@ -16,6 +16,7 @@ export class RegionsOverlay implements MeshOverlay {
   private readonly fill: THREE.Mesh;
   private readonly outline: THREE.LineSegments;
   private colors: THREE.BufferAttribute;
+  private bound = true;  // to the mesh's attributes (rebind)
 
   // `mesh`: the detailed mesh's geometry, whose attributes this shares.
   constructor(private readonly mesh: THREE.BufferGeometry) {
@@ -42,14 +43,24 @@ export class RegionsOverlay implements MeshOverlay {
     return new THREE.BufferAttribute(new Float32Array(3 * mesh.getAttribute('position').count).fill(0.27), 3);
   }
 
-  // Another level of detail drawn: grey again until the next answer for it.
+  // Another level of detail drawn: grey again until the next answer for it
+  // (bound to it when shown).
   rebind(): void {
+    unshareMesh(this.fill.geometry);
+    this.bound = false;
+    this.setEdges(new Uint32Array(0));
+    if (this.object.visible) this.bind();
+  }
+
+  private bind(): void {
+    if (this.bound) return;
+    this.bound = true;
     this.colors = RegionsOverlay.grey(this.mesh);
     shareMesh(this.fill.geometry, this.mesh, this.colors);
-    this.setEdges(new Uint32Array(0));
   }
 
   setVisible(visible: boolean): void {
+    if (visible) this.bind();
     this.object.visible = visible;
   }
 
@@ -57,7 +68,7 @@ export class RegionsOverlay implements MeshOverlay {
 
   // Per-vertex linear colours and the outline's index pairs (the worker's).
   setRegions(colors: Float32Array, edges: Uint32Array): void {
-    if (colors.length !== this.colors.array.length) return;  // not this mesh's (never expected)
+    if (!this.bound || colors.length !== this.colors.array.length) return;  // not for this mesh
     this.colors.array = colors;
     this.colors.needsUpdate = true;
     this.setEdges(edges);

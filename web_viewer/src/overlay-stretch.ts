@@ -5,7 +5,7 @@
 // mesh drawn again over itself; the page only swaps the colour array in.
 import * as THREE from 'three';
 
-import { shareMesh, type MeshOverlay } from './overlays';
+import { shareMesh, unshareMesh, type MeshOverlay } from './overlays';
 
 export class StretchOverlay implements MeshOverlay {
   readonly id = 'stretch';
@@ -13,6 +13,7 @@ export class StretchOverlay implements MeshOverlay {
   readonly fromServer = false;
   readonly object: THREE.Mesh;
   private colors: THREE.BufferAttribute;
+  private bound = true;  // to the mesh's attributes (rebind)
   maxDeviation = 0;  // the largest |L2 − 1| of the last colours (for the panel and tests)
 
   // `mesh`: the detailed mesh's geometry, whose position and normal attributes this shares.
@@ -34,10 +35,11 @@ export class StretchOverlay implements MeshOverlay {
   }
 
   // Another level of detail drawn; its colours come with its frames (the
-  // level's first ones too, when shown: setColors).
+  // level's first ones too, when shown: setColors, which binds it).
   rebind(): void {
-    this.colors = StretchOverlay.blank(this.mesh);
-    shareMesh(this.object.geometry, this.mesh, this.colors);
+    unshareMesh(this.object.geometry);
+    this.bound = false;
+    this.object.visible = false;
   }
 
   // Shown once the worker has coloured a frame; it starts colouring now.
@@ -50,6 +52,11 @@ export class StretchOverlay implements MeshOverlay {
 
   // A frame's colours; returns the array they replace.
   setColors(colors: Float32Array, maxDeviation: number): Float32Array {
+    if (!this.bound) {
+      this.bound = true;
+      this.colors = StretchOverlay.blank(this.mesh);
+      shareMesh(this.object.geometry, this.mesh, this.colors);
+    }
     const old = this.colors.array as Float32Array;
     this.colors.array = colors;
     this.colors.needsUpdate = true;

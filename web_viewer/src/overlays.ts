@@ -17,21 +17,26 @@ export interface Overlay {
 
 // Overlays drawn from the mesh's own attributes (sharing its position,
 // normal and index): after the mesh is swapped for another level of detail,
-// rebind() takes the new ones and frees the old geometries' own buffers.
+// rebind() lets the old ones go and frees the overlay's own buffers; it takes
+// the new ones (and allocates its colours, 12 bytes a vertex) when shown.
 export interface MeshOverlay extends Overlay {
   rebind(): void;
 }
 
-// Points `geometry` at `mesh`'s position, normal and index (after freeing
-// its own GPU buffers, not the shared ones, which the mesh frees), with a
-// colour attribute of `colors` when given.
+// Lets `geometry` go of the mesh's attributes and frees its own GPU buffers
+// (not the shared ones, which the mesh frees).
+export function unshareMesh(geometry: THREE.BufferGeometry): void {
+  if (!geometry.getAttribute('position')) return;
+  geometry.deleteAttribute('position');
+  geometry.deleteAttribute('normal');
+  geometry.setIndex(null);
+  geometry.dispose();
+}
+
+// Points `geometry` at `mesh`'s position, normal and index (unsharing what
+// it held), with a colour attribute of `colors` when given.
 export function shareMesh(geometry: THREE.BufferGeometry, mesh: THREE.BufferGeometry, colors?: THREE.BufferAttribute): void {
-  if (geometry.getAttribute('position')) {
-    geometry.deleteAttribute('position');
-    geometry.deleteAttribute('normal');
-    geometry.setIndex(null);
-    geometry.dispose();
-  }
+  unshareMesh(geometry);
   geometry.setAttribute('position', mesh.getAttribute('position'));
   geometry.setAttribute('normal', mesh.getAttribute('normal'));
   geometry.setIndex(mesh.getIndex());
