@@ -5,6 +5,17 @@
 // page's own work). Prints a table; not a test.
 //
 //   node bench/web_viewer/bench.mjs [--sizes 134k,1m] [--seconds 10] [--trace-out DIR] [--no-trace]
+//   node bench/web_viewer/bench.mjs --detail [--sizes 1m] [--budgets 16384,65536,262144,full] [--canvas full|64] [--seconds 10]
+//
+// The first form measures full detail (detail=full). --detail measures the
+// levels of detail instead: one page per budget (detail=BUDGET) on the
+// normal canvas (--canvas 64: the 64×64 one), driven as above; per budget the
+// level drawn, frames arrived/applied/drawn per second, the longest
+// main-thread task and the most of our JavaScript in one task (from the
+// trace, split as below), the draw call, and then, still driven, a switch
+// chosen in the panel (to Full; on the full row to 65,536): the time to the
+// new level's third frame, the page's own time for the swap, and the longest
+// task meanwhile.
 //
 // Needs the viewer build (web_viewer/build.sh), filigree-server and the CLI
 // (FILIGREE_SERVER, FILIGREE_CLI as in web_viewer/test/harness.mjs), chromium.
@@ -72,8 +83,11 @@ const option = (name, fallback) => {
   const i = args.indexOf(`--${name}`);
   return i >= 0 ? args[i + 1] : fallback;
 };
-const SIZES = { '134k': [260, 516], '1m': [708, 1416] };  // rings, segments: (rings − 1)·segments + 2 vertices
-const sizes = option('sizes', '134k,1m').split(',');
+const SIZES = { '134k': [260, 516], '300k': [388, 776], '1m': [708, 1416] };  // rings, segments: (rings − 1)·segments + 2 vertices
+const DETAIL = args.includes('--detail');
+const sizes = option('sizes', DETAIL ? '1m' : '134k,1m').split(',');
+const BUDGETS = option('budgets', '16384,65536,262144,full').split(',');
+const DETAIL_CANVAS = option('canvas', 'full');
 const SECONDS = Number(option('seconds', '10'));
 const TRACE_OUT = option('trace-out', null);
 const TRACE = !args.includes('--no-trace');
@@ -140,14 +154,16 @@ const median = (xs) => (xs.length === 0 ? NaN : [...xs].sort((a, b) => a - b)[Ma
 const fmt = (x, digits = 1) => (Number.isFinite(x) ? x.toFixed(digits) : '–');
 const count = (x) => (Number.isFinite(x) ? String(x) : '–');
 
-async function measure(browser, baseUrl, grpc, session, small, label) {
+// `detail`: the page's detail= (full detail by default: what this bench
+// measured before levels of detail; --detail passes each budget).
+async function measure(browser, baseUrl, grpc, session, small, label, detail = 'full') {
   const context = await browser.newContext({ viewport: { width: 1280, height: 800 } });
   const page = await context.newPage();
   await page.addInitScript(instrument);
   const cdp = await context.newCDPSession(page);
   await cdp.send('Performance.enable');
   const opened = Date.now();
-  await page.goto(`${baseUrl}/?session=${session.session_id}#token=${session.viewer_token}`);
+  await page.goto(`${baseUrl}/?session=${session.session_id}&detail=${detail}#token=${session.viewer_token}`);
   const stages = new Set();
   // Progress is shown while the mesh loads: sample which stages the page showed.
   for (;;) {
@@ -161,10 +177,15 @@ async function measure(browser, baseUrl, grpc, session, small, label) {
   const loadLongest = await page.evaluate(() => Math.max(0, ...window.__bench.longtasks.map((t) => t.duration)));
   if (small) await page.addStyleTag({ content: '#view { flex: none !important; width: 64px !important; height: 64px !important; }' });
 
-  const driver = spawn(CLI, driveArgs(grpc, session, 'bend', Math.round(30 * (SECONDS + 4)), 30, small ? 'bench-64' : 'bench'),
+  // --detail: long enough for the switch after the window too (the driver is stopped after it).
+  const driver = spawn(CLI, driveArgs(grpc, session, 'bend', Math.round(30 * (SECONDS + (DETAIL ? 300 : 4))), 30,
+    small ? 'bench-64' : 'bench'),
     { stdio: 'ignore' });
   const driverDone = new Promise((done) => driver.on('exit', done));
   await page.waitForFunction(() => window.__filigree.framesApplied >= 3, null, { timeout: 120_000 });
+  // At the level asked for (as the server rounds the budget), a few of its frames in.
+  await page.waitForFunction(() => window.__filigree.levelVertices === window.__filigree.detailTarget
+    && window.__filigree.framesAtLevel >= 3, null, { timeout: 180_000 });
   await page.waitForTimeout(1000);  // past the first frames
 
   const snapshot = async () => {
@@ -213,6 +234,8 @@ async function measure(browser, baseUrl, grpc, session, small, label) {
     longtasks: window.__bench.longtasks.filter((t) => t.start >= t0 && t.start < t1),
     inputs: window.__bench.inputs.slice(i0, i1),
   }), [a.now, b.now, a.inputs, b.inputs]);
+  const level = await page.evaluate(() => ({ vertices: window.__filigree.levelVertices, full: window.__filigree.fullVertexCount }));
+  const switched = DETAIL ? await measureSwitch(page, cdp, level.vertices === level.full ? '65536' : 'full') : null;
   driver.kill('SIGTERM');
   await driverDone;
   await context.close();
@@ -245,7 +268,28 @@ async function measure(browser, baseUrl, grpc, session, small, label) {
     loadMs, loadLongest, stages: [...stages].join('→'),
     ...tasks,
     clickWorst,
+    level: level.vertices,
+    switched,
   };
+}
+
+// While driven: another level chosen in the panel (`to`); the time to the
+// new level's third frame swapped in, the page's own time for the swap
+// (hook.levelSwapMs), and from a trace of that time the longest main-thread
+// task split as in taskSplit.
+async function measureSwitch(page, cdp, to) {
+  if (TRACE) await startTrace(cdp);
+  await page.evaluate(() => performance.mark('filigree-bench-start'));
+  const swaps = await page.evaluate(() => window.__filigree.levelSwaps);
+  const t0 = Date.now();
+  await page.selectOption('#detail', to);
+  await page.waitForFunction((s) => window.__filigree.levelSwaps > s && window.__filigree.framesAtLevel >= 3, swaps,
+    { timeout: 180_000 });
+  const ms = Date.now() - t0;
+  await page.evaluate(() => performance.mark('filigree-bench-end'));
+  const h = await page.evaluate(() => ({ vertices: window.__filigree.levelVertices, swapMs: window.__filigree.levelSwapMs }));
+  const tasks = TRACE ? taskSplit((await endTrace(cdp)).events) : null;
+  return { to: h.vertices, ms, swapMs: h.swapMs, longestTask: tasks?.longestTask ?? null, ourLongest: tasks?.ourLongest ?? NaN };
 }
 
 // Tracing over the measured window, read back as a stream.
@@ -424,6 +468,14 @@ async function main() {
       const session = await upload(grpc, file, `bench-${size}`);
       const uploadS = (Date.now() - t0) / 1000;
       process.stderr.write(`bench: ${n} vertices uploaded and preprocessed in ${uploadS.toFixed(1)} s\n`);
+      if (DETAIL) {
+        for (const budget of BUDGETS) {
+          const r = await measure(browser, `http://${http}`, grpc, session, DETAIL_CANVAS === '64', `${size}-${budget}`, budget);
+          rows.push({ vertices: n, budget, ...r });
+          process.stderr.write(`bench: ${n} at ${budget} (${r.level} vertices) done\n`);
+        }
+        continue;
+      }
       for (const small of [false, true]) {
         const r = await measure(browser, `http://${http}`, grpc, session, small, size);
         rows.push({ vertices: n, ...r });
@@ -434,6 +486,10 @@ async function main() {
     await browser?.close();
     await stopServer(server, 20_000);
     rmSync(work, { recursive: true, force: true });
+  }
+  if (DETAIL) {
+    printDetail(rows);
+    return;
   }
   const header = ['vertices', 'canvas', 'arrived/s', 'applied/s', 'drawn/s', 'applied %', 'long tasks', 'long %',
     'longest ms', 'tasks > 50 ms: all / our JS > 50', 'longest task of our JS ms (task CPU)', 'longest task: JS / draw / other (readback); CPU ms',
@@ -452,6 +508,26 @@ async function main() {
   for (const row of table) console.log(line(row));
   console.log();
   printTargets(rows);
+  const [one, five, fifteen] = loadavg();
+  console.log(`\nLoad average at the end: ${fmt(one, 2)}, ${fmt(five, 2)}, ${fmt(fifteen, 2)} ` +
+    `(${cpus().length} cores; the server, the CLI driver and Chromium share them).`);
+}
+
+// The --detail table: a row per budget.
+function printDetail(rows) {
+  const split = (t) => (t ? `${fmt(t.dur, 0)}: ${fmt(t.js)} / ${fmt(t.draw)} / ${fmt(t.other, 0)} (${fmt(t.readback, 0)})` : '–');
+  const header = ['vertices', 'budget', 'level', 'canvas', 'arrived/s', 'applied/s', 'drawn/s', 'applied %',
+    'longest task ms: JS / draw / other (readback)', 'longest task of our JS ms', 'tasks > 50 ms', 'draw ms',
+    'switch to', 'switch ms', 'swap task ms', 'longest task while switching: JS / draw / other (readback)'];
+  const table = rows.map((r) => [r.vertices.toLocaleString('en-US'), r.budget, r.level.toLocaleString('en-US'), r.canvas,
+    fmt(r.arrived), fmt(r.applied), fmt(r.drawn), fmt(100 * r.appliedShare, 0), split(r.longestTask), fmt(r.ourLongest),
+    count(r.traceLong), fmt(r.drawPerDraw), r.switched ? r.switched.to.toLocaleString('en-US') : '–',
+    r.switched ? fmt(r.switched.ms, 0) : '–', r.switched ? fmt(r.switched.swapMs) : '–', split(r.switched?.longestTask)]);
+  const widths = header.map((h, i) => Math.max(h.length, ...table.map((row) => row[i].length)));
+  const line = (cells) => `| ${cells.map((c, i) => c.padEnd(widths[i])).join(' | ')} |`;
+  console.log(line(header));
+  console.log(`|${widths.map((w) => '-'.repeat(w + 2)).join('|')}|`);
+  for (const row of table) console.log(line(row));
   const [one, five, fifteen] = loadavg();
   console.log(`\nLoad average at the end: ${fmt(one, 2)}, ${fmt(five, 2)}, ${fmt(fifteen, 2)} ` +
     `(${cpus().length} cores; the server, the CLI driver and Chromium share them).`);
