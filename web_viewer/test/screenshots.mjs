@@ -234,9 +234,12 @@ try {
     await waitFor(page, () => window.__filigree.displacement > 0.3);
     drive.kill('SIGTERM');
     await new Promise((done) => drive.on('exit', done));
-    // The last frame applied and drawn in full detail (not the stand-in drawn while busy).
+    // The last frame applied and drawn in full detail: every vertex (Auto
+    // watches a level while driven and switches to full detail at rest), not
+    // the stand-in drawn while busy.
     await waitFor(page, () => window.__filigree.framesReceived === window.__filigree.framesApplied + window.__filigree.framesSkipped
-      && window.__filigree.drawnVersion === window.__filigree.version);
+      && window.__filigree.drawnVersion === window.__filigree.version
+      && window.__filigree.levelVertices === window.__filigree.fullVertexCount);
     await waitFor(page, () => window.__filigree.lastDrawFull);
     const path = join(IMAGES, 'million-vertices.png');
     await page.screenshot({ path });
