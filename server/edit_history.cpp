@@ -1,6 +1,7 @@
 #include "server/edit_history.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <stdexcept>
 
@@ -21,6 +22,10 @@ bool same_value(const float* a, const float* b) { return a[0] == b[0] && a[1] ==
 std::string vertices_phrase(std::size_t n) { return std::to_string(n) + (n == 1 ? " base vertex" : " base vertices"); }
 
 }  // namespace
+
+double unix_seconds() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
 
 std::size_t EditHistory::Entry::bytes() const {
   std::size_t b = sizeof(Entry) + info.author().size() + vertices.capacity() * sizeof(Index) +
@@ -103,7 +108,7 @@ void EditHistory::record_pose(const ChangeOrigin& origin, Kind kind, std::span<c
   bool moves = false;
   for (std::size_t i = 0; i < count && !moves; ++i) {
     const std::size_t v = indices.empty() ? i : indices[i];
-    moves = !same_value(&before[3 * v], &after[3 * v]);
+    moves = !same_value(&before[3 * v], &after[3 * i]);
   }
   if (!moves) return;
   Entry& e = entry_for(origin, kind);
@@ -112,16 +117,16 @@ void EditHistory::record_pose(const ChangeOrigin& origin, Kind kind, std::span<c
     const Index v = static_cast<Index>(indices.empty() ? i : indices[i]);
     const auto [slot, added] = e.slot.try_emplace(v, static_cast<std::uint32_t>(e.vertices.size()));
     if (added) {
-      if (same_value(&before[3 * v], &after[3 * v])) {
+      if (same_value(&before[3 * v], &after[3 * i])) {
         e.slot.erase(slot);
         continue;
       }
       e.vertices.push_back(v);
       e.before.insert(e.before.end(), &before[3 * v], &before[3 * v] + 3);
-      e.after.insert(e.after.end(), &after[3 * v], &after[3 * v] + 3);
+      e.after.insert(e.after.end(), &after[3 * i], &after[3 * i] + 3);
       e.prev_writer.push_back(writer_[v]);
     } else {
-      std::copy(&after[3 * v], &after[3 * v] + 3, &e.after[3 * slot->second]);
+      std::copy(&after[3 * i], &after[3 * i] + 3, &e.after[3 * slot->second]);
     }
     writer_[v] = e.info.seq();
   }

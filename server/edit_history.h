@@ -28,6 +28,9 @@
 
 namespace filigree::server {
 
+// Unix seconds now: history entries' times (shown to people, kept across restarts).
+double unix_seconds();
+
 struct HistoryLimits {
   std::size_t entries = 1000;        // the oldest go first beyond these
   std::size_t bytes = 64u << 20;
@@ -60,8 +63,9 @@ class EditHistory {
   EditHistory(std::size_t base_vertices, HistoryLimits limits);
 
   // A pose change: `indices` (base order; empty: every vertex) go from
-  // `before` to `after` (whole poses, 3 per base vertex). `kind` is
-  // KIND_POSE, or KIND_HANDLES for the pose a handle solve made.
+  // `before` (the whole pose, 3 per base vertex) to `after` (3 per index; the
+  // whole pose when indices is empty). Call before the pose changes. `kind`
+  // is KIND_POSE, or KIND_HANDLES for the pose a handle solve made.
   void record_pose(const ChangeOrigin& origin, v1::HistoryEntry::Kind kind, std::span<const std::uint32_t> indices,
                    std::span<const float> before, std::span<const float> after);
   // The author's handles went from `before` to `after`.
@@ -102,6 +106,7 @@ class EditHistory {
   std::size_t size() const { return entries_.size(); }
   // Changes recorded since the last call (for persisting only when needed).
   bool take_dirty() { return std::exchange(dirty_, false); }
+  void mark_dirty() { dirty_ = true; }
 
  private:
   struct Entry {

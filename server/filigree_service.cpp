@@ -17,6 +17,8 @@
 #include "server/play_clip_reactor.h"
 #include "server/pose_request.h"
 #include "server/resident_memory.h"
+#include "server/export_history_reactor.h"
+#include "server/presence_reactor.h"
 #include "server/rest_mesh_reactor.h"
 #include "server/watch_reactors.h"
 
@@ -398,7 +400,7 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
     for (const v1::Handle& h : request->handles()) handles.emplace_back(h.vertex(), Vec3(h.x(), h.y(), h.z()));
     try {
       response->set_accepted_at_version(s.accepted_version());
-      response->set_handles_in_session(static_cast<std::uint32_t>(s.set_handles(request->client_name(), handles)));
+      response->set_handles_in_session(static_cast<std::uint32_t>(s.set_handles(request->client_name(), handles, request->gesture_id())));
     } catch (const PoseError& e) {
       return {grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const StoreUnavailable& e) {  // handles are journaled now
@@ -411,6 +413,16 @@ grpc::ServerUnaryReactor* FiligreeService::SetHandles(grpc::CallbackServerContex
 grpc::ServerWriteReactor<v1::RestMeshPart>* FiligreeService::GetRestMesh(grpc::CallbackServerContext* context,
                                                                          const v1::GetRestMeshRequest* request) {
   return new_rest_mesh_reactor(*this, context, *request);
+}
+
+grpc::ServerWriteReactor<v1::Presence>* FiligreeService::WatchPresence(grpc::CallbackServerContext* context,
+                                                                       const v1::WatchPresenceRequest* request) {
+  return new_presence_reactor(*this, context, *request);
+}
+
+grpc::ServerWriteReactor<v1::HistoryFrame>* FiligreeService::ExportHistory(grpc::CallbackServerContext* context,
+                                                                           const v1::ExportHistoryRequest* request) {
+  return new_export_history_reactor(*this, context, *request);
 }
 
 grpc::ServerUnaryReactor* FiligreeService::GetHandles(grpc::CallbackServerContext* context,
@@ -468,9 +480,10 @@ grpc::ServerUnaryReactor* FiligreeService::GetState(grpc::CallbackServerContext*
 
 namespace {
 
-grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, std::size_t inline_rest, grpc::ByteBuffer* response) {
+grpc::Status apply_options(Session& s, double threshold, bool whole_mesh, const std::string& author, std::size_t inline_rest,
+                           grpc::ByteBuffer* response) {
   try {
-    const std::uint64_t accepted = s.set_threshold(threshold, whole_mesh);
+    const std::uint64_t accepted = s.set_threshold(threshold, whole_mesh, &author);
     // Not the current frame's version: a frame may have been published since
     // the change, and a client waiting for a frame after it would wait forever.
     *response = s.info_wire(inline_rest, accepted);
@@ -499,9 +512,9 @@ grpc::ServerUnaryReactor* FiligreeService::SetOptions(grpc::CallbackServerContex
   const std::size_t inline_rest = limits_.inline_rest_bytes();
   return unary_on_session(
       context, r.session_id(), Role::kEditor,
-      [threshold, whole_mesh, valid, inline_rest, response](Session& s) -> grpc::Status {
+      [threshold, whole_mesh, valid, inline_rest, response, author = r.client_name()](Session& s) -> grpc::Status {
         if (!valid) return {grpc::StatusCode::INVALID_ARGUMENT, "threshold must be a finite number ≥ 0 (whole_mesh for ∞)"};
-        return apply_options(s, threshold, whole_mesh, inline_rest, response);
+        return apply_options(s, threshold, whole_mesh, author, inline_rest, response);
       },
       // The first finite T of a mesh derives its node graph and region
       // optimisation's data (~1 s at 1.25M vertices), and whole-mesh

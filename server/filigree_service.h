@@ -55,7 +55,12 @@ using FiligreeServiceBase = rpc::WithCallbackMethod_CreateSession<rpc::WithRawCa
         rpc::WithRawCallbackMethod_GetOverlays<rpc::WithRawCallbackMethod_Watch<rpc::WithRawCallbackMethod_GetState<
             rpc::WithRawCallbackMethod_SetOptions<rpc::WithCallbackMethod_CloseSession<rpc::WithCallbackMethod_ListSessions<
                 rpc::WithCallbackMethod_LocateSession<rpc::WithRawCallbackMethod_PlayClip<
-                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::WithCallbackMethod_GetRestMesh<rpc::WithCallbackMethod_SetDetail<rpc::Service>>>>>>>>>>>>>>>>>;
+                    rpc::WithRawCallbackMethod_Follow<rpc::WithCallbackMethod_GetHandles<rpc::WithCallbackMethod_GetRestMesh<rpc::WithCallbackMethod_SetDetail<
+                        rpc::WithCallbackMethod_GetHistory<rpc::WithCallbackMethod_Undo<rpc::WithCallbackMethod_Redo<
+                            rpc::WithCallbackMethod_CreateCheckpoint<rpc::WithCallbackMethod_RestoreCheckpoint<
+                                rpc::WithCallbackMethod_DiffCheckpoint<rpc::WithCallbackMethod_WatchPresence<
+                                    rpc::WithCallbackMethod_SetPresence<rpc::WithCallbackMethod_ExportHistory<
+                                        rpc::Service>>>>>>>>>>>>>>>>>>>>>>>>>>;
 
 class FiligreeService final : public FiligreeServiceBase {
  public:
@@ -87,6 +92,25 @@ class FiligreeService final : public FiligreeServiceBase {
                                        v1::SessionHandles* response) override;
   grpc::ServerUnaryReactor* SetDetail(grpc::CallbackServerContext* context, const v1::SetDetailRequest* request,
                                       v1::SetDetailResponse* response) override;
+  // The edit history, checkpoints and presence (history_calls.cpp).
+  grpc::ServerUnaryReactor* GetHistory(grpc::CallbackServerContext* context, const v1::GetHistoryRequest* request,
+                                       v1::History* response) override;
+  grpc::ServerUnaryReactor* Undo(grpc::CallbackServerContext* context, const v1::UndoRequest* request,
+                                 v1::UndoResponse* response) override;
+  grpc::ServerUnaryReactor* Redo(grpc::CallbackServerContext* context, const v1::UndoRequest* request,
+                                 v1::UndoResponse* response) override;
+  grpc::ServerUnaryReactor* CreateCheckpoint(grpc::CallbackServerContext* context, const v1::CreateCheckpointRequest* request,
+                                             v1::Checkpoint* response) override;
+  grpc::ServerUnaryReactor* RestoreCheckpoint(grpc::CallbackServerContext* context,
+                                              const v1::RestoreCheckpointRequest* request, v1::UndoResponse* response) override;
+  grpc::ServerUnaryReactor* DiffCheckpoint(grpc::CallbackServerContext* context, const v1::DiffCheckpointRequest* request,
+                                           v1::CheckpointDiff* response) override;
+  grpc::ServerUnaryReactor* SetPresence(grpc::CallbackServerContext* context, const v1::SetPresenceRequest* request,
+                                        v1::SetPresenceResponse* response) override;
+  grpc::ServerWriteReactor<v1::Presence>* WatchPresence(grpc::CallbackServerContext* context,
+                                                        const v1::WatchPresenceRequest* request) override;
+  grpc::ServerWriteReactor<v1::HistoryFrame>* ExportHistory(grpc::CallbackServerContext* context,
+                                                            const v1::ExportHistoryRequest* request) override;
   // Request: a GetOverlaysRequest; answer: an Overlays serialized once per frame.
   grpc::ServerUnaryReactor* GetOverlays(grpc::CallbackServerContext* context, const grpc::ByteBuffer* request,
                                         grpc::ByteBuffer* response) override;

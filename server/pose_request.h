@@ -1,13 +1,21 @@
 #pragma once
 // A DriveRequest (from Drive or SubmitPose) merged into its session.
 
+#include <cstddef>
 #include <cstdint>
+#include <string>
 
 #include "filigree/v1/filigree.pb.h"
 
 namespace filigree::server {
 
 class Session;
+
+// The longest client_name a change may carry: names are kept in frames'
+// changes, the history and presence.
+inline constexpr std::size_t kMaxClientName = 256;
+// Throws PoseError for a longer one.
+void check_client_name(const std::string& name);
 
 // Merges `r`'s pose into `session` as `driver`'s (0: a unary call): its
 // positions (full or partial) or its joints, not both; a keyframe request

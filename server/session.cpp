@@ -33,6 +33,7 @@
 namespace filigree::server {
 namespace {
 
+
 v1::Skeleton skeleton_info(const Rig& rig) {
   v1::Skeleton out;
   for (const Joint& j : rig.joints) {
@@ -66,11 +67,20 @@ DeformerOptions deformer_options(const v1::SessionOptions& o) {
 }  // namespace
 
 Session::Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
-                 Journal journal)
+                 Journal journal, HistoryLimits history_limits)
     : assets_(std::move(assets)), scheduler_(scheduler), lane_(scheduler.lane()),
       encoder_(assets_->hierarchy().rest_positions, frame_encoder_options(record.options, *assets_)),
-      record_(std::move(record)), last_activity_(Clock::now()), journal_(std::move(journal)) {
+      history_(assets_->hierarchy().base_vertices.size(), history_limits), record_(std::move(record)),
+      last_activity_(Clock::now()), journal_(std::move(journal)) {
   const Hierarchy& h = assets_->hierarchy();
+  if (!record_.history.empty()) {
+    try {
+      history_ = EditHistory::deserialize(record_.history, h.base_vertices.size(), history_limits);
+    } catch (const std::exception& e) {  // the session comes back without its history rather than not at all
+      spdlog::warn("session={} event=history_not_restored error=\"{}\"", record_.id, e.what());
+    }
+    record_.history = {};
+  }
   const v1::BaseMesh& base = assets_->base;
   if (record_.pose.size() != 3 * h.base_vertices.size()) record_.pose.assign(base.positions().begin(), base.positions().end());
   if (!record_.rig.empty()) {
@@ -185,6 +195,8 @@ void Session::merge(const PoseOrigin& origin,
     if (closed_) return;
     // Handles edit on top of the skeleton: solved again from the new skinned base.
     if (skinned && !handles_.empty()) handles_dirty_ = true;
+    history_.record_pose({origin.client_name, origin.gesture, unix_seconds(), assigned_version_},
+                         v1::HistoryEntry::KIND_POSE, indices, record_.pose, positions);
     for (std::size_t i = 0; i < count; ++i) {
       const std::size_t v = indices.empty() ? i : indices[i];
       for (int k = 0; k < 3; ++k) record_.pose[3 * v + k] = positions[3 * i + k];
@@ -204,6 +216,7 @@ void Session::merge(const PoseOrigin& origin,
       touched[v] = true;
     }
     change.set_vertex_count(change.vertex_count() + newly);
+    publish_presence_locked(/*paced=*/true);
     seq = ++journal_seq_;
     if (journal_now) progress = progress_with_change_locked();
     pending_ = true;
@@ -327,7 +340,8 @@ void Session::driver_left(std::uint64_t driver) {
   latest_pose_of_driver_.erase(driver);
 }
 
-std::size_t Session::set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles) {
+std::size_t Session::set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles,
+                                 std::uint64_t gesture) {
   for (const auto& [v, target] : handles) {
     if (v >= assets_->hierarchy().vertex_count())
       throw PoseError("handle vertex " + std::to_string(v) + " is out of range: the mesh has " +
@@ -342,16 +356,22 @@ std::size_t Session::set_handles(const std::string& client_name, const std::vect
     std::lock_guard lock(mutex_);
     if (evicted_) throw_evicted();
     if (closed_) return 0;
+    HandleSet before;
     for (auto it = handles_.begin(); it != handles_.end();) {
+      for (const HandleEntry& e : it->second)
+        if (e.client == client_name) before.emplace_back(it->first, e.target);
       std::erase_if(it->second, [&](const HandleEntry& e) { return e.client == client_name; });
       it = it->second.empty() ? handles_.erase(it) : std::next(it);
     }
     for (const auto& [v, target] : handles) handles_[v].push_back({target, client_name, ++handle_stamp_});
+    handles_origin_ = {client_name, gesture, unix_seconds(), assigned_version_};
+    history_.record_handles(handles_origin_, before, handles);
     count = handles_.size();
     v1::Change& change = changes_[client_name];
     change.set_client_name(client_name);
     change.set_vertex_count(change.vertex_count() + static_cast<std::uint32_t>(handles.size()));
     handles_dirty_ = true;
+    publish_presence_locked(/*paced=*/true);
     // Journaled like a pose: a session that moves keeps every client's handles.
     seq = ++journal_seq_;
     if (journal_) progress = progress_with_change_locked();
@@ -393,7 +413,7 @@ bool Session::threshold_needs_preparation(double threshold, bool whole_mesh) con
   return whole_mesh || (threshold > 0.0 && !(m.node_graph_derived() && m.optimisation_data_derived()));
 }
 
-std::uint64_t Session::set_threshold(double threshold, bool whole_mesh) {
+std::uint64_t Session::set_threshold(double threshold, bool whole_mesh, const std::string* author) {
   if (whole_mesh || threshold > 0.0) {
     // A finite T needs the hierarchy's node graph, which loading does not
     // check (hierarchy/node_graph.h): derive it now (once per mesh) so that
@@ -428,6 +448,10 @@ std::uint64_t Session::set_threshold(double threshold, bool whole_mesh) {
     if (evicted_) throw_evicted();
     // Frames take their version and options together, under this lock.
     accepted = assigned_version_;
+    if (author)
+      history_.record_threshold({*author, 0, unix_seconds(), assigned_version_},
+                                record_.options.whole_mesh() ? DeformerOptions::kInfinity : record_.options.threshold(),
+                                whole_mesh ? DeformerOptions::kInfinity : threshold);
     record_.options.set_threshold(threshold);
     record_.options.set_whole_mesh(whole_mesh);
     pending_threshold_ = whole_mesh ? DeformerOptions::kInfinity : threshold;
@@ -444,6 +468,7 @@ std::uint64_t Session::set_threshold(double threshold, bool whole_mesh) {
 
 void Session::close() {
   std::vector<std::shared_ptr<FrameSink>> sinks;
+  std::vector<std::shared_ptr<PresenceSink>> presence;
   {
     std::lock_guard lock(mutex_);
     closed_ = true;
@@ -451,13 +476,19 @@ void Session::close() {
     for (const auto& w : sinks_)
       if (auto s = w.lock()) sinks.push_back(s);
     sinks_.clear();
+    for (const auto& w : presence_sinks_)
+      if (auto s = w.lock()) presence.push_back(s);
+    presence_sinks_.clear();
   }
   for (const auto& s : sinks) s->close(true, {});
+  for (const auto& s : presence) s->close(true, {});
 }
 
 bool Session::evict_if_unused() {
   std::lock_guard lock(mutex_);
   for (const auto& w : sinks_)
+    if (!w.expired()) return false;
+  for (const auto& w : presence_sinks_)
     if (!w.expired()) return false;
   evicted_ = closed_ = stopping_ = true;
   return true;
@@ -469,13 +500,18 @@ void Session::throw_evicted() const {
 
 void Session::close_streams(const std::string& why) {
   std::vector<std::shared_ptr<FrameSink>> sinks;
+  std::vector<std::shared_ptr<PresenceSink>> presence;
   {
     std::lock_guard lock(mutex_);
     for (const auto& w : sinks_)
       if (auto s = w.lock()) sinks.push_back(s);
     sinks_.clear();
+    for (const auto& w : presence_sinks_)
+      if (auto s = w.lock()) presence.push_back(s);
+    presence_sinks_.clear();
   }
   for (const auto& s : sinks) s->close(false, why);
+  for (const auto& s : presence) s->close(false, why);
 }
 
 std::string Session::failure() const {

@@ -32,7 +32,9 @@
 #include "runtime/deformer.h"  // FrameStats
 #include "runtime/pose.h"
 #include "server/frame_scheduler.h"
+#include "server/edit_history.h"
 #include "server/level_frames.h"
+#include "server/presence_sink.h"
 #include "server/serialized_frame.h"
 #include "server/session_assets.h"
 #include "server/session_record.h"
@@ -89,6 +91,7 @@ struct PoseOrigin {
   std::string client_name;
   std::uint64_t pose_id = 0;
   bool keyframe = false;
+  std::uint64_t gesture = 0;  // DriveRequest.gesture_id: one history entry
 };
 
 // A subscriber's mailbox; implemented by the streaming reactors.
@@ -129,6 +132,9 @@ struct Journal {
   // over between the merge and the frame. One machine journals with the
   // frame (a group commit of the poses it merges; DESIGN §3.3).
   bool every_merge = true;
+  // Where the edit history goes (its serialized bytes, whole); empty: kept
+  // in memory only.
+  std::function<void(const std::string&)> write_history;
   explicit operator bool() const { return static_cast<bool>(write); }
 };
 
@@ -137,7 +143,7 @@ class Session {
   // Computes the current frame; later frames run on `scheduler`, which must
   // outlive the session.
   Session(SessionRecord record, std::shared_ptr<const SessionAssets> assets, FrameScheduler& scheduler,
-          Journal journal = {});
+          Journal journal = {}, HistoryLimits history_limits = {});
   ~Session();
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
@@ -194,8 +200,41 @@ class Session {
   // Throws HierarchyError (and changes nothing) if a finite T is asked of a
   // hierarchy whose node graph cannot be derived. Returns the version when
   // the change was accepted: every frame with a larger version applies it,
-  // and one follows.
-  std::uint64_t set_threshold(double threshold, bool whole_mesh);
+  // and one follows. Recorded in the history as `author`'s unless null.
+  std::uint64_t set_threshold(double threshold, bool whole_mesh, const std::string* author = nullptr);
+
+  // The edit history (edit_history.h). Undo, redo and restore change the
+  // pose (and handles, threshold) at once, journal it and answer with the
+  // version every frame including it exceeds.
+  v1::History history(std::size_t newest) const;
+  v1::UndoResponse undo(const std::string& author, bool redo, bool force);
+  // Throws std::invalid_argument for a bad name.
+  v1::Checkpoint create_checkpoint(const std::string& author, const std::string& name);
+  // Throws std::out_of_range for an unknown checkpoint.
+  v1::UndoResponse restore_checkpoint(const std::string& author, std::uint64_t id);
+  v1::CheckpointDiff diff_checkpoint(std::uint64_t id) const;
+  // The base pose after each entry of [from, to] (EditHistory::states).
+  std::vector<std::pair<v1::HistoryEntry, std::vector<float>>> history_states(std::uint64_t from, std::uint64_t to) const;
+  // Each author's latest change: its base vertices and end time (presence).
+  std::map<std::string, std::pair<std::vector<std::uint32_t>, double>> latest_changes() const;
+  // Presence (proto Presence). A WatchPresence stream joins as `name` with
+  // `role` and gets the current presence at once, then every change.
+  struct Pointer {
+    float x = 0, y = 0, z = 0;
+    std::uint32_t vertex = 0;
+  };
+  void join_presence(const std::shared_ptr<PresenceSink>& sink, const std::string& name, Role role);
+  void leave_presence(const PresenceSink* sink, const std::string& name);
+  // Sets (nullopt: clears) `name`'s pointer.
+  void point(const std::string& name, Role role, std::optional<Pointer> pointer);
+  // Sends presence held back by pacing (the maintenance tick).
+  void flush_presence();
+
+  // Writes the history where the journal keeps it (Journal::write_history)
+  // if it changed since the last write; a failure is logged and retried at
+  // the next call. Called after undo, redo and checkpoints, and by the
+  // registry's maintenance for the entries of gestures.
+  void persist_history();
   // Whether set_threshold(threshold, whole_mesh) would first derive the
   // mesh's node graph and region optimisation's data (once per mesh; ~1 s
   // at 1.25M vertices), or, for whole_mesh, make T = ∞'s factorisation
@@ -207,7 +246,8 @@ class Session {
   // Throws PoseError for a vertex out of range or a non-finite target. With a
   // journal, returns once the handles are journaled, and throws what the
   // journal throws. Returns the number of handles in the session after the merge.
-  std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles);
+  std::size_t set_handles(const std::string& client_name, const std::vector<std::pair<Index, Vec3>>& handles,
+                          std::uint64_t gesture = 0);
   // GetHandles' answer: every client's handles as set, by client name, and
   // the version of the newest frame.
   v1::SessionHandles handles() const;
@@ -345,6 +385,13 @@ class Session {
   // Builds and publishes the encoded frame.
   void publish(InFlight& f);
   void touch();
+  // An undo, redo or restore's outcome applied (mutex_ held): handles,
+  // the pose's frame, the journal's progress; returns the journal seq.
+  std::uint64_t apply_history_locked(const std::string& author, const HistoryOutcome& outcome, SessionProgress& progress);
+  // Finishes an undo, redo or restore: journal, threshold, answer's version.
+  v1::UndoResponse finish_history(HistoryOutcome outcome, std::uint64_t seq, SessionProgress& progress,
+                                  std::uint64_t accepted);
+  double threshold_locked() const;  // +inf for whole-mesh optimisation
   // Journals `progress` unless a later progress (by seq) already was.
   void journal(const SessionProgress& progress, std::uint64_t seq);
   // The progress including a change just merged, under the version of the frame that will show it.
@@ -382,7 +429,25 @@ class Session {
   // encoding frame's levels part and publish(), one frame at a time).
   std::map<std::uint32_t, std::unique_ptr<LevelFrames>> level_frames_;
   std::map<std::uint32_t, std::uint64_t> level_frames_encoded_;  // mutex_; for ListSessions
-  std::set<std::uint32_t> levels_building_;                      // mutex_: meshes being built for this session
+  std::set<std::uint32_t> levels_building_;
+  EditHistory history_;  // mutex_
+  // Presence (session_presence.cpp), mutex_.
+  struct PresenceState {
+    Role role = Role::kNone;
+    int streams = 0;  // WatchPresence streams open under this name
+    std::optional<Pointer> pointer;
+    std::chrono::steady_clock::time_point active{};
+  };
+  std::map<std::string, PresenceState> presence_;
+  std::vector<std::weak_ptr<PresenceSink>> presence_sinks_;
+  bool presence_dirty_ = false;
+  std::chrono::steady_clock::time_point presence_published_{};
+  v1::Presence presence_locked() const;
+  // Offers the presence to every stream; `paced`: not within 100 ms of the
+  // last (then the next event or tick sends it).
+  void publish_presence_locked(bool paced);
+  // Who set handles last: the handle solve's pose change is theirs (mutex_).
+  ChangeOrigin handles_origin_;                      // mutex_: meshes being built for this session
   std::unique_ptr<InFlight> computed_;  // computed, waiting for the encoder
   std::unique_ptr<InFlight> encoding_;  // being encoded
 

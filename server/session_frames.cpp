@@ -369,8 +369,12 @@ bool Session::compute_frame(InFlight& f, bool keep_version) {
       std::lock_guard lock(mutex_);
       handles_solving_ = false;
       if (journal_seq_ == seq) {
+        std::vector<float> solved(3 * m);
         for (std::size_t i = 0; i < m; ++i)
-          for (int k = 0; k < 3; ++k) record_.pose[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+          for (int k = 0; k < 3; ++k) solved[3 * i + k] = static_cast<float>(pose.positions[i][k]);
+        // The solved pose is the change of whoever set handles last.
+        history_.record_pose(handles_origin_, v1::HistoryEntry::KIND_HANDLES, {}, record_.pose, solved);
+        record_.pose = std::move(solved);
         seq = ++journal_seq_;
       } else {
         // A pose was merged while this solved: keep it (writing back would

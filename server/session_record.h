@@ -40,6 +40,9 @@ struct SessionRecord {
   bool handles_pending = false;  // not solved into `pose` yet
   // The adaptive cut of the frame showing `pose` (empty: none, or not taken).
   CutSnapshot cut;
+  // The edit history as EditHistory::serialize() wrote it (kept beside the
+  // record by the stores; empty: none).
+  std::string history;
 };
 
 // Session ids are 20 lowercase hex digits (80 random bits): safe as file

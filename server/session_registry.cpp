@@ -22,20 +22,27 @@ SessionRegistry::~SessionRegistry() = default;
 
 Journal SessionRegistry::journal_for(const std::string& id) {
   if (!store_.persistent()) return {};
-  if (!store_.shared())
-    return {[this, id](const SessionProgress& p) {
-              if (!store_.save_progress(id, p)) throw StoreUnavailable("session " + id + " was closed");
-              std::lock_guard lock(mutex_);
-              if (const auto it = sessions_.find(id); it != sessions_.end())
-                it->second.persisted_version = std::max(it->second.persisted_version, p.version);
-            },
-            /*every_merge=*/false};
-  return {[this, id](const SessionProgress& p) {
-            if (!store_.save_progress(id, p))
-              throw StoreUnavailable("replica " + store_.replica_id() + " no longer holds the lease of session " + id +
-                                     "; another replica serves it: reconnect");
-          },
-          /*every_merge=*/true};
+  Journal j;
+  if (!store_.shared()) {
+    j.write = [this, id](const SessionProgress& p) {
+      if (!store_.save_progress(id, p)) throw StoreUnavailable("session " + id + " was closed");
+      std::lock_guard lock(mutex_);
+      if (const auto it = sessions_.find(id); it != sessions_.end())
+        it->second.persisted_version = std::max(it->second.persisted_version, p.version);
+    };
+    j.every_merge = false;
+  } else {
+    j.write = [this, id](const SessionProgress& p) {
+      if (!store_.save_progress(id, p))
+        throw StoreUnavailable("replica " + store_.replica_id() + " no longer holds the lease of session " + id +
+                               "; another replica serves it: reconnect");
+    };
+    j.every_merge = true;
+  }
+  j.write_history = [this, id](const std::string& bytes) {
+    if (!store_.save_history(id, bytes)) throw StoreUnavailable("session " + id + " was closed");
+  };
+  return j;
 }
 
 void SessionRegistry::confirm_lease(const std::string& id) {
@@ -330,6 +337,8 @@ void SessionRegistry::maintain() {
   }
   for (const auto& [id, e] : entries) {
     const auto& s = e.session;
+    s->persist_history();  // the entries of gestures since the last tick
+    s->flush_presence();
     if (shared) {
       Renewal renewal = Renewal::kHeld;
       try {
@@ -414,6 +423,7 @@ std::size_t SessionRegistry::evict_idle_until(const std::function<bool()>& enoug
 void SessionRegistry::shutdown() {
   for (const auto& s : loaded()) {
     persist(*s);
+    s->persist_history();
     s->close_streams("the server is shutting down");
     if (store_.shared()) {
       try {

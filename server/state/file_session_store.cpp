@@ -34,6 +34,11 @@ std::filesystem::path progress_file(const std::filesystem::path& record_file) {
   return p.replace_extension(".progress");
 }
 
+std::filesystem::path history_file(const std::filesystem::path& record_file) {
+  std::filesystem::path p = record_file;
+  return p.replace_extension(".history");
+}
+
 // Write, flush to the disk, then rename and flush the folder: a crash (of
 // the process or the machine) leaves the old file or the new one, never half
 // of one, and once this returns the new one is what a restart reads. Owner
@@ -110,6 +115,15 @@ bool FileSessionStore::save_progress(const std::string& id, const SessionProgres
   return true;
 }
 
+bool FileSessionStore::save_history(const std::string& id, const std::string& bytes) {
+  const auto file = file_of(id);
+  if (file.empty()) return true;  // memory only
+  std::lock_guard lock(write_mutex_);
+  if (!std::filesystem::exists(file)) return false;
+  write_durably(history_file(file), bytes);
+  return true;
+}
+
 std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
   const auto file = file_of(id);
   if (file.empty()) return std::nullopt;
@@ -134,6 +148,7 @@ std::optional<SessionRecord> FileSessionStore::load(const std::string& id) {
     }
     if (p.version >= r.version) apply_progress(p, r);
   }
+  if (std::optional<std::string> history = read_file(history_file(file))) r.history = std::move(*history);
   return r;
 }
 
@@ -147,6 +162,7 @@ void FileSessionStore::remove(const std::string& id) {
   if (file.empty()) return;
   std::lock_guard lock(write_mutex_);
   std::filesystem::remove(progress_file(file));
+  std::filesystem::remove(history_file(file));
   std::filesystem::remove(file);
 }
 

@@ -25,6 +25,7 @@ class FileSessionStore final : public SessionStore {
   bool create(const SessionRecord& r) override;
   bool save(const SessionRecord& r) override;
   bool save_progress(const std::string& id, const SessionProgress& p) override;
+  bool save_history(const std::string& id, const std::string& bytes) override;
   std::optional<SessionRecord> load(const std::string& id) override;
   bool exists(const std::string& id) override;
   void remove(const std::string& id) override;

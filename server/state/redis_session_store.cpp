@@ -75,12 +75,18 @@ bool RedisSessionStore::save_progress(const std::string& id, const SessionProgre
   return redis_->eval(kSave, {lease, state}, {options_.replica_id, bytes}).integer == 1;
 }
 
+bool RedisSessionStore::save_history(const std::string& id, const std::string& bytes) {
+  // Only by the lease's holder, like progress.
+  return redis_->eval(kSave, {key("lease:", id), key("history:", id)}, {options_.replica_id, bytes}).integer == 1;
+}
+
 std::optional<SessionRecord> RedisSessionStore::load(const std::string& id) {
-  const RedisReply reply = redis_->command({"MGET", key("session:", id), key("state:", id)});
-  if (reply.elements.size() != 2 || reply.elements[0].nil()) return std::nullopt;
+  const RedisReply reply = redis_->command({"MGET", key("session:", id), key("state:", id), key("history:", id)});
+  if (reply.elements.size() != 3 || reply.elements[0].nil()) return std::nullopt;
   try {
     SessionRecord r = decode_session_record(reply.elements[0].str);
     if (!reply.elements[1].nil()) apply_session_progress(reply.elements[1].str, r);
+    if (!reply.elements[2].nil()) r.history = reply.elements[2].str;
     return r;
   } catch (const std::exception& e) {
     throw SessionUnusable("the stored record of session " + id + " is unreadable: " + e.what());
@@ -92,7 +98,7 @@ bool RedisSessionStore::exists(const std::string& id) {
 }
 
 void RedisSessionStore::remove(const std::string& id) {
-  redis_->command({"DEL", key("session:", id), key("state:", id), key("lease:", id), key("handoff:", id)});
+  redis_->command({"DEL", key("session:", id), key("state:", id), key("history:", id), key("lease:", id), key("handoff:", id)});
 }
 
 std::vector<std::string> RedisSessionStore::list() {

@@ -64,6 +64,14 @@ class SessionStore {
   // Overwrites only what changes while the session runs (the journal of a
   // shared store); false if this replica no longer owns the session.
   virtual bool save_progress(const std::string& id, const SessionProgress& p) = 0;
+  // Overwrites the session's edit history (EditHistory::serialize), which
+  // load() returns in SessionRecord::history; false if the session is gone
+  // (or, shared, owned by another replica now). A store that keeps nothing
+  // keeps no history either.
+  virtual bool save_history(const std::string& id, const std::string& bytes) {
+    (void)id, (void)bytes;
+    return true;
+  }
   // nullopt if there is none; throws SessionUnusable if it is unreadable.
   virtual std::optional<SessionRecord> load(const std::string& id) = 0;
   virtual bool exists(const std::string& id) = 0;
