@@ -494,14 +494,16 @@ class Viewer {
     const { frame } = arrival;
     this.stats.frameArrived(frame, start, arrival.bytes);
     ++hook.framesReceived;
+    // Frames sent again (a level switch or a resync sends the current frame,
+    // its keyframe first) are no new changes.
     if (frame.version > this.lastVersion) {
       this.lastVersion = frame.version;
-      this.lastNewFrameAt = start;  // a level's keyframe sent again after a switch is no new frame
+      this.lastNewFrameAt = start;
       hook.lastNewFrameAt = start;
+      this.changes.add(frame);
+      this.participants.frameArrived(frame);
     }
     hook.newestVersion = Number(this.lastVersion);
-    this.changes.add(frame);
-    this.participants.frameArrived(frame);
     this.feed.frameArrived();
     if (hook.framesReceived === 1) {
       // From the first frame on, the count includes this page's own Watch.

@@ -218,6 +218,10 @@ describe('levels of detail', { timeout: 3 * TEST_TIMEOUT_MS }, () => {
       assert.equal(switched.reconnects, 0);
       assert.equal(switched.error, null);
       assert.equal(await page.textContent('#detail-level'), 'Detail: 10,242 of 10,242 vertices');
+      // The frame sent again at the new level (its keyframe first) is no new change.
+      const lines = await page.$$eval('#changes li', (items) => items.map((item) => item.textContent));
+      assert.ok(lines.length > 3, `change lines: ${lines.length}`);
+      assert.equal(new Set(lines).size, lines.length, `a change listed twice: ${lines.join(' | ')}`);
       // Every vertex drawn: one the level lacks has a position now.
       const ids = new Set(levelIds);
       const missing = Array.from({ length: vertices }, (_, i) => i).find((i) => !ids.has(i));
