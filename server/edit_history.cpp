@@ -102,6 +102,7 @@ void EditHistory::trim() {
 
 void EditHistory::record_pose(const ChangeOrigin& origin, Kind kind, std::span<const std::uint32_t> indices,
                               std::span<const float> before, std::span<const float> after) {
+  if (limits_.entries == 0) return;  // history off
   const std::size_t count = indices.empty() ? base_vertices_ : indices.size();
   // A full pose repeats every vertex: only the ones that move count as
   // touched (else every later undo by anyone would conflict with it).
@@ -137,6 +138,7 @@ void EditHistory::record_pose(const ChangeOrigin& origin, Kind kind, std::span<c
 }
 
 void EditHistory::record_handles(const ChangeOrigin& origin, const HandleSet& before, const HandleSet& after) {
+  if (limits_.entries == 0) return;
   Entry& e = entry_for(origin, v1::HistoryEntry::KIND_HANDLES);
   const std::size_t old_bytes = e.bytes();
   if (!e.handles_before) e.handles_before = before;
@@ -148,6 +150,7 @@ void EditHistory::record_handles(const ChangeOrigin& origin, const HandleSet& be
 }
 
 void EditHistory::record_threshold(const ChangeOrigin& origin, double before, double after) {
+  if (limits_.entries == 0) return;
   Entry& e = entry_for(origin, v1::HistoryEntry::KIND_THRESHOLD);
   if (!e.threshold_before) {
     e.threshold_before = before;

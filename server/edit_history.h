@@ -32,7 +32,7 @@ namespace filigree::server {
 double unix_seconds();
 
 struct HistoryLimits {
-  std::size_t entries = 1000;        // the oldest go first beyond these
+  std::size_t entries = 1000;        // the oldest go first beyond these; 0: no history
   std::size_t bytes = 64u << 20;
   double pause_seconds = 0.5;        // gesture id 0: a longer pause starts a new entry
 };

@@ -151,6 +151,11 @@ int main(int argc, char** argv) {
                  "Seconds an upload may take to send its bytes (DEADLINE_EXCEEDED after); 0: no limit")
       ->check(CLI::NonNegativeNumber);
   app.add_option("--max-message-mib", max_message_mib, "Largest gRPC message in MiB, each way")->check(CLI::Range(1, 2047));
+  std::size_t history_mib = registry_limits.history.bytes >> 20;
+  app.add_option("--history-entries", registry_limits.history.entries,
+                 "Most entries each session's edit history keeps (the oldest go first; 0: no history)")
+      ->check(CLI::Range(0, 1000000));
+  app.add_option("--history-mib", history_mib, "Most memory each session's edit history holds, in MiB")->check(CLI::Range(1, 65536));
   app.add_option("--idle-timeout", registry_limits.idle_seconds, "Seconds after which an idle session leaves memory (its record stays)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error");
   TlsFiles tls;
@@ -223,6 +228,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(300, 600000));
   app.add_option("--redis-prefix", redis_prefix, "Prefix of every Redis key (several deployments on one Redis)");
   CLI11_PARSE(app, argc, argv);
+  registry_limits.history.bytes = history_mib << 20;
   service_limits.max_memory_bytes = max_memory_mib << 20;
   service_limits.max_message_bytes = static_cast<std::uint64_t>(max_message_mib) << 20;
   // Logs go to stderr; stdout carries only the "listening on" (and "http on") lines for scripts.

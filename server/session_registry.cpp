@@ -99,7 +99,7 @@ std::shared_ptr<Session> SessionRegistry::create(std::shared_ptr<const Hierarchy
   r.owner = std::move(owner);
   if (!store_.create(r)) throw BadSessionId("the proposed session id is taken", true);
   Journal journal = journal_for(r.id);
-  auto made = std::make_shared<Session>(std::move(r), assets_.get(h, scheduler_.threads()), scheduler_, std::move(journal));
+  auto made = std::make_shared<Session>(std::move(r), assets_.get(h, scheduler_.threads()), scheduler_, std::move(journal), limits_.history);
   confirm_lease(made->id());
   auto s = insert(made);
   // Reserved above: nobody else can have inserted this id meanwhile.
@@ -167,7 +167,7 @@ std::shared_ptr<Session> SessionRegistry::load(const std::string& id, bool take_
       return nullptr;
     }
     auto h = cache_.load(r->hierarchy_key);
-    s = std::make_shared<Session>(std::move(*r), assets_.get(h, scheduler_.threads()), scheduler_, journal_for(id));
+    s = std::make_shared<Session>(std::move(*r), assets_.get(h, scheduler_.threads()), scheduler_, journal_for(id), limits_.history);
   } catch (const StoreUnavailable&) {
     store_.release(id);
     throw;

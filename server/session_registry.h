@@ -17,6 +17,7 @@
 #include <utility>
 #include <vector>
 
+#include "server/edit_history.h"
 #include "server/hierarchy_cache.h"
 #include "server/session.h"
 #include "server/session_assets.h"
@@ -35,6 +36,8 @@ struct RegistryLimits {
   double lease_seconds = 3.0;
   // Threads computing and encoding every session's frames; 0: one per core.
   unsigned frame_threads = 0;
+  // Each session's edit history keeps at most this much.
+  HistoryLimits history;
 };
 
 // More sessions than --max-sessions.
