@@ -23,10 +23,10 @@ struct Editing {
 
   // `author` moves `vertices` to x = value (a pose of one gesture).
   void move(const std::string& author, std::vector<std::uint32_t> vertices, float value, std::uint64_t gesture = 0) {
-    std::vector<float> after = pose;
-    for (std::uint32_t v : vertices) after[3 * v] = value;
-    history.record_pose({author, gesture, now, ++version}, v1::HistoryEntry::KIND_POSE, vertices, pose, after);
-    pose = after;
+    std::vector<float> values;  // 3 per index
+    for (std::uint32_t v : vertices) values.insert(values.end(), {value, pose[3 * v + 1], pose[3 * v + 2]});
+    history.record_pose({author, gesture, now, ++version}, v1::HistoryEntry::KIND_POSE, vertices, pose, values);
+    for (std::size_t i = 0; i < vertices.size(); ++i) pose[3 * vertices[i]] = value;
     now += 1.0;  // past the pause: a new entry unless a gesture id joins them
   }
   HistoryOutcome undo(const std::string& author, bool force = false) {
