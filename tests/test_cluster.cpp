@@ -622,5 +622,147 @@ TEST(Cluster, SessionSurvivesItsReplicaBeingKilledUnderLoad) {
   }
 }
 
+// The edit history's calls on one replica (a direct call may take the session
+// over, as a load balancer's would).
+class HistoryAt {
+ public:
+  HistoryAt(const std::string& address, const SessionHandle& s)
+      : stub_(v1::Filigree::NewStub(grpc::CreateChannel(address, grpc::InsecureChannelCredentials()))), s_(s) {}
+
+  // `author` moves base vertices `vertices` up by `dy` from the base pose, in gesture `gesture`.
+  void move(const std::string& author, const std::vector<std::uint32_t>& vertices, float dy, std::uint64_t gesture) {
+    grpc::ClientContext context;
+    set_session_metadata(context, s_.session_id, s_.editor_token);
+    v1::DriveRequest r;
+    r.set_session_id(s_.session_id);
+    r.set_client_name(author);
+    r.set_gesture_id(gesture);
+    for (const std::uint32_t v : vertices) {
+      r.add_indices(v);
+      r.add_positions(s_.mesh.base_positions[3 * v]);
+      r.add_positions(s_.mesh.base_positions[3 * v + 1] + dy);
+      r.add_positions(s_.mesh.base_positions[3 * v + 2]);
+    }
+    v1::SubmitPoseResponse answer;
+    const grpc::Status status = stub_->SubmitPose(&context, r, &answer);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  v1::UndoResponse undo(const std::string& author, bool redo = false) {
+    grpc::ClientContext context;
+    set_session_metadata(context, s_.session_id, s_.editor_token);
+    v1::UndoRequest r;
+    r.set_session_id(s_.session_id);
+    r.set_client_name(author);
+    v1::UndoResponse answer;
+    const grpc::Status status = redo ? stub_->Redo(&context, r, &answer) : stub_->Undo(&context, r, &answer);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return answer;
+  }
+  v1::Checkpoint checkpoint(const std::string& author, const std::string& name) {
+    grpc::ClientContext context;
+    set_session_metadata(context, s_.session_id, s_.editor_token);
+    v1::CreateCheckpointRequest r;
+    r.set_session_id(s_.session_id);
+    r.set_client_name(author);
+    r.set_name(name);
+    v1::Checkpoint made;
+    const grpc::Status status = stub_->CreateCheckpoint(&context, r, &made);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return made;
+  }
+  grpc::Status history(v1::History* out) {
+    grpc::ClientContext context;
+    set_session_metadata(context, s_.session_id, s_.viewer_token);
+    v1::GetHistoryRequest r;
+    r.set_session_id(s_.session_id);
+    return stub_->GetHistory(&context, r, out);
+  }
+  // Each base vertex's height above the base pose in the merged pose.
+  std::vector<float> heights() {
+    grpc::ClientContext context;
+    set_session_metadata(context, s_.session_id, s_.viewer_token);
+    v1::GetStateRequest r;
+    r.set_session_id(s_.session_id);
+    v1::SessionState state;
+    const grpc::Status status = stub_->GetState(&context, r, &state);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    std::vector<float> out(s_.mesh.base_positions.size() / 3, 0.0f);
+    for (std::size_t v = 0; v < out.size() && 3 * v + 1 < static_cast<std::size_t>(state.pose_size()); ++v)
+      out[v] = state.pose(static_cast<int>(3 * v + 1)) - s_.mesh.base_positions[3 * v + 1];
+    return out;
+  }
+
+ private:
+  std::unique_ptr<v1::Filigree::Stub> stub_;
+  SessionHandle s_;
+};
+
+// Heights of zero but for `set`, against `got`.
+void expect_heights(const std::vector<float>& got, std::initializer_list<std::pair<std::uint32_t, float>> set) {
+  std::vector<float> want(got.size(), 0.0f);
+  for (const auto& [v, h] : set) want.at(v) = h;
+  for (std::size_t v = 0; v < got.size(); ++v) EXPECT_NEAR(got[v], want[v], 1e-6) << "base vertex " << v;
+}
+
+TEST(Cluster, TheEditHistoryFailsOverWithTheSession) {
+  // Editors change a session on replica A and one undoes; A is killed
+  // (SIGKILL: nothing saved on the way out). Replica B takes the session over
+  // from Redis with its history: the same entries, and undo and redo go on.
+  Cluster cluster(FILIGREE_SERVER_BINARY, kReplicas);
+  Client lb(cluster.lb());
+  const SessionHandle s = lb.create_session(bunny(), "obj", {}, "history");
+  const int a = cluster.index_of(lb.locate(s.session_id, s.viewer_token).replica_id());
+  ASSERT_GE(a, 0);
+  HistoryAt on_a(cluster.address(a), s);
+  on_a.move("ana", {1, 2}, 0.01f, 11);
+  on_a.move("ben", {3}, 0.02f, 21);
+  on_a.move("ana", {1, 2}, 0.03f, 11);  // the same gesture: one entry
+  on_a.move("cleo", {4}, 0.04f, 31);
+  const v1::Checkpoint made = on_a.checkpoint("cleo", "before ben's second");
+  on_a.move("ben", {2}, 0.05f, 22);  // over Ana's vertex 2
+  // Ben's undo gives vertex 2 back to Ana. Once it is answered, the history
+  // is in Redis (undo, redo and checkpoints save it before answering).
+  ASSERT_EQ(on_a.undo("ben").outcome(), v1::UndoResponse::OUTCOME_DONE);
+  expect_heights(on_a.heights(), {{1, 0.03f}, {2, 0.03f}, {3, 0.02f}, {4, 0.04f}});
+  v1::History before;
+  ASSERT_TRUE(on_a.history(&before).ok());
+  ASSERT_EQ(before.entries_size(), 5) << before.DebugString();
+  ASSERT_EQ(before.checkpoints_size(), 1);
+  EXPECT_TRUE(before.entries(3).undone());
+
+  cluster.kill(a);
+  const int b = (a + 1) % kReplicas;
+  state_when_served(cluster.address(b), s);  // B takes the session over once A's lease expires
+  EXPECT_EQ(Client(cluster.address(b)).locate(s.session_id, s.viewer_token).replica_id(), "replica-" + std::to_string(b + 1));
+  HistoryAt on_b(cluster.address(b), s);
+  v1::History after;
+  ASSERT_TRUE(on_b.history(&after).ok());
+  ASSERT_EQ(after.entries_size(), before.entries_size()) << "the history was not saved to Redis:\n" << after.DebugString();
+  for (int i = 0; i < after.entries_size(); ++i)
+    EXPECT_EQ(after.entries(i).SerializeAsString(), before.entries(i).SerializeAsString())
+        << "entry " << i << ": " << after.entries(i).DebugString() << " was " << before.entries(i).DebugString();
+  ASSERT_EQ(after.checkpoints_size(), 1);
+  EXPECT_EQ(after.checkpoints(0).SerializeAsString(), made.SerializeAsString());
+  EXPECT_EQ(after.first_seq(), before.first_seq());
+  expect_heights(on_b.heights(), {{1, 0.03f}, {2, 0.03f}, {3, 0.02f}, {4, 0.04f}});
+
+  // Undo and redo go on on B: Ben's redo takes vertex 2 back, Ana's undo
+  // restores her vertex 1 (vertex 2 is Ben's again), Cleo's undo her 4.
+  const v1::UndoResponse redone = on_b.undo("ben", /*redo=*/true);
+  EXPECT_EQ(redone.outcome(), v1::UndoResponse::OUTCOME_DONE) << redone.message();
+  EXPECT_EQ(redone.entry(), before.entries(3).seq());
+  expect_heights(on_b.heights(), {{1, 0.03f}, {2, 0.05f}, {3, 0.02f}, {4, 0.04f}});
+  const v1::UndoResponse undone = on_b.undo("ana");
+  EXPECT_EQ(undone.outcome(), v1::UndoResponse::OUTCOME_PARTIAL) << undone.message();
+  EXPECT_EQ(undone.entry(), before.entries(0).seq());
+  expect_heights(on_b.heights(), {{2, 0.05f}, {3, 0.02f}, {4, 0.04f}});
+  EXPECT_EQ(on_b.undo("cleo").outcome(), v1::UndoResponse::OUTCOME_DONE);
+  expect_heights(on_b.heights(), {{2, 0.05f}, {3, 0.02f}});
+  v1::History later;
+  ASSERT_TRUE(on_b.history(&later).ok());
+  ASSERT_EQ(later.entries_size(), before.entries_size() + 3);
+  EXPECT_GT(later.entries(before.entries_size()).seq(), before.entries().rbegin()->seq()) << "entry numbers go on";
+}
+
 }  // namespace
 }  // namespace filigree
