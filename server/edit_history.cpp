@@ -28,7 +28,7 @@ double unix_seconds() {
 }
 
 std::size_t EditHistory::Entry::bytes() const {
-  std::size_t b = sizeof(Entry) + info.author().size() + vertices.capacity() * sizeof(Index) +
+  std::size_t b = sizeof(Entry) + info.author().size() + (vertices.capacity() + slot.capacity()) * sizeof(Index) +
                   (before.capacity() + after.capacity()) * sizeof(float) + prev_writer.capacity() * sizeof(std::uint64_t);
   if (handles_before) b += (handles_before->size() + handles_after->size()) * sizeof(HandleSet::value_type);
   return b;
@@ -63,6 +63,7 @@ void EditHistory::close_open(const std::string& author) {
   if (Entry* e = find(it->second)) {
     e->open = false;
     e->slot = {};
+    e->slot.shrink_to_fit();
   }
   open_.erase(it);
 }
@@ -80,6 +81,7 @@ EditHistory::Entry& EditHistory::entry_for(const ChangeOrigin& origin, Kind kind
   redo_.erase(origin.author);
   Entry& e = append(origin, kind);
   e.open = true;
+  e.slot.assign(base_vertices_, kNoSlot);
   open_[origin.author] = e.info.seq();
   trim();  // may drop old entries, never this one (the newest)
   return entries_.back();
@@ -116,18 +118,16 @@ void EditHistory::record_pose(const ChangeOrigin& origin, Kind kind, std::span<c
   const std::size_t old_bytes = e.bytes();
   for (std::size_t i = 0; i < count; ++i) {
     const Index v = static_cast<Index>(indices.empty() ? i : indices[i]);
-    const auto [slot, added] = e.slot.try_emplace(v, static_cast<std::uint32_t>(e.vertices.size()));
-    if (added) {
-      if (same_value(&before[3 * v], &after[3 * i])) {
-        e.slot.erase(slot);
-        continue;
-      }
+    std::uint32_t& slot = e.slot[v];
+    if (slot == kNoSlot) {
+      if (same_value(&before[3 * v], &after[3 * i])) continue;
+      slot = static_cast<std::uint32_t>(e.vertices.size());
       e.vertices.push_back(v);
       e.before.insert(e.before.end(), &before[3 * v], &before[3 * v] + 3);
       e.after.insert(e.after.end(), &after[3 * i], &after[3 * i] + 3);
       e.prev_writer.push_back(writer_[v]);
     } else {
-      std::copy(&after[3 * i], &after[3 * i] + 3, &e.after[3 * slot->second]);
+      std::copy(&after[3 * i], &after[3 * i] + 3, &e.after[3 * slot]);
     }
     writer_[v] = e.info.seq();
   }

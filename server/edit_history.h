@@ -19,7 +19,6 @@
 #include <optional>
 #include <span>
 #include <string>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -117,10 +116,14 @@ class EditHistory {
     std::optional<HandleSet> handles_before, handles_after;
     std::optional<double> threshold_before, threshold_after;
     std::uint64_t prev_threshold_writer = 0;
-    std::unordered_map<Index, std::uint32_t> slot;  // vertex → index, while open
+    // Per base vertex, its index in `vertices` (kNoSlot: none), while open:
+    // a drag merges 60 poses a second into one entry, and a hash map's
+    // lookups cost ~0.5 ms a full pose of 5,000 vertices.
+    std::vector<std::uint32_t> slot;
     bool open = false;
     std::size_t bytes() const;
   };
+  static constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};
   struct CheckpointState {
     v1::Checkpoint info;
     std::vector<float> pose;
