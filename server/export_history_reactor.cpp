@@ -30,6 +30,13 @@ class ExportHistoryReactor final : public grpc::ServerWriteReactor<v1::HistoryFr
     service.with_session(*context, request.session_id(), Role::kViewer, [this, from, to](grpc::Status status, std::shared_ptr<Session> s) {
       if (!status.ok()) return Finish(status);
       if (to != 0 && to < from) return Finish({grpc::StatusCode::INVALID_ARGUMENT, "to_entry is before from_entry"});
+      // Counted as one of the session's streams, and as one of the exports
+      // the server runs at once (each keeps a thread deforming).
+      if (const grpc::Status admitted = service_.open_stream(*s, &stream_slot_); !admitted.ok()) return Finish(admitted);
+      export_slot_ = service_.take_export_slot();
+      if (!export_slot_)
+        return Finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                       "as many history exports as this server has cores are running: retry when one ends"});
       session_ = std::move(s);
       states_ = session_->history_states(from, to);
       if (states_.size() > kMostExported)
@@ -98,6 +105,7 @@ class ExportHistoryReactor final : public grpc::ServerWriteReactor<v1::HistoryFr
   }
 
   FiligreeService& service_;
+  std::shared_ptr<void> stream_slot_, export_slot_;
   std::shared_ptr<Session> session_;
   std::vector<std::pair<v1::HistoryEntry, std::vector<float>>> states_;
   std::size_t next_ = 0;

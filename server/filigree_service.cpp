@@ -219,6 +219,10 @@ grpc::Status FiligreeService::open_stream(const Session& session, std::shared_pt
   return grpc::Status::OK;
 }
 
+std::shared_ptr<void> FiligreeService::take_export_slot() {
+  return exports_.take("exports", std::max(1u, std::thread::hardware_concurrency()));
+}
+
 bool FiligreeService::begin_job() {
   std::lock_guard lock(jobs_mutex_);
   if (draining_) return false;

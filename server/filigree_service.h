@@ -195,6 +195,9 @@ class FiligreeService final : public FiligreeServiceBase {
   // its quota of streams open; else *slot holds the stream's place (and
   // quota) until it is released.
   grpc::Status open_stream(const Session& session, std::shared_ptr<void>* slot);
+  // A place for one ExportHistory call (each deforms a frame per entry on a
+  // thread of its own): one per core at once; null when all are taken.
+  std::shared_ptr<void> take_export_slot();
 
   // What a call on a session continues with: the status of authorize() and,
   // when it is OK, the session.
@@ -234,6 +237,7 @@ class FiligreeService final : public FiligreeServiceBase {
   SlotCounter uploading_;      // admitted uploads not yet sessions, by API key
   SlotCounter vertices_;       // vertices of those uploads that passed the quota, by API key
   SlotCounter stream_places_;  // streams open, by session id
+  SlotCounter exports_;        // ExportHistory calls deforming, server-wide
   struct Upload {
     std::chrono::steady_clock::time_point deadline;
     std::function<void()> expire;
