@@ -3,11 +3,15 @@ import { Code, ConnectError, createClient, type Client, type Interceptor } from 
 import { createGrpcWebTransport } from '@connectrpc/connect-web';
 
 import {
-  Filigree, FrameFormat, type DetailLevel, type Frame, type ListSessionsResponse_Entry, type Overlays, type RestMeshPart, type SessionHandles,
-  type SessionInfo, type SessionState, type SetHandlesResponse,
+  Filigree, FrameFormat, type Checkpoint, type CheckpointDiff, type DetailLevel, type Frame, type History, type ListSessionsResponse_Entry,
+  type Overlays, type Presence, type RestMeshPart, type SessionHandles, type SessionInfo, type SessionState, type SetHandlesResponse,
+  type UndoResponse,
 } from './gen/filigree/v1/filigree_pb';
 
-export type { DetailLevel, Frame, Overlays, RestMeshPart, SessionHandles, SessionInfo, SessionState };
+export type {
+  Checkpoint, CheckpointDiff, DetailLevel, Frame, History, Overlays, Presence, RestMeshPart, SessionHandles, SessionInfo, SessionState,
+  UndoResponse,
+};
 export type SessionEntry = ListSessionsResponse_Entry;
 
 // A handle as this page keeps it: a vertex of the detailed mesh (original
@@ -79,23 +83,66 @@ export class SessionClient {
     return this.client.getState({ sessionId: this.sessionId, frameFormat: FrameFormat.CHUNKED });
   }
 
-  setOptions(threshold: number, wholeMesh: boolean): Promise<SessionInfo> {
-    return this.client.setOptions({ sessionId: this.sessionId, threshold, wholeMesh });
+  // `clientName`: the history entry's author (so that its undo is theirs).
+  setOptions(threshold: number, wholeMesh: boolean, clientName = ''): Promise<SessionInfo> {
+    return this.client.setOptions({ sessionId: this.sessionId, threshold, wholeMesh, clientName });
   }
 
   // A full pose (3·m floats in base order); resolves with the version the
   // pose was accepted at: the frame that includes it has a larger one.
   // `indices`: a partial pose, positions[3k..] for base vertex indices[k].
-  async submitPose(poseId: bigint, positions: number[], clientName: string, indices: number[] = []): Promise<bigint> {
-    const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName, indices });
+  // `gestureId`: every pose of one drag shares it (one history entry, one undo).
+  async submitPose(poseId: bigint, positions: number[], clientName: string, indices: number[] = [],
+    gestureId = 0n): Promise<bigint> {
+    const response = await this.client.submitPose({ sessionId: this.sessionId, poseId, positions, clientName, indices, gestureId });
     return response.acceptedAtVersion;
   }
 
   // Replaces this client's handles (empty: none); resolves with the version
   // they were accepted at (the frame including them has a larger one) and
-  // all participants' handle count after the merge.
-  setHandles(clientName: string, handles: HandleTarget[]): Promise<SetHandlesResponse> {
-    return this.client.setHandles({ sessionId: this.sessionId, clientName, handles });
+  // all participants' handle count after the merge. `gestureId` as submitPose's.
+  setHandles(clientName: string, handles: HandleTarget[], gestureId = 0n): Promise<SetHandlesResponse> {
+    return this.client.setHandles({ sessionId: this.sessionId, clientName, handles, gestureId });
+  }
+
+  // ---- history, checkpoints, presence
+
+  // The newest `newest` history entries (oldest first) and the checkpoints (viewer token).
+  getHistory(newest: number): Promise<History> {
+    return this.client.getHistory({ sessionId: this.sessionId, newest });
+  }
+
+  // Undoes (redo: redoes) `clientName`'s latest change; `force` also
+  // overwrites what others changed since (editor token).
+  undo(clientName: string, redo: boolean, force = false): Promise<UndoResponse> {
+    const request = { sessionId: this.sessionId, clientName, force };
+    return redo ? this.client.redo(request) : this.client.undo(request);
+  }
+
+  createCheckpoint(name: string, clientName: string): Promise<Checkpoint> {
+    return this.client.createCheckpoint({ sessionId: this.sessionId, name, clientName });
+  }
+
+  restoreCheckpoint(checkpoint: bigint, clientName: string): Promise<UndoResponse> {
+    return this.client.restoreCheckpoint({ sessionId: this.sessionId, checkpoint, clientName });
+  }
+
+  diffCheckpoint(checkpoint: bigint): Promise<CheckpointDiff> {
+    return this.client.diffCheckpoint({ sessionId: this.sessionId, checkpoint });
+  }
+
+  // Who is here: the current presence at once, then every change; this
+  // page is listed as `clientName` while the stream is open (viewer token).
+  watchPresence(clientName: string, signal: AbortSignal): AsyncIterable<Presence> {
+    return this.client.watchPresence({ sessionId: this.sessionId, clientName }, { signal });
+  }
+
+  // Where this page points on the mesh (null: nowhere); `vertex` an original id.
+  async setPresence(clientName: string, pointer: { x: number; y: number; z: number; vertex: number } | null): Promise<void> {
+    await this.client.setPresence({
+      sessionId: this.sessionId, clientName, hasPointer: pointer !== null, pointerX: pointer?.x ?? 0, pointerY: pointer?.y ?? 0,
+      pointerZ: pointer?.z ?? 0, pointerVertex: pointer?.vertex ?? 0,
+    });
   }
 
   // Every participant's handles by client name, as their last SetHandles

@@ -16,18 +16,25 @@
 // In both, the target moves in the plane facing the camera, and presses on
 // the background orbit as usual. The frames come back on Watch. Vertices are
 // original ids whatever level of detail is drawn (MeshView maps them).
+//
+// Every call of one drag carries the drag's gesture id (gesture.ts): the
+// server keeps the drag as one history entry, which one undo takes back.
+// Dropping a handle and clearing them are gestures of their own.
 
 import * as THREE from 'three';
 
 import { Code, isCode, type HandleTarget, type SessionClient } from './client';
 import { falloff } from './geometry';
+import { newGestureId } from './gesture';
 import { LatestSender } from './latest-sender';
 import type { MeshView } from './scene';
 
 export type EditMode = 'pull' | 'handles';
 
-// A partial pose: base vertex indices and 3 coordinates each.
-interface PartialPose { indices: number[]; positions: number[] }
+// A partial pose: base vertex indices and 3 coordinates each, and the drag it is part of.
+interface PartialPose { indices: number[]; positions: number[]; gesture: bigint }
+// This page's whole set of handles, and the gesture that changed it.
+interface HandleSet { handles: HandleTarget[]; gesture: bigint }
 
 export const EDITOR_NEEDED = 'Handles need the editor token; this page was opened with another token ' +
   '(orbit, zoom and the overlays still work).';
@@ -50,13 +57,14 @@ export class HandleEditor {
   private readonly sphere: THREE.SphereGeometry;
   private readonly idle = new THREE.MeshBasicMaterial({ color: 0x39d0ff, depthTest: false });
   private readonly active = new THREE.MeshBasicMaterial({ color: 0xffe14d, depthTest: false });
-  private readonly sender = new LatestSender<HandleTarget[]>((handles) => this.send(handles));
+  private readonly sender = new LatestSender<HandleSet>((set) => this.send(set));
   private readonly poses = new LatestSender<PartialPose>((pose) => this.sendPose(pose));
-  private drag: { vertex: number; pointerId: number; plane: THREE.Plane } | null = null;
+  private drag: { vertex: number; pointerId: number; plane: THREE.Plane; gesture: bigint } | null = null;
   // The pull in progress: where the pressed point started, and the base
   // vertices it moves with their start positions and weights.
   private pull: {
     pointerId: number; plane: THREE.Plane; start: THREE.Vector3; indices: number[]; from: Float32Array; weights: Float32Array;
+    gesture: bigint;
   } | null = null;
   private readonly cursor: THREE.Mesh;       // the pressed point while pulling
   private readonly influence: THREE.Mesh;    // the radius of influence around it
@@ -131,7 +139,21 @@ export class HandleEditor {
   clear(): void {
     this.endDrag();
     for (const vertex of [...this.spheres.keys()]) this.removeSphere(vertex);
-    this.changed();
+    this.changed(newGestureId());
+  }
+
+  // This page's handles as the server has them now (after an undo, redo or
+  // restore changed them there): drawn, not sent. Not while a drag or a
+  // call is under way (the page's own set is the newer one then).
+  adopt(handles: readonly HandleTarget[]): void {
+    if (this.drag || !this.sender.idle) return;
+    const key = (list: Iterable<HandleTarget>) => [...list].map((h) => `${h.vertex},${h.x},${h.y},${h.z}`).join(';');
+    const own = [...this.spheres].map(([vertex, { position: p }]) => ({ vertex, x: p.x, y: p.y, z: p.z }));
+    if (key(own) === key(handles)) return;
+    for (const vertex of [...this.spheres.keys()]) this.removeSphere(vertex);
+    for (const h of handles) this.addSphere(h.vertex, new THREE.Vector3(h.x, h.y, h.z));
+    this.view.invalidate();
+    this.events.counts(this.spheres.size, this.inSession);
   }
 
   private down(event: PointerEvent): void {
@@ -141,7 +163,7 @@ export class HandleEditor {
       if (handle === null) return;  // a pan
       stop(event);
       this.removeSphere(handle);
-      this.changed();
+      this.changed(newGestureId());
       return;
     }
     if (event.button !== 0) return;
@@ -166,9 +188,9 @@ export class HandleEditor {
     sphere.material = this.active;
     this.view.setOrbitEnabled(false);
     this.view.canvas.setPointerCapture(event.pointerId);
-    this.drag = { vertex, pointerId: event.pointerId, plane: this.view.facingPlane(sphere.position) };
+    this.drag = { vertex, pointerId: event.pointerId, plane: this.view.facingPlane(sphere.position), gesture: newGestureId() };
     this.events.started?.();
-    this.changed();
+    this.changed(this.drag.gesture);
   }
 
   private startPull(event: PointerEvent): void {
@@ -206,7 +228,7 @@ export class HandleEditor {
     }
     this.pull = {
       pointerId: event.pointerId, plane: this.view.facingPlane(start), start, indices,
-      from: Float32Array.from(from), weights: Float32Array.from(weights),
+      from: Float32Array.from(from), weights: Float32Array.from(weights), gesture: newGestureId(),
     };
     this.pulledVertices = indices.length;
     this.cursor.position.copy(start);
@@ -234,7 +256,7 @@ export class HandleEditor {
       positions[3 * k + 1] = pull.from[3 * k + 1] + w * d.y;
       positions[3 * k + 2] = pull.from[3 * k + 2] + w * d.z;
     }
-    this.poses.push({ indices: pull.indices, positions });
+    this.poses.push({ indices: pull.indices, positions, gesture: pull.gesture });
   }
 
   private endPull(): void {
@@ -250,7 +272,7 @@ export class HandleEditor {
   private async sendPose(pose: PartialPose): Promise<void> {
     const accepted = this.events.sent();
     try {
-      const at = await this.client.submitPose(this.nextPoseId++, pose.positions, this.clientName, pose.indices);
+      const at = await this.client.submitPose(this.nextPoseId++, pose.positions, this.clientName, pose.indices, pose.gesture);
       accepted(at);
       this.acceptedAt = at;
       ++this.answered;
@@ -274,7 +296,7 @@ export class HandleEditor {
     const point = this.view.rayAt(event.clientX, event.clientY).ray.intersectPlane(this.drag.plane, new THREE.Vector3());
     if (!point) return;  // the plane is edge-on
     this.spheres.get(this.drag.vertex)!.position.copy(point);
-    this.changed();
+    this.changed(this.drag.gesture);
   }
 
   private up(event: PointerEvent): void {
@@ -312,17 +334,19 @@ export class HandleEditor {
     this.spheres.delete(vertex);
   }
 
-  // The local set changed: redraw, and send it.
-  private changed(): void {
+  // The local set changed (by the gesture `gesture`): redraw, and send it.
+  private changed(gesture: bigint): void {
     this.view.invalidate();
     this.events.counts(this.spheres.size, this.inSession);
-    this.sender.push([...this.spheres].map(([vertex, { position: p }]) => ({ vertex, x: p.x, y: p.y, z: p.z })));
+    this.sender.push({
+      handles: [...this.spheres].map(([vertex, { position: p }]) => ({ vertex, x: p.x, y: p.y, z: p.z })), gesture,
+    });
   }
 
-  private async send(handles: HandleTarget[]): Promise<void> {
+  private async send({ handles, gesture }: HandleSet): Promise<void> {
     const accepted = this.events.sent();
     try {
-      const answer = await this.client.setHandles(this.clientName, handles);
+      const answer = await this.client.setHandles(this.clientName, handles, gesture);
       accepted(answer.acceptedAtVersion);
       this.inSession = answer.handlesInSession;
       this.acceptedAt = answer.acceptedAtVersion;
