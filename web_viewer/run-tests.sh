@@ -33,4 +33,4 @@ timeout 300 npx vitest run
 
 echo "web_viewer: browser test, server $server"
 export FILIGREE_SERVER="$server" FILIGREE_CLI="$cli" CHROMIUM="$chromium"
-exec timeout --kill-after=10 900 node --test --test-concurrency=1 test/browser.test.mjs test/front-door.test.mjs test/large-mesh.test.mjs test/detail.test.mjs
+exec timeout --kill-after=10 900 node --test --test-concurrency=1 test/browser.test.mjs test/front-door.test.mjs test/large-mesh.test.mjs test/detail.test.mjs test/history.test.mjs

@@ -35,7 +35,7 @@ import { colourRegions, cutForDrawing, edgeSet, regionBoundaryEdges, regionVerte
 import { decodeLevelMesh, facesOnLevel, gather1, gather3, levelIndices, type DracoMeshModule } from './levels';
 import { FrameMailbox } from './mailbox';
 import { RestAssembler } from './rest-parts';
-import type { Buffers, CallError, FromWorker, ToWorker } from './pipeline-protocol';
+import type { Buffers, CallError, FromWorker, HistoryLines, ToWorker } from './pipeline-protocol';
 import { STRETCH_RED, stretchColor, TriangleStretch } from './stretch';
 
 // Loaded at once: the first frame should not wait for it.
@@ -555,6 +555,33 @@ async function overlays(id: number): Promise<void> {
   }, [regionColors.buffer, regionEdges.buffer, cutEdges.buffer, refined.buffer]);
 }
 
+// ------------------------------------------------------------------ history
+
+// GetHistory, parsed here (each entry lists the base vertices it changed:
+// up to every base vertex, for each of `newest` entries) and summarised for
+// the panel, newest first.
+async function history(id: number, newest: number): Promise<void> {
+  let answer;
+  try {
+    answer = await client!.getHistory(newest);
+  } catch (error) {
+    post({ type: 'historyFailed', id, error: callError(error) });
+    return;
+  }
+  const lines: HistoryLines = {
+    entries: answer.entries.map((e) => ({
+      seq: Number(e.seq), kind: e.kind, author: e.author, startTime: e.startTime, endTime: e.endTime, vertices: e.baseVertices.length,
+      target: Number(e.target), undone: e.undone, gestureId: e.gestureId, version: e.version,
+    })).reverse(),
+    checkpoints: answer.checkpoints.map((c) => ({
+      id: c.id, name: c.name, author: c.author, time: c.time, version: c.version, afterEntry: Number(c.afterEntry),
+    })).reverse(),
+    firstSeq: Number(answer.firstSeq),
+    bytes: Number(answer.bytes),
+  };
+  post({ type: 'history', id, history: lines });
+}
+
 // ------------------------------------------------------------------ messages
 
 self.onmessage = (event: MessageEvent<ToWorker>) => {
@@ -579,6 +606,9 @@ self.onmessage = (event: MessageEvent<ToWorker>) => {
       break;
     case 'overlays':
       void overlays(message.id);
+      break;
+    case 'history':
+      void history(message.id, message.newest);
       break;
     case 'stretch':
       stretchOn = message.on;

@@ -58,6 +58,26 @@ export interface TestHook {
   otherHandles(): { name: string; colour: string; vertex: number; visible: boolean; x: number | null; y: number | null }[];
   // The colour a client name gets (the same on every page).
   participantColour(name: string): string;
+  // The edit history (history.ts), newest first, as the last GetHistory answer had it.
+  history: { seq: number; kind: string; author: string; undone: boolean; vertices: number; gestureId: string; text: string }[];
+  checkpoints: { id: number; name: string; author: string }[];
+  historyCalls: number;             // GetHistory calls made
+  historyAnswers: number;           // and answered
+  historyMostInFlight: number;      // the most ever running at once
+  historyFetching: boolean;         // a GetHistory call is running or due
+  // Undo and redo answers shown (outcome: UndoResponse.Outcome; text: what the page said; conflicts: their authors).
+  undos: { redo: boolean; outcome: number; text: string; message: string; conflicts: string[]; forced: boolean }[];
+  undosPending: number;             // presses not answered yet
+  // Who is here (presence-layer.ts), as the last WatchPresence message had it.
+  presence: { name: string; colour: string; role: string; you: boolean; touching: number; handles: number; pointerVertex: number | null }[];
+  presenceMessages: number;
+  presenceStreams: number;          // WatchPresence streams opened
+  presenceFirst: string[];          // the names in the current stream's first message
+  // Dots drawn per other participant (their touched base vertices), and their pointers on the page.
+  touchMarkers(): Record<string, number>;
+  otherPointers(): { name: string; colour: string; vertex: number; x: number | null; y: number | null; visible: boolean }[];
+  pointerCalls: number;             // SetPresence calls answered
+  pointerVertex: number | null;     // the vertex this page's pointer was last sent at (null: none)
   regionCount: number | null;       // of the last ready GetOverlays (null: none yet)
   overlaysVersion: number;          // the frame those overlays describe
   cutTriangles: number;             // triangles of that cut mesh
@@ -85,6 +105,7 @@ export interface TestHook {
   receiveFraction: number;  // of the mesh's values received in parts, when last shown
   restParts: number;        // GetRestMesh parts the mesh came in (0: in JoinSession's answer)
   triangleCount: number;    // of the detailed mesh drawn
+  meshRadius: number;       // of the rest mesh's bounding sphere (the pull radius slider is a share of it)
   joinMs: number;           // JoinSession in the worker, to the last byte (and GetRestMesh, for a mesh in parts)
   buildMs: number;          // the first normals and the framing, in the worker
   upAxis: 'y' | 'z' | '';   // as the page framed the mesh
@@ -125,11 +146,13 @@ export const hook: TestHook = window.__filigree = {
   framesReceived: 0, framesApplied: 0, framesSkipped: 0, framesRendered: 0, roundTripMs: null,
   displacement: 0, frameKind: '', framesSparse: 0, resyncs: 0, clientName: '', handleCount: 0, handlesAnswered: 0, handlesAcceptedAt: 0, handlesSending: false, handlesInSession: null,
   participants: [], participantsAnswers: 0, participantsVersion: 0, participantsFetching: false, otherHandles: () => [],
-  participantColour: () => '', regionCount: null,
+  participantColour: () => '', history: [], checkpoints: [], historyCalls: 0, historyAnswers: 0, historyMostInFlight: 0,
+  historyFetching: false, undos: [], undosPending: 0, presence: [], presenceMessages: 0, presenceStreams: 0, presenceFirst: [],
+  touchMarkers: () => ({}), otherPointers: () => [], pointerCalls: 0, pointerVertex: null, regionCount: null,
   overlaysVersion: 0, cutTriangles: 0, stretchMax: 0, clips: [], clipState: 'idle', clipFrames: 0,
   capture: () => null, screenPointOfVertex: () => null, nearestVertexToCamera: () => -1, vertexAt: () => null,
   vertexPosition: () => null, screenExtent: () => null, viewDirection: () => null, statsSnapshot: () => null,
-  loadStage: '', loadStages: [], receiveFraction: 0, restParts: 0, triangleCount: 0, joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
+  loadStage: '', loadStages: [], receiveFraction: 0, restParts: 0, triangleCount: 0, meshRadius: 0, joinMs: 0, buildMs: 0, upAxis: '', fits: 0, canEdit: null, editMode: '', pulledVertices: 0,
   editToDrawnMs: null, reconnects: 0, lastLoss: '', newestVersion: 0, drawnVersion: 0,
   framesDrawn: 0, pageMsTotal: 0, drawMsTotal: 0, draws: 0, coarseTriangles: 0, coarseDraws: 0, lastDrawFull: false, pixelRatio: 1, drawShowMs: 0,
   frontState: '', apiKeysNeeded: false, sessionsListed: [], createStages: [],

@@ -15,6 +15,7 @@ import { HandleEditor, type EditMode } from './handles';
 import { connectLines } from './connect';
 import { DetailControl } from './detail-control';
 import { FrontDoor, rememberedTokens, serverJson } from './front';
+import { describeEntry, HistoryPanel, kindName } from './history';
 import { FRAME_EVENT, hook } from './hook';
 import { CutWireframe } from './overlay-cut';
 import { OverlayFeed } from './overlay-feed';
@@ -29,6 +30,7 @@ import {
 } from './pipeline';
 import type { LoadStage } from './pipeline-protocol';
 import { pollPresence } from './presence';
+import { PointerSender, PresenceLayer } from './presence-layer';
 import { isFinal, lossReason, retryDelay } from './reconnect';
 import { MeshView } from './scene';
 import { StatsTracker, statsRows } from './stats';
@@ -57,6 +59,8 @@ class Viewer {
   private feed!: OverlayFeed<DrawableOverlays>;
   private handles: HandleEditor | null = null;
   private participants!: ParticipantsLayer;
+  private history!: HistoryPanel;
+  private presence!: PresenceLayer;
   private detail!: DetailControl;
   // The full mesh's faces, stand-in and base ids (join): drawn again at full detail.
   private fullFaces: Uint32Array = new Uint32Array(0);
@@ -117,6 +121,8 @@ class Viewer {
     hook.loadStage = 'done';
     this.applyRole(joined.info.role);
     this.participants.refresh();
+    this.history.refresh();
+    void this.presence.start();
     void this.showShare();
     await this.follow();
   }
@@ -173,6 +179,7 @@ class Viewer {
     hook.vertexCount = vertexCount;
     hook.baseVertexCount = joined.originalIds.length;
     hook.triangleCount = faces.length / 3;
+    hook.meshRadius = this.view.radius;
     hook.restParts = joined.restParts;
     hook.upAxis = framing.upAxis;
     hook.joinMs = joined.joinMs;
@@ -218,6 +225,8 @@ class Viewer {
     });
     this.setupEditing(joined);
     this.setupParticipants();
+    this.setupHistory();
+    this.setupPresence(joined);
     this.setupOptions(info);
     this.setupClips(info);
     this.setupViewControls();
@@ -352,6 +361,96 @@ class Viewer {
     hook.participantColour = (name) => participantColour(name).css;
   }
 
+  // Undo and redo (buttons; Ctrl+Z, Ctrl+Shift+Z and Ctrl+Y on editor
+  // pages), the history list and the checkpoints.
+  private setupHistory(): void {
+    this.history = new HistoryPanel(this.client, CLIENT_NAME, {
+      fetch: (newest) => this.pipeline.history(newest).then((lines) => {
+        hook.history = lines.entries.map((e) => ({
+          seq: e.seq, kind: kindName(e.kind), author: e.author, undone: e.undone, vertices: e.vertices,
+          gestureId: e.gestureId.toString(), text: describeEntry(e, lines.checkpoints),
+        }));
+        hook.checkpoints = lines.checkpoints.map((c) => ({ id: Number(c.id), name: c.name, author: c.author }));
+        return lines;
+      }),
+      describe: (error) => this.describe(error),
+      changed: () => void this.adoptOwnHandles(),
+      canEdit: () => hook.canEdit === true,
+      meshSize: 2 * this.view.radius,
+    }, byId('history'), byId('checkpoints'), byId('undo-status'), byId('history-status'), byId('checkpoint-status'));
+    const history = this.history;
+    Object.defineProperties(hook, {
+      historyCalls: { get: () => history.calls, enumerable: true },
+      historyAnswers: { get: () => history.answers, enumerable: true },
+      historyMostInFlight: { get: () => history.mostInFlight, enumerable: true },
+      historyFetching: { get: () => history.fetching, enumerable: true },
+      undos: { get: () => history.undos, enumerable: true },
+      undosPending: { get: () => history.pendingUndos, enumerable: true },
+    });
+    byId('undo').addEventListener('click', () => history.undo(false));
+    byId('redo').addEventListener('click', () => history.undo(true));
+    window.addEventListener('keydown', (event) => {
+      if (!(event.ctrlKey || event.metaKey) || event.altKey) return;
+      const key = event.key.toLowerCase();
+      if (key !== 'z' && key !== 'y') return;
+      if (hook.canEdit !== true) return;
+      // A text field keeps its own undo.
+      if ((event.target as HTMLElement).closest('input, textarea, [contenteditable]')) return;
+      event.preventDefault();
+      history.undo(key === 'y' || event.shiftKey);
+    });
+    const name = byId<HTMLInputElement>('checkpoint-name');
+    byId<HTMLFormElement>('checkpoint-form').addEventListener('submit', async (event) => {
+      event.preventDefault();
+      const text = name.value.trim();
+      if (text === '') return;
+      if (await history.save(text)) name.value = '';
+    });
+  }
+
+  // After this page's undo, redo or restore changed the session: its own
+  // handles as the server has them now (an undo of a handle change moves them there).
+  private async adoptOwnHandles(): Promise<void> {
+    this.participants.refresh();
+    if (!this.handles) return;
+    try {
+      const answer = await this.client.getHandles();
+      this.handles?.adopt(answer.participants.find((p) => p.clientName === CLIENT_NAME)?.handles ?? []);
+    } catch {
+      // The legend says what GetHandles answers; the page keeps its own set meanwhile.
+    }
+  }
+
+  // Who is here (WatchPresence), their dots and pointers, and this page's pointer for them.
+  private setupPresence(joined: Joined): void {
+    this.presence = new PresenceLayer(this.view, this.client, CLIENT_NAME, joined.originalIds, byId('presence-list'), {
+      shown: (participants) => {
+        hook.presence = participants.map((p) => ({
+          name: p.name, colour: p.colour, role: p.role, you: p.you, touching: p.touchingCount, handles: p.handles,
+          pointerVertex: p.pointer?.vertex ?? null,
+        }));
+        hook.presenceFirst = this.presence.firstNames;
+      },
+      status: (text, bad) => setNote('presence-status', text, bad),
+      describe: (error) => this.describe(error),
+    });
+    const presence = this.presence;
+    Object.defineProperties(hook, {
+      presenceMessages: { get: () => presence.messages, enumerable: true },
+      presenceStreams: { get: () => presence.streams, enumerable: true },
+    });
+    hook.touchMarkers = () => presence.markerCounts();
+    const show = byId<HTMLInputElement>('show-activity');
+    show.addEventListener('change', () => presence.setVisible(show.checked));
+    hook.otherPointers = () => presence.pointersOnPage();
+    const pointer = new PointerSender(this.view, this.client, CLIENT_NAME,
+      (error) => setNote('presence-status', `Your pointer is not shared: ${this.describe(error)}`, true));
+    Object.defineProperties(hook, {
+      pointerCalls: { get: () => pointer.calls, enumerable: true },
+      pointerVertex: { get: () => pointer.lastVertex, enumerable: true },
+    });
+  }
+
   // The base wireframe comes from the frames, the stretch map from the
   // worker; the cut and the regions from GetOverlays, polled while one of them is shown.
   private setupOverlays(joined: Joined): void {
@@ -445,6 +544,7 @@ class Viewer {
     if (this.attempt > 0) {
       ++hook.reconnects;
       this.participants.refresh();  // handles may have changed meanwhile (or the server restarted)
+      this.history.refresh();
     }
     this.attempt = 0;
     this.downSince = null;
@@ -502,6 +602,7 @@ class Viewer {
       hook.lastNewFrameAt = start;
       this.changes.add(frame);
       this.participants.frameArrived(frame);
+      if (frame.changes.length > 0) this.history.refresh();
     }
     hook.newestVersion = Number(this.lastVersion);
     this.feed.frameArrived();
@@ -571,6 +672,7 @@ class Viewer {
   // After a state was swapped in: what the panel and the hook show of it.
   private drawn(result: Ready | LevelReady, start: number): void {
     for (const overlay of this.overlays) if (overlay.id === 'base' && this.shown.has(overlay)) overlay.update(this.view.positions);
+    this.presence.meshMoved();
     ++hook.framesAtLevel;
     hook.maxError = result.maxError;
     this.appliedVersion = result.version;
@@ -659,7 +761,8 @@ class Viewer {
       }
       setNote('options-status', 'Applying…');
       try {
-        const updated = await this.client.setOptions(value, wholeMesh.checked);
+        const updated = await this.client.setOptions(value, wholeMesh.checked, CLIENT_NAME);
+        this.history.refresh();
         const t = updated.options?.wholeMesh ? '∞ (whole mesh)' : String(updated.options?.threshold ?? value);
         setNote('options-status', `T is now ${t}.`);
       } catch (error) {

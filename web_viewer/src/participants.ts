@@ -22,33 +22,41 @@ import type { MeshView } from './scene';
 
 export { MIN_INTERVAL_MS } from './paced-calls';
 
-// Colours of other participants (never this page's cyan and yellow), and
-// whether a label on each needs dark text.
+// Participants' colours: the server's (Participant.colour, server/session_presence.cpp),
+// computed here alike so that a name has its colour before any presence
+// arrives (history authors, handles): FNV-1a of the name's UTF-8 bytes over
+// this palette. `darkText`: a label on it reads better in dark letters.
 export const PALETTE: readonly { css: string; darkText: boolean }[] = [
-  { css: '#ff5c5c', darkText: true },   // red
-  { css: '#ff9f1c', darkText: true },   // orange
-  { css: '#2ecc71', darkText: true },   // green
-  { css: '#a66cff', darkText: false },  // violet
-  { css: '#ff6fd8', darkText: true },   // pink
-  { css: '#4d7cff', darkText: false },  // blue
-  { css: '#c5e84a', darkText: true },   // lime
-];
+  '#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#42d4f4', '#f032e6', '#9a6324',
+].map((css) => ({ css, darkText: prefersDarkText(css) }));
 // A label's largest width and about its height (CSS: .participant-label), and its gap to the anchor.
 const LABEL_MAX_WIDTH = 160;
 const LABEL_HEIGHT = 20;
 const LABEL_GAP = 9;
 
-// FNV-1a (32 bits) of the name's UTF-16 code units.
+// WCAG contrast: dark text (#111) on `css` reads better than white.
+export function prefersDarkText(css: string): boolean {
+  const channel = (k: number) => {
+    const c = parseInt(css.slice(1 + 2 * k, 3 + 2 * k), 16) / 255;
+    return c <= 0.03928 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
+  };
+  const l = 0.2126 * channel(0) + 0.7152 * channel(1) + 0.0722 * channel(2);
+  return (l + 0.05) / (0.0056 + 0.05) > 1.05 / (l + 0.05);
+}
+
+const utf8 = new TextEncoder();
+
+// FNV-1a (32 bits) of the name's UTF-8 bytes (as the server hashes it).
 export function nameHash(name: string): number {
   let h = 0x811c9dc5;
-  for (let i = 0; i < name.length; ++i) {
-    h ^= name.charCodeAt(i);
+  for (const byte of utf8.encode(name)) {
+    h ^= byte;
     h = Math.imul(h, 0x01000193);
   }
   return h >>> 0;
 }
 
-// The palette entry of a client name: the same on every page, for good.
+// The palette entry of a client name: the same on every page and on the server, for good.
 export function participantColour(name: string): (typeof PALETTE)[number] {
   return PALETTE[nameHash(name) % PALETTE.length];
 }

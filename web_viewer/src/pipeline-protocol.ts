@@ -21,9 +21,21 @@ export type ToWorker =
   | { type: 'clear' }
   | { type: 'recycle'; buffers: Buffers }
   | { type: 'stretch'; on: boolean }
-  | { type: 'overlays'; id: number };
+  | { type: 'overlays'; id: number }
+  // GetHistory of the newest `newest` entries, summarised (HistoryLines).
+  | { type: 'history'; id: number; newest: number };
 
 export type LoadStage = 'download' | 'receive' | 'build';
+
+// A history entry as the panel shows it (proto HistoryEntry without its
+// vertex list: the worker parses the answer, whose lists may hold every base
+// vertex of every entry).
+export interface HistoryLine {
+  seq: number; kind: number; author: string; startTime: number; endTime: number; vertices: number; target: number;
+  undone: boolean; gestureId: bigint; version: bigint;
+}
+export interface CheckpointLine { id: bigint; name: string; author: string; time: number; version: bigint; afterEntry: number }
+export interface HistoryLines { entries: HistoryLine[]; checkpoints: CheckpointLine[]; firstSeq: number; bytes: number }
 
 // A failed call, as the page rebuilds it (a ConnectError cannot be posted).
 export interface CallError { code: number | null; rawMessage: string; message: string; fetchFailed: boolean }
@@ -80,5 +92,8 @@ export type FromWorker =
     refined: Float32Array;
   }
   | { type: 'overlaysFailed'; id: number; error: CallError }
+  // GetHistory's answer (entries newest first), or why it failed.
+  | { type: 'history'; id: number; history: HistoryLines }
+  | { type: 'historyFailed'; id: number; error: CallError }
   // resync: the keyframe the stream's next frames need is not held here.
   | { type: 'frameFailed'; stream: number; version: bigint; message: string; resync: boolean };

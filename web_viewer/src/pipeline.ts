@@ -7,7 +7,7 @@
 import { Code, ConnectError } from '@connectrpc/connect';
 
 import type { Frame } from './client';
-import type { Buffers, CallError, FromWorker, LoadStage, ToWorker } from './pipeline-protocol';
+import type { Buffers, CallError, FromWorker, HistoryLines, LoadStage, ToWorker } from './pipeline-protocol';
 
 export type Joined = Extract<FromWorker, { type: 'joined' }>;
 export type Applied = Extract<FromWorker, { type: 'applied' }>;
@@ -57,6 +57,7 @@ export class FramePipeline {
   private joinWaiter: { resolve(j: Joined): void; reject(e: Error): void } | null = null;
   private readonly streamWaiters = new Map<number, (end: StreamEnd) => void>();
   private readonly overlayWaiters = new Map<number, { resolve(o: DrawableOverlays): void; reject(e: Error): void }>();
+  private readonly historyWaiters = new Map<number, { resolve(h: HistoryLines): void; reject(e: Error): void }>();
 
   constructor(private readonly events: PipelineEvents) {
     this.worker.onmessage = (event: MessageEvent<FromWorker>) => this.received(event.data);
@@ -110,6 +111,15 @@ export class FramePipeline {
     });
   }
 
+  // GetHistory of the newest `newest` entries, called, parsed and summarised in the worker.
+  history(newest: number): Promise<HistoryLines> {
+    const id = this.nextId++;
+    return new Promise((resolve, reject) => {
+      this.historyWaiters.set(id, { resolve, reject });
+      this.send({ type: 'history', id, newest });
+    });
+  }
+
   setStretch(on: boolean): void {
     this.send({ type: 'stretch', on });
   }
@@ -128,6 +138,14 @@ export class FramePipeline {
         const waiter = this.overlayWaiters.get(message.id);
         this.overlayWaiters.delete(message.id);
         if (message.type === 'overlays') waiter?.resolve(message);
+        else waiter?.reject(rebuild(message.error));
+        break;
+      }
+      case 'history':
+      case 'historyFailed': {
+        const waiter = this.historyWaiters.get(message.id);
+        this.historyWaiters.delete(message.id);
+        if (message.type === 'history') waiter?.resolve(message.history);
         else waiter?.reject(rebuild(message.error));
         break;
       }

@@ -23,6 +23,9 @@ const SLOW_DRAW_MS = 50;
 const FAST_DRAW_MS = 25;
 const MIN_PIXEL_RATIO = 0.5;
 
+// A bounding sphere that culls nothing (pointVertex).
+const UNBOUNDED = new THREE.Sphere(new THREE.Vector3(), Infinity);
+
 export class MeshView {
   readonly scene = new THREE.Scene();
   readonly geometry = new THREE.BufferGeometry();
@@ -333,6 +336,32 @@ export class MeshView {
     for (let k = 0; k < count; ++k) {
       const v = candidates ? candidates[k] : k;
       const d = distance(v);
+      if (d < bestDistance) [best, bestDistance] = [v, d];
+    }
+    return best < 0 ? null : this.idOf(best);
+  }
+
+  // The vertex under a page point, cheaply enough to follow a pointer (the
+  // pointer others see, up to 10 times a second): the corner nearest the hit
+  // of the triangle hit, on the stand-in when there is one, without the
+  // pass over every vertex pickVertex makes (the bounding sphere is not
+  // recomputed: an unbounded one culls nothing). Its original id; null: the background.
+  pointVertex(clientX: number, clientY: number): number | null {
+    const drawn = this.mesh.geometry;
+    const target = this.coarse ?? this.geometry;
+    const sphere = target.boundingSphere;
+    target.boundingSphere = UNBOUNDED;
+    this.mesh.geometry = target;
+    const hit = this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
+    this.mesh.geometry = drawn;
+    target.boundingSphere = sphere;
+    if (!hit?.face) return null;
+    const p = this.positions;
+    const { x, y, z } = hit.point;
+    let best = -1;
+    let bestDistance = Infinity;
+    for (const v of [hit.face.a, hit.face.b, hit.face.c]) {
+      const d = (p[3 * v] - x) ** 2 + (p[3 * v + 1] - y) ** 2 + (p[3 * v + 2] - z) ** 2;
       if (d < bestDistance) [best, bestDistance] = [v, d];
     }
     return best < 0 ? null : this.idOf(best);

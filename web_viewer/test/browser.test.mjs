@@ -154,6 +154,8 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
   it('renders the mesh, follows a driven session and returns to rest', { timeout: TEST_TIMEOUT_MS }, async (t) => {
     const page = await open(viewerUrl(session.viewer_token));
     await waitFor(page, () => window.__filigree?.framesApplied >= 1 && window.__filigree.framesRendered >= 1);
+    // The mesh's pixels only: not the dots where the driver worked in the last 10 s (history.test.mjs tests those).
+    await page.uncheck('#show-activity');
     const joined = await hookState(page);
     assert.equal(joined.state, 'live');
     assert.equal(joined.vertexCount, 1839);
@@ -569,6 +571,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
   it('colours the stretch of a bent mesh, computed in the worker', { timeout: TEST_TIMEOUT_MS }, async (t) => {
     const page = await open(viewerUrl(session.viewer_token));
     await waitFor(page, () => window.__filigree?.state === 'live' && window.__filigree.framesApplied >= 1);
+    await page.uncheck('#show-activity');  // colours of the stretch map only, not the driver's dots
     const plain = colouredFraction(png(await page.evaluate(() => window.__filigree.capture())));
     await page.check('#overlay-stretch');
     // Armed before the drive: the first frame whose stretch is clearly above rigid.
@@ -594,6 +597,7 @@ describe('the web viewer in Chromium against filigree-server', { timeout: 10 * T
       await waitFor(page, (v) => document.querySelector('#options-status').textContent === `T is now ${v}.`, value);
     };
     await page.check('#overlay-regions');
+    await page.uncheck('#show-activity');  // colours of the regions only, not the driver's dots
     await setThreshold(1e5);
 
     // Armed before the drive: a bend with T = 1e5 refines regions.

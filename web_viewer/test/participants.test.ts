@@ -7,7 +7,7 @@ import { afterEach, beforeEach, describe, expect, it, vi } from 'vitest';
 
 import { FrameSchema, SessionHandlesSchema } from '../src/gen/filigree/v1/filigree_pb';
 import {
-  HandlesFeed, MIN_INTERVAL_MS, nameHash, namesOther, othersOf, PALETTE, participantColour, participantsKey,
+  HandlesFeed, MIN_INTERVAL_MS, nameHash, namesOther, othersOf, PALETTE, participantColour, participantsKey, prefersDarkText,
 } from '../src/participants';
 
 const answer = (participants: [string, [number, number, number, number][]][], version = 1) =>
@@ -19,21 +19,27 @@ const answer = (participants: [string, [number, number, number, number][]][], ve
   });
 
 describe('participant colours', () => {
-  it('are FNV-1a of the name into the palette: the same on every page', () => {
+  it('are FNV-1a of the name\'s UTF-8 bytes into the server\'s palette: the same on every page and on the server', () => {
     expect(nameHash('')).toBe(0x811c9dc5);
     expect(nameHash('a')).toBe(0xe40c292c);        // the FNV-1a test vectors
     expect(nameHash('foobar')).toBe(0xbf9cf968);
+    expect(nameHash('Émilie')).toBe(0xc0ddaba7);   // UTF-8 bytes, as server/session_presence.cpp hashes them
+    // What the server's participant_colour gives these names (computed apart).
+    expect(participantColour('web-3fa9c1').css).toBe('#f58231');
+    expect(participantColour('cli-bend').css).toBe('#9a6324');
+    expect(participantColour('Émilie').css).toBe('#9a6324');
     for (const name of ['web-3fa9c1', 'cli-bend', 'Émilie']) {
       expect(participantColour(name)).toBe(PALETTE[nameHash(name) % PALETTE.length]);
-      expect(participantColour(name)).toBe(participantColour(`${name}`));
     }
   });
 
-  it('spread over the whole palette and never take this page\'s own handle colours', () => {
+  it('spread over the whole palette, with label text that reads on each', () => {
     const used = new Set(Array.from({ length: 200 }, (_, i) => participantColour(`web-${i.toString(16).padStart(6, '0')}`).css));
     expect(used.size).toBe(PALETTE.length);
-    for (const { css } of PALETTE) expect(['#39d0ff', '#ffe14d']).not.toContain(css);
-    expect(new Set(PALETTE.map((p) => p.css)).size).toBe(PALETTE.length);
+    expect(PALETTE.map((p) => p.css)).toEqual(['#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#42d4f4', '#f032e6', '#9a6324']);
+    expect(PALETTE.filter((p) => !p.darkText).map((p) => p.css)).toEqual(['#e6194b', '#4363d8', '#911eb4', '#9a6324']);
+    expect(prefersDarkText('#ffffff')).toBe(true);
+    expect(prefersDarkText('#000000')).toBe(false);
   });
 });
 
