@@ -195,6 +195,9 @@ class FiligreeService final : public FiligreeServiceBase {
   // its quota of streams open; else *slot holds the stream's place (and
   // quota) until it is released.
   grpc::Status open_stream(const Session& session, std::shared_ptr<void>* slot);
+  // Undo or Redo (history_calls.cpp).
+  grpc::ServerUnaryReactor* undo_call(grpc::CallbackServerContext* context, const v1::UndoRequest& request,
+                                      v1::UndoResponse* response, bool redo);
   // A place for one ExportHistory call (each deforms a frame per entry on a
   // thread of its own): one per core at once; null when all are taken.
   std::shared_ptr<void> take_export_slot();

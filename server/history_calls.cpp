@@ -48,25 +48,22 @@ grpc::ServerUnaryReactor* FiligreeService::GetHistory(grpc::CallbackServerContex
 
 grpc::ServerUnaryReactor* FiligreeService::Undo(grpc::CallbackServerContext* context, const v1::UndoRequest* request,
                                                 v1::UndoResponse* response) {
-  return unary_on_session(
-      context, request->session_id(), Role::kEditor,
-      [=, author = request->client_name(), force = request->force()](Session& s) {
-        return guarded([&] {
-          check_client_name(author);
-          *response = s.undo(author, /*redo=*/false, force);
-        });
-      },
-      always);
+  return undo_call(context, *request, response, /*redo=*/false);
 }
 
 grpc::ServerUnaryReactor* FiligreeService::Redo(grpc::CallbackServerContext* context, const v1::UndoRequest* request,
                                                 v1::UndoResponse* response) {
+  return undo_call(context, *request, response, /*redo=*/true);
+}
+
+grpc::ServerUnaryReactor* FiligreeService::undo_call(grpc::CallbackServerContext* context, const v1::UndoRequest& request,
+                                                     v1::UndoResponse* response, bool redo) {
   return unary_on_session(
-      context, request->session_id(), Role::kEditor,
-      [=, author = request->client_name(), force = request->force()](Session& s) {
+      context, request.session_id(), Role::kEditor,
+      [=, author = request.client_name(), force = request.force()](Session& s) {
         return guarded([&] {
           check_client_name(author);
-          *response = s.undo(author, /*redo=*/true, force);
+          *response = s.undo(author, redo, force);
         });
       },
       always);
