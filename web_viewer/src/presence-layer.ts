@@ -433,6 +433,8 @@ export class PointerSender {
   }
 
   private async send(): Promise<void> {
+    // A task of its own: not inside the pointer event that asked (input stays quick).
+    await new Promise((resolve) => setTimeout(resolve, 0));
     const vertex = this.at === null ? null : this.view.pointVertex(this.at.x, this.at.y);
     if (vertex === this.sent) return;
     const p = vertex === null ? null : this.view.positionOf(vertex);
