@@ -62,7 +62,19 @@ const std::set<std::string> kApi = {
     "filigree_driver_send_partial", "filigree_driver_send_joints", "filigree_driver_poll",
     "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_wait_for_pose", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
     "filigree_watcher_open", "filigree_play_clip", "filigree_play_clip_with", "filigree_watcher_poll",
-    "filigree_watcher_frame_info", "filigree_watcher_clip_seconds", "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free"};
+    "filigree_watcher_frame_info", "filigree_watcher_clip_seconds", "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free",
+    "filigree_set_handles_in_gesture", "filigree_driver_set_gesture", "filigree_undo", "filigree_redo",
+    "filigree_session_edit_message", "filigree_session_edit_conflicts", "filigree_create_checkpoint",
+    "filigree_restore_checkpoint", "filigree_diff_checkpoint", "filigree_history_read", "filigree_history_info_get",
+    "filigree_history_entry_get", "filigree_history_entry_author", "filigree_history_entry_vertices",
+    "filigree_history_checkpoint_get", "filigree_history_checkpoint_name", "filigree_history_checkpoint_author",
+    "filigree_history_last_error", "filigree_history_free", "filigree_presence_open", "filigree_presence_poll",
+    "filigree_presence_wait", "filigree_presence_participant_count", "filigree_presence_participant_get",
+    "filigree_presence_participant_name", "filigree_presence_participant_touching",
+    "filigree_presence_participant_handles", "filigree_presence_close", "filigree_presence_last_error",
+    "filigree_presence_free", "filigree_set_presence", "filigree_export_history", "filigree_history_export_next",
+    "filigree_history_export_author", "filigree_history_export_base_pose", "filigree_history_export_close",
+    "filigree_history_export_last_error", "filigree_history_export_free"};
 
 // The names of the symbols the ELF file defines in its dynamic symbol table
 // (what dlsym can find), read with <elf.h>.

@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   filigree::cli::add_deform_commands(app);
   filigree::cli::add_compare_command(app);
   filigree::cli::add_service_commands(app);
+  filigree::cli::add_history_commands(app);
   filigree::cli::add_rig_command(app);
   filigree::cli::add_health_command(app);
   filigree::cli::add_api_key_command(app);

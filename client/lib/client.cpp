@@ -5,6 +5,8 @@
 #include <random>
 
 #include "filigree/channel_arguments.h"
+#include "pose_check.h"
+#include "unary_call.h"
 
 namespace filigree {
 namespace {
@@ -40,20 +42,6 @@ std::string new_session_id() {
     for (int k = 0; k < 8 && id.size() < 20; ++k, bits >>= 4) id += kHex[bits & 15];
   }
   return id;
-}
-
-// One unary call on a session: metadata set, failure thrown as ClientError.
-template <class Request, class Response>
-Response call(v1::Filigree::Stub& stub,
-              grpc::Status (v1::Filigree::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
-              const std::string& session_id, const std::string& token, const Request& request, Routing routing,
-              std::chrono::milliseconds timeout) {
-  grpc::ClientContext context;
-  set_session_metadata(context, session_id, token, routing);
-  context.set_deadline(std::chrono::system_clock::now() + timeout);
-  Response response;
-  throw_if_error((stub.*method)(&context, request, &response));
-  return response;
 }
 
 }  // namespace
@@ -126,7 +114,7 @@ SessionHandle Client::create_session(const std::string& mesh_bytes, const std::s
 SessionMesh Client::join(const std::string& session_id, const std::string& token) {
   v1::JoinSessionRequest request;
   request.set_session_id(session_id);
-  v1::SessionInfo info = call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_, call_timeout_);
+  v1::SessionInfo info = unary_call(*stub_, &v1::Filigree::Stub::JoinSession, session_id, token, request, routing_, call_timeout_);
   read_rest_in_parts(session_id, token, info);
   return to_session_mesh(info);
 }
@@ -174,27 +162,29 @@ v1::SessionState Client::state(const std::string& session_id, const std::string&
   v1::GetStateRequest request;
   request.set_session_id(session_id);
   request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-  return call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_, call_timeout_);
+  return unary_call(*stub_, &v1::Filigree::Stub::GetState, session_id, token, request, routing_, call_timeout_);
 }
 
 void Client::set_threshold(const std::string& session_id, const std::string& token, double threshold,
-                           bool whole_mesh) {
+                           bool whole_mesh, const std::string& client_name) {
   v1::SetOptionsRequest request;
   request.set_session_id(session_id);
   request.set_threshold(threshold);
   request.set_whole_mesh(whole_mesh);
-  call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_, call_timeout_);
+  request.set_client_name(client_name);
+  unary_call(*stub_, &v1::Filigree::Stub::SetOptions, session_id, token, request, routing_, call_timeout_);
 }
 
 std::uint32_t Client::set_handles(const std::string& session_id, const std::string& token,
                                   const std::string& client_name, std::span<const std::uint32_t> vertices,
-                                  std::span<const std::array<float, 3>> targets) {
+                                  std::span<const std::array<float, 3>> targets, std::uint64_t gesture_id) {
   if (vertices.size() != targets.size())
     throw ClientError(grpc::StatusCode::INVALID_ARGUMENT, std::to_string(vertices.size()) + " handle vertices but " +
                                                               std::to_string(targets.size()) + " targets");
   v1::SetHandlesRequest request;
   request.set_session_id(session_id);
   request.set_client_name(client_name);
+  request.set_gesture_id(gesture_id);
   for (std::size_t i = 0; i < vertices.size(); ++i) {
     v1::Handle* h = request.add_handles();
     h->set_vertex(vertices[i]);
@@ -202,13 +192,26 @@ std::uint32_t Client::set_handles(const std::string& session_id, const std::stri
     h->set_y(targets[i][1]);
     h->set_z(targets[i][2]);
   }
-  return call(*stub_, &v1::Filigree::Stub::SetHandles, session_id, token, request, routing_, call_timeout_).handles_in_session();
+  return unary_call(*stub_, &v1::Filigree::Stub::SetHandles, session_id, token, request, routing_, call_timeout_).handles_in_session();
+}
+
+std::uint64_t Client::submit_pose(const std::string& session_id, const std::string& token,
+                                  const std::string& client_name, std::span<const float> positions,
+                                  std::uint64_t gesture_id) {
+  check_positions("submit_pose", {}, positions);
+  v1::DriveRequest request;
+  request.set_session_id(session_id);
+  request.set_client_name(client_name);
+  request.set_gesture_id(gesture_id);
+  request.mutable_positions()->Assign(positions.begin(), positions.end());
+  return unary_call(*stub_, &v1::Filigree::Stub::SubmitPose, session_id, token, request, routing_, call_timeout_)
+      .accepted_at_version();
 }
 
 void Client::close(const std::string& session_id, const std::string& token) {
   v1::CloseSessionRequest request;
   request.set_session_id(session_id);
-  call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request, routing_, call_timeout_);
+  unary_call(*stub_, &v1::Filigree::Stub::CloseSession, session_id, token, request, routing_, call_timeout_);
 }
 
 std::vector<v1::ListSessionsResponse::Entry> Client::list() {

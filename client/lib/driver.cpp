@@ -64,6 +64,7 @@ bool Driver::write() {
   // driver on the server, and the name is reported with each change.
   request_.set_session_id(session_id_);
   request_.set_client_name(client_name_);
+  request_.set_gesture_id(gesture_.load());
   request_.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
   std::lock_guard lock(mutex_);
   if (status_ || writes_done_) return false;

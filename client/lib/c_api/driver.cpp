@@ -140,6 +140,13 @@ int filigree_driver_send_joints(filigree_driver* driver, uint64_t pose_id, int s
   });
 }
 
+int filigree_driver_set_gesture(filigree_driver* driver, uint64_t gesture_id) {
+  return with_handle(driver, "filigree_driver_set_gesture", [&](filigree_driver& d) -> int {
+    d.driver->set_gesture(gesture_id);
+    return FILIGREE_OK;
+  });
+}
+
 int filigree_driver_poll(filigree_driver* driver, float* positions, size_t capacity, uint64_t* version,
                          uint64_t* pose_id, int* updated) {
   constexpr const char* kFunction = "filigree_driver_poll";

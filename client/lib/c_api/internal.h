@@ -24,7 +24,7 @@
 
 namespace filigree::c_api {
 
-enum class Kind : std::uint8_t { kClient, kSession, kDriver, kWatcher };
+enum class Kind : std::uint8_t { kClient, kSession, kDriver, kWatcher, kHistory, kPresence, kHistoryExport };
 
 // Live handles by address. A lookup on every call costs a mutex and a hash
 // probe, nothing next to a frame, and it turns NULL, a freed handle or one
@@ -112,6 +112,10 @@ struct filigree_session {
   std::string editor_token, viewer_token;  // empty for a joined session
   std::string token;                       // what it was made (editor) or joined with
   filigree::SessionMesh mesh;
+  // The latest undo, redo or restore made through this handle
+  // (filigree_session_edit_message, filigree_session_edit_conflicts).
+  mutable std::mutex edit_mutex;
+  std::string edit_message, edit_conflicts;
   mutable filigree::c_api::ErrorSlot error;  // mutable: accessors on const handles record failures too
 };
 

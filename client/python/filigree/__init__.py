@@ -17,6 +17,9 @@ from ._library import library_path
 from .client import DUAL_QUATERNION, LINEAR_BLEND, Client, SessionOptions
 from .errors import (DeadlineExceeded, FailedPrecondition, FiligreeError, InvalidArgument, NotFound,
                      PermissionDenied, ResourceExhausted, Status, StreamEnded, Unauthenticated, Unavailable)
+from .history import Checkpoint, CheckpointDiff, Conflict, EditOutcome, History, HistoryEntry
+from .history_export import HistoryExport, HistoryState
+from .presence import Participant, Presence, PresenceWatcher
 from .session import Clip, Joint, Session
 from .streams import JOINTS_LOCAL_TRS, JOINTS_MODEL_MATRIX, Change, Driver, Frame, Watcher
 
@@ -35,4 +38,6 @@ __all__ = [
     "FiligreeError", "Status", "InvalidArgument", "NotFound", "PermissionDenied", "Unauthenticated",
     "Unavailable", "ResourceExhausted", "DeadlineExceeded", "FailedPrecondition", "StreamEnded", "LINEAR_BLEND", "DUAL_QUATERNION",
     "JOINTS_LOCAL_TRS", "JOINTS_MODEL_MATRIX", "library_path", "library_version",
+    "History", "HistoryEntry", "Checkpoint", "CheckpointDiff", "EditOutcome", "Conflict", "Presence", "Participant",
+    "PresenceWatcher", "HistoryExport", "HistoryState",
 ]

@@ -43,6 +43,40 @@ class ClipPlayback(ctypes.Structure):
     _fields_ = [("speed", c_double), ("loop", c_int32), ("start_seconds", c_double), ("max_rate", c_double)]
 
 
+class EditOutcome(ctypes.Structure):
+    _fields_ = [("result", c_int32), ("conflict_count", c_uint32), ("entry", c_uint64), ("recorded", c_uint64),
+                ("accepted_at_version", c_uint64), ("conflict_vertex_count", c_uint64)]
+
+
+class Checkpoint(ctypes.Structure):
+    _fields_ = [("id", c_uint64), ("time", c_double), ("version", c_uint64), ("after_entry", c_uint64)]
+
+
+class CheckpointDiff(ctypes.Structure):
+    _fields_ = [("checkpoint", c_uint64), ("version", c_uint64), ("vertex_count", c_uint64), ("max_distance", c_double),
+                ("rms_distance", c_double), ("threshold_differs", c_int32)]
+
+
+class HistoryInfo(ctypes.Structure):
+    _fields_ = [("entry_count", c_uint64), ("checkpoint_count", c_uint64), ("first_seq", c_uint64), ("bytes", c_uint64)]
+
+
+class HistoryEntry(ctypes.Structure):
+    _fields_ = [("seq", c_uint64), ("kind", c_int32), ("undone", c_int32), ("start_time", c_double),
+                ("end_time", c_double), ("target", c_uint64), ("gesture_id", c_uint64), ("version", c_uint64),
+                ("vertex_count", c_uint64)]
+
+
+class Participant(ctypes.Structure):
+    _fields_ = [("role", c_int32), ("colour", c_uint32), ("has_pointer", c_int32), ("pointer", c_float * 3),
+                ("pointer_vertex", c_uint32), ("idle_seconds", c_double), ("touching_count", c_uint64),
+                ("handle_count", c_uint64)]
+
+
+class HistoryState(ctypes.Structure):
+    _fields_ = [("entry", c_uint64), ("version", c_uint64), ("time", c_double), ("max_error", c_float)]
+
+
 FrameCallback = ctypes.CFUNCTYPE(None, POINTER(c_float), c_size_t, c_uint64, c_void_p)
 
 _P = c_void_p  # every handle is opaque
@@ -112,6 +146,45 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_watcher_close": ([_P], c_int),
     "filigree_watcher_last_error": ([_P], c_char_p),
     "filigree_watcher_free": ([_P], c_int),
+    # working together: history, undo, checkpoints, presence, export, gestures
+    "filigree_driver_set_gesture": ([_P, c_uint64], c_int),
+    "filigree_set_handles_in_gesture": ([_P, c_char_p, c_char_p, c_uint64, _U32, c_size_t, _F, c_size_t, _U32], c_int),
+    "filigree_undo": ([_P, c_char_p, c_char_p, c_int, POINTER(EditOutcome)], c_int),
+    "filigree_redo": ([_P, c_char_p, c_char_p, c_int, POINTER(EditOutcome)], c_int),
+    "filigree_session_edit_message": ([_P, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_session_edit_conflicts": ([_P, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_create_checkpoint": ([_P, c_char_p, c_char_p, c_char_p, POINTER(Checkpoint)], c_int),
+    "filigree_restore_checkpoint": ([_P, c_char_p, c_uint64, c_char_p, POINTER(EditOutcome)], c_int),
+    "filigree_diff_checkpoint": ([_P, c_char_p, c_uint64, POINTER(CheckpointDiff), _U32, c_size_t, _SIZE], c_int),
+    "filigree_history_read": ([_P, c_char_p, c_uint32, POINTER(_P)], c_int),
+    "filigree_history_info_get": ([_P, POINTER(HistoryInfo)], c_int),
+    "filigree_history_entry_get": ([_P, c_size_t, POINTER(HistoryEntry)], c_int),
+    "filigree_history_entry_author": ([_P, c_size_t, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_history_entry_vertices": ([_P, c_size_t, _U32, c_size_t, _SIZE], c_int),
+    "filigree_history_checkpoint_get": ([_P, c_size_t, POINTER(Checkpoint)], c_int),
+    "filigree_history_checkpoint_name": ([_P, c_size_t, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_history_checkpoint_author": ([_P, c_size_t, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_history_last_error": ([_P], c_char_p),
+    "filigree_history_free": ([_P], c_int),
+    "filigree_presence_open": ([_P, c_char_p, c_char_p, POINTER(_P)], c_int),
+    "filigree_presence_poll": ([_P, POINTER(c_uint64), POINTER(c_int)], c_int),
+    "filigree_presence_wait": ([_P, c_int64], c_int),
+    "filigree_presence_participant_count": ([_P, _SIZE], c_int),
+    "filigree_presence_participant_get": ([_P, c_size_t, POINTER(Participant)], c_int),
+    "filigree_presence_participant_name": ([_P, c_size_t, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_presence_participant_touching": ([_P, c_size_t, _U32, c_size_t, _SIZE], c_int),
+    "filigree_presence_participant_handles": ([_P, c_size_t, _U32, c_size_t, _SIZE], c_int),
+    "filigree_presence_close": ([_P], c_int),
+    "filigree_presence_last_error": ([_P], c_char_p),
+    "filigree_presence_free": ([_P], c_int),
+    "filigree_set_presence": ([_P, c_char_p, c_char_p, _F, c_uint32], c_int),
+    "filigree_export_history": ([_P, c_char_p, c_uint64, c_uint64, POINTER(_P)], c_int),
+    "filigree_history_export_next": ([_P, _F, c_size_t, _SIZE, POINTER(HistoryState)], c_int),
+    "filigree_history_export_author": ([_P, c_char_p, c_size_t, _SIZE], c_int),
+    "filigree_history_export_base_pose": ([_P, _F, c_size_t, _SIZE], c_int),
+    "filigree_history_export_close": ([_P], c_int),
+    "filigree_history_export_last_error": ([_P], c_char_p),
+    "filigree_history_export_free": ([_P], c_int),
 }
 
 

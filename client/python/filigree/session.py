@@ -10,6 +10,10 @@ import numpy as np
 
 from . import _library
 from ._library import check, lib, read_string, token_bytes
+from .history import CheckpointDiff, EditOutcome, History, checkpoint_of, diff_checkpoint, edit_outcome, read_history
+from .history import Checkpoint as HistoryCheckpoint
+from .history_export import HistoryExport
+from .presence import PresenceWatcher
 from .streams import Driver, Watcher
 
 
@@ -127,17 +131,20 @@ class Session:
     # ------------------------------------------------------------ editing
 
     def set_handles(self, vertices: Sequence[int] | np.ndarray, targets: np.ndarray,
-                    client_name: str = "filigree-python", token: Optional[str] = None) -> int:
+                    client_name: str = "filigree-python", token: Optional[str] = None, gesture_id: int = 0) -> int:
         """Replaces `client_name`'s handles: rest vertex vertices[k] (session
         order) should go to targets[k] (k × 3). Empty arrays remove them.
-        Returns every participant's handle count."""
+        Returns every participant's handle count. Calls of one drag share a
+        nonzero `gesture_id`: one history entry, undone as one (0: calls less
+        than 0.5 s apart are one entry)."""
         ids = np.ascontiguousarray(vertices, dtype=np.uint32).reshape(-1)
         points = np.ascontiguousarray(targets, dtype=np.float32).reshape(-1)
         total = ctypes.c_uint32(0)
-        check(lib.filigree_set_handles(self.handle, token_bytes(token), client_name.encode(),
-                                       ids.ctypes.data_as(_library._U32) if ids.size else None, ids.size,
-                                       points.ctypes.data_as(_library._F) if points.size else None, points.size,
-                                       ctypes.byref(total)))
+        check(lib.filigree_set_handles_in_gesture(self.handle, token_bytes(token), client_name.encode(),
+                                                  int(gesture_id),
+                                                  ids.ctypes.data_as(_library._U32) if ids.size else None, ids.size,
+                                                  points.ctypes.data_as(_library._F) if points.size else None,
+                                                  points.size, ctypes.byref(total)))
         return total.value
 
     def set_threshold(self, threshold: float, whole_mesh: bool = False, token: Optional[str] = None) -> None:
@@ -147,6 +154,78 @@ class Session:
     def end(self, token: Optional[str] = None) -> None:
         """Ends the session on the server for everyone (editor token)."""
         check(lib.filigree_close_session(self.handle, token_bytes(token)))
+
+    # ------------------------------------------------------------ working together
+
+    def history(self, newest: int = 0, token: Optional[str] = None) -> History:
+        """The history, oldest first, and the checkpoints (either token);
+        `newest` > 0: only the newest that many entries."""
+        return read_history(self.handle, token_bytes(token), newest)
+
+    def undo(self, client_name: str = "filigree-python", force: bool = False,
+             token: Optional[str] = None) -> EditOutcome:
+        """Undoes `client_name`'s latest change not undone (editor token), on
+        the base vertices nobody else changed since: the others' later work
+        stays (`conflicts`) unless `force`. Never another author's change."""
+        outcome = _library.EditOutcome()
+        check(lib.filigree_undo(self.handle, token_bytes(token), client_name.encode(), int(bool(force)),
+                                ctypes.byref(outcome)))
+        return edit_outcome(self.handle, outcome)
+
+    def redo(self, client_name: str = "filigree-python", force: bool = False,
+             token: Optional[str] = None) -> EditOutcome:
+        """Redoes `client_name`'s latest undone change (since its last new one)."""
+        outcome = _library.EditOutcome()
+        check(lib.filigree_redo(self.handle, token_bytes(token), client_name.encode(), int(bool(force)),
+                                ctypes.byref(outcome)))
+        return edit_outcome(self.handle, outcome)
+
+    def checkpoint(self, name: str, client_name: str = "filigree-python",
+                   token: Optional[str] = None) -> HistoryCheckpoint:
+        """Names the current pose and threshold (editor token; `name`: 1 to
+        200 bytes). history().checkpoints lists them."""
+        made = _library.Checkpoint()
+        check(lib.filigree_create_checkpoint(self.handle, token_bytes(token), name.encode(), client_name.encode(),
+                                             ctypes.byref(made)))
+        return checkpoint_of(made, name, client_name)
+
+    def restore(self, checkpoint: int | HistoryCheckpoint, client_name: str = "filigree-python",
+                token: Optional[str] = None) -> EditOutcome:
+        """Goes back to a checkpoint (its id, or the Checkpoint): itself a
+        history entry of `client_name`, so undo() takes it back. NotFound:
+        no such checkpoint."""
+        outcome = _library.EditOutcome()
+        check(lib.filigree_restore_checkpoint(self.handle, token_bytes(token), _checkpoint_id(checkpoint),
+                                              client_name.encode(), ctypes.byref(outcome)))
+        return edit_outcome(self.handle, outcome)
+
+    def diff(self, checkpoint: int | HistoryCheckpoint, token: Optional[str] = None) -> CheckpointDiff:
+        """The current base pose against a checkpoint's (either token)."""
+        return diff_checkpoint(self.handle, token_bytes(token), _checkpoint_id(checkpoint))
+
+    def presence(self, client_name: str = "filigree-python", token: Optional[str] = None) -> PresenceWatcher:
+        """Who is here and what they touch: a stream of Presence snapshots
+        (iterate it), on which `client_name` is listed while it is open."""
+        return PresenceWatcher(self, client_name, token)
+
+    def set_presence(self, pointer: Optional[Sequence[float] | np.ndarray] = None, vertex: int = 0,
+                     client_name: str = "filigree-python", token: Optional[str] = None) -> None:
+        """Sets `client_name`'s pointer, shown in the others' presence: x y z
+        on the mesh and the detailed-mesh vertex nearest it. None clears it."""
+        at = None
+        if pointer is not None:
+            at = np.ascontiguousarray(pointer, dtype=np.float32).reshape(-1)
+            if at.size != 3:
+                raise ValueError(f"pointer must be x y z, not {at.size} values")
+        check(lib.filigree_set_presence(self.handle, token_bytes(token), client_name.encode(),
+                                        at.ctypes.data_as(_library._F) if at is not None else None, int(vertex)))
+
+    def export_history(self, from_entry: int = 0, to_entry: int = 0, token: Optional[str] = None) -> HistoryExport:
+        """The state after each history entry from `from_entry` to `to_entry`
+        (0: the oldest kept, the newest), oldest first: an iterator of
+        HistoryState (base pose, and the detailed mesh deformed at full
+        detail). At most 2000 entries at a time."""
+        return HistoryExport(self, from_entry, to_entry, token)
 
     # ------------------------------------------------------------ lifetime
 
@@ -167,3 +246,7 @@ class Session:
 
     def __repr__(self) -> str:
         return f"Session({self.id!r}, {self.vertex_count} vertices, base {self.base_vertex_count})"
+
+
+def _checkpoint_id(checkpoint: int | HistoryCheckpoint) -> int:
+    return int(checkpoint.id if isinstance(checkpoint, HistoryCheckpoint) else checkpoint)

@@ -4,9 +4,11 @@ or wait for the next frame, and iterate over frames."""
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
 import numbers
+import random
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Iterator, Optional, Sequence
@@ -231,34 +233,70 @@ class Driver(_Stream):
         super().__init__(session, handle)
         self._m = session.base_vertex_count
         self.last_pose_id = 0
+        self._gesture_id = 0
+        self._gestures = random.getrandbits(48)  # gesture() numbers them from here: unlike another driver's
 
     def _next_id(self, pose_id: Optional[int]) -> int:
         self.last_pose_id = self.last_pose_id + 1 if pose_id is None else int(pose_id)
         return self.last_pose_id
 
-    def send(self, positions: np.ndarray, pose_id: Optional[int] = None) -> int:
-        """A full pose: every base vertex (m × 3). Returns its pose id."""
+    @property
+    def gesture_id(self) -> int:
+        """The gesture the poses sent from now on belong to: poses of one
+        nonzero id are one history entry, undone as one (Session.undo). 0
+        (the default): none; the server then joins poses less than 0.5 s apart."""
+        return self._gesture_id
+
+    @gesture_id.setter
+    def gesture_id(self, value: int) -> None:
+        if not isinstance(value, numbers.Integral) or not 0 <= value < 2**64:
+            raise ValueError(f"gesture_id must be an integer in [0, 2**64), not {value!r}")
+        check(lib.filigree_driver_set_gesture(self.handle, int(value)))
+        self._gesture_id = int(value)
+
+    @contextlib.contextmanager
+    def gesture(self) -> Iterator[int]:
+        """The poses sent inside `with driver.gesture():` are one gesture (a
+        new id, yielded), one history entry; afterwards none again."""
+        self._gestures += 1
+        self.gesture_id = self._gestures
+        try:
+            yield self._gestures
+        finally:
+            if self._handle:
+                self.gesture_id = 0
+
+    def _set_gesture(self, gesture_id: Optional[int]) -> None:
+        if gesture_id is not None and gesture_id != self._gesture_id:
+            self.gesture_id = gesture_id
+
+    def send(self, positions: np.ndarray, pose_id: Optional[int] = None, gesture_id: Optional[int] = None) -> int:
+        """A full pose: every base vertex (m × 3). Returns its pose id.
+        `gesture_id` (None: keep the current one) sets `gesture_id` first."""
         p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1)
+        self._set_gesture(gesture_id)
         pid = self._next_id(pose_id)
         check(lib.filigree_driver_send_positions(self.handle, pid, p.ctypes.data_as(_library._F), p.size))
         return pid
 
     def send_partial(self, indices: Sequence[int] | np.ndarray, positions: np.ndarray,
-                     pose_id: Optional[int] = None) -> int:
+                     pose_id: Optional[int] = None, gesture_id: Optional[int] = None) -> int:
         """Base vertices indices[k] move to positions[k]; the others stay."""
         i = np.ascontiguousarray(indices, dtype=np.uint32).reshape(-1)
         p = np.ascontiguousarray(positions, dtype=np.float32).reshape(-1)
+        self._set_gesture(gesture_id)
         pid = self._next_id(pose_id)
         check(lib.filigree_driver_send_partial(self.handle, pid, i.ctypes.data_as(_library._U32), i.size,
                                                p.ctypes.data_as(_library._F), p.size))
         return pid
 
     def send_joints(self, values: np.ndarray, joints: Optional[Sequence[int]] = None, space: int = JOINTS_LOCAL_TRS,
-                    pose_id: Optional[int] = None) -> int:
+                    pose_id: Optional[int] = None, gesture_id: Optional[int] = None) -> int:
         """A skeletal pose: 10 (JOINTS_LOCAL_TRS) or 16 (JOINTS_MODEL_MATRIX)
         floats per joint, for `joints` or all joints in order."""
         v = np.ascontiguousarray(values, dtype=np.float32).reshape(-1)
         j = None if joints is None else np.ascontiguousarray(joints, dtype=np.uint32).reshape(-1)
+        self._set_gesture(gesture_id)
         pid = self._next_id(pose_id)
         check(lib.filigree_driver_send_joints(self.handle, pid, int(space),
                                               None if j is None else j.ctypes.data_as(_library._U32),

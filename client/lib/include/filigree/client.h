@@ -22,6 +22,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -31,7 +32,11 @@
 #include "filigree/call_metadata.h"
 #include "filigree/client_error.h"
 #include "filigree/driver.h"
+#include "filigree/edit_outcome.h"
 #include "filigree/frame_decoder.h"
+#include "filigree/history_export.h"
+#include "filigree/presence_pointer.h"
+#include "filigree/presence_watcher.h"
 #include "filigree/session_mesh.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "filigree/watcher.h"
@@ -86,12 +91,24 @@ class Client {
   // state.keyframe() first when the frame is sparse (has_keyframe()).
   v1::SessionState state(const std::string& session_id, const std::string& token);
   // Changes the cut threshold (editor token); whole_mesh means T = ∞.
-  void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh);
+  // `client_name` is the history entry's author.
+  void set_threshold(const std::string& session_id, const std::string& token, double threshold, bool whole_mesh,
+                     const std::string& client_name = {});
   // Replaces `client_name`'s handles (editor token): detailed-mesh vertex
   // `vertices[i]` (session order) should go to `targets[i]`. An empty set
   // removes that client's handles. Returns every participant's handle count.
+  // Calls of one drag share a nonzero `gesture_id`: one history entry,
+  // undone as one (0: calls less than 0.5 s apart are one entry).
   std::uint32_t set_handles(const std::string& session_id, const std::string& token, const std::string& client_name,
-                            std::span<const std::uint32_t> vertices, std::span<const std::array<float, 3>> targets);
+                            std::span<const std::uint32_t> vertices, std::span<const std::array<float, 3>> targets,
+                            std::uint64_t gesture_id = 0);
+  // One pose, unary (editor token): 3·m floats, base order, as Driver::send
+  // but without a stream, with `client_name` as its author (a replay names
+  // each pose's). Poses of one nonzero `gesture_id` are one history entry.
+  // Returns the session's version when it was accepted: the frame that
+  // includes it has a larger one.
+  std::uint64_t submit_pose(const std::string& session_id, const std::string& token, const std::string& client_name,
+                            std::span<const float> positions, std::uint64_t gesture_id = 0);
   // Ends the session for everyone (editor token).
   void close(const std::string& session_id, const std::string& token);
   // The server's sessions (no token needed; with replicas, this replica's).
@@ -123,6 +140,48 @@ class Client {
   // shows (a looping clip wraps around to 0 instead).
   std::unique_ptr<Watcher> play_clip(const std::string& session_id, const std::string& token, const std::string& clip,
                                      const ClipPlayback& playback = {}, const std::string& client_name = "clip");
+  // ---- working together: the history, undo, checkpoints, presence, export.
+  // Every accepted change is a history entry of its author (the client_name
+  // of the poses, handles or threshold); a gesture (Driver::set_gesture, a
+  // set_handles gesture_id) is one entry.
+
+  // The history, oldest first, and the checkpoints (either token); `newest`
+  // > 0: only the newest that many entries.
+  v1::History history(const std::string& session_id, const std::string& token, std::uint32_t newest = 0);
+  // Undoes `client_name`'s latest change not undone (editor token), on the
+  // base vertices nobody else changed since: the others' later work stays
+  // (EditOutcome::conflicts) unless `force`. Never another author's change.
+  EditOutcome undo(const std::string& session_id, const std::string& token, const std::string& client_name,
+                   bool force = false);
+  // Redoes `client_name`'s latest undone change (since its last new one).
+  EditOutcome redo(const std::string& session_id, const std::string& token, const std::string& client_name,
+                   bool force = false);
+  // Names the current pose and threshold (editor token); `name`: 1 to 200
+  // characters. Checkpoints are listed in history().checkpoints().
+  v1::Checkpoint create_checkpoint(const std::string& session_id, const std::string& token, const std::string& name,
+                                   const std::string& client_name);
+  // Goes back to checkpoint `checkpoint` (editor token): itself a history
+  // entry of `client_name`, so undo() takes it back. NOT_FOUND: no such checkpoint.
+  EditOutcome restore_checkpoint(const std::string& session_id, const std::string& token, std::uint64_t checkpoint,
+                                 const std::string& client_name);
+  // The current base pose against checkpoint `checkpoint` (either token).
+  v1::CheckpointDiff diff_checkpoint(const std::string& session_id, const std::string& token, std::uint64_t checkpoint);
+  // Who is here and what they touch (either token): a stream of Presence
+  // snapshots, on which `client_name` is listed as present while it is open.
+  std::unique_ptr<PresenceWatcher> watch_presence(const std::string& session_id, const std::string& token,
+                                                  const std::string& client_name, Reconnect reconnect = {});
+  // Sets `client_name`'s pointer, shown in the others' presence (either
+  // token); nullopt clears it.
+  void set_presence(const std::string& session_id, const std::string& token, const std::string& client_name,
+                    const std::optional<PresencePointer>& pointer);
+  // The state after each history entry from `from_entry` to `to_entry` (0:
+  // the oldest kept, the newest), oldest first (either token), decoded
+  // against `rest_positions` (SessionMesh::rest_positions). At most 2000
+  // entries at a time (else the stream ends with INVALID_ARGUMENT).
+  std::unique_ptr<HistoryExport> export_history(const std::string& session_id, const std::string& token,
+                                                std::vector<float> rest_positions, std::uint64_t from_entry = 0,
+                                                std::uint64_t to_entry = 0);
+
   // Routing::kDirect for an engine that calls the replica locate() named
   // instead of a load balancer (default: kLoadBalanced).
   void set_routing(Routing routing) { routing_ = routing; }

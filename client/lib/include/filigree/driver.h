@@ -1,6 +1,7 @@
 #pragma once
 // One Drive stream: numbered poses out, frames in.
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -77,6 +78,16 @@ class Driver {
     return last_refusal_;
   }
 
+  // The gesture the poses sent from now on belong to (a drag, a slider's
+  // travel): poses of one nonzero id are one history entry, undone as one
+  // (Client::undo). Use a new id for each gesture (a counter will do: only
+  // this client's latest entry can continue); 0 (the default) ends the
+  // gesture: the server then joins poses less than 0.5 s apart. Thread-safe;
+  // a pose takes the id set when it is sent, a re-sent one (after a
+  // reconnection) keeps it.
+  void set_gesture(std::uint64_t gesture_id) { gesture_.store(gesture_id); }
+  std::uint64_t gesture() const { return gesture_.load(); }
+
   // Tells the server no more poses come (it then ends the stream). Idempotent.
   bool writes_done();
 
@@ -109,6 +120,7 @@ class Driver {
   const std::string session_id_, token_, client_name_;
   const Routing routing_;
   ReconnectSchedule reconnect_;  // the reading thread's
+  std::atomic<std::uint64_t> gesture_{0};  // set_gesture's, for the poses sent from then on
   v1::DriveRequest request_;  // filled by send(); recycled (spare_), so no allocation per pose once warm
 
   // Held while writing, which may block on flow control, so cancel() has

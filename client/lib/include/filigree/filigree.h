@@ -46,9 +46,12 @@
  *     watcher and never waits for it).
  *   - What blocks: filigree_create_session, filigree_join and
  *     filigree_close_session (network round trips; an upload lasts as long as
- *     the server preprocesses), *_close (until the stream has ended) and
- *     filigree_watcher_wait. Sends block only while the transport is
- *     flow-controlled. Polls never wait for the network.
+ *     the server preprocesses), the history calls (filigree_undo, _redo, the
+ *     checkpoints', filigree_history_read, filigree_set_presence,
+ *     filigree_history_export_next), *_close (until the stream has ended),
+ *     filigree_watcher_wait and filigree_presence_wait. Sends block only
+ *     while the transport is flow-controlled. Polls never wait for the
+ *     network. A presence handle owns a background thread as a watcher does.
  *
  * Usage (errors unchecked for brevity):
  *
@@ -270,6 +273,14 @@ FILIGREE_API int filigree_set_handles(filigree_session* session, const char* tok
                                       const uint32_t* vertices, size_t vertex_count, const float* targets,
                                       size_t float_count, uint32_t* handles_in_session);
 
+/* As filigree_set_handles, as part of a gesture (a drag): calls with the
+ * same nonzero `gesture_id` are one history entry, undone as one; 0: calls
+ * less than 0.5 s apart are one entry. */
+FILIGREE_API int filigree_set_handles_in_gesture(filigree_session* session, const char* token,
+                                                 const char* client_name, uint64_t gesture_id,
+                                                 const uint32_t* vertices, size_t vertex_count, const float* targets,
+                                                 size_t float_count, uint32_t* handles_in_session);
+
 /* Sets the performance threshold T of the cut (editor token; NULL: the
  * session's); whole_mesh nonzero means T = infinity. Thresholds must be
  * finite and >= 0. Every participant's frames follow from the next one. */
@@ -334,6 +345,12 @@ FILIGREE_API int filigree_driver_send_partial(filigree_driver* driver, uint64_t 
 FILIGREE_API int filigree_driver_send_joints(filigree_driver* driver, uint64_t pose_id, int space,
                                              const uint32_t* joints, size_t joint_count, const float* values,
                                              size_t value_count);
+
+/* The gesture the poses sent from now on belong to (a drag, a slider's
+ * travel): poses of one nonzero id are one history entry, undone as one
+ * (filigree_undo). Use a new id for each gesture (a counter will do); 0
+ * (the default) ends it: the server then joins poses less than 0.5 s apart. */
+FILIGREE_API int filigree_driver_set_gesture(filigree_driver* driver, uint64_t gesture_id);
 
 /* Copies the newest decoded frame into `positions` (3·n floats, session
  * order) if it is newer than the last one polled, and sets *updated to 1;
@@ -472,6 +489,235 @@ FILIGREE_API const char* filigree_watcher_last_error(const filigree_watcher* wat
 /* Closes the watcher if needed and releases the handle. NULL: FILIGREE_OK.
  * Not from the watcher's own callback. */
 FILIGREE_API int filigree_watcher_free(filigree_watcher* watcher);
+
+/* ------------------------------------------------------------ working together */
+
+/* Every accepted change is a history entry of its author: the client_name
+ * of the poses (filigree_driver_open), handles or threshold. Poses of one
+ * gesture (filigree_driver_set_gesture) are one entry, undone as one. An
+ * author's undo never undoes another's change, and keeps the vertices others
+ * changed since (the conflicts) unless forced. */
+
+/* What an undo, a redo or a checkpoint's restore did. */
+typedef enum filigree_edit_result {
+  FILIGREE_EDIT_DONE = 0,     /* every vertex restored */
+  FILIGREE_EDIT_PARTIAL = 1,  /* restored but the conflicts' vertices, which keep the others' work */
+  FILIGREE_EDIT_CONFLICT = 2, /* every vertex conflicts: nothing changed */
+  FILIGREE_EDIT_NOTHING = 3   /* nothing to undo or redo */
+} filigree_edit_result;
+
+typedef struct filigree_edit_outcome {
+  int32_t result;                 /* filigree_edit_result */
+  uint32_t conflict_count;        /* later changes of other authors that kept their vertices */
+  uint64_t entry;                 /* the change undone or redone (a restore: the new entry) */
+  uint64_t recorded;              /* the history entry this made; 0 if nothing changed */
+  uint64_t accepted_at_version;   /* every frame with a larger version includes the result */
+  uint64_t conflict_vertex_count; /* base vertices they kept, over all conflicts */
+} filigree_edit_outcome;
+
+/* Undoes `client_name`'s (NULL: "filigree-c") latest change not undone
+ * (editor token; NULL: the session's), on the base vertices nobody else changed since; with `force`
+ * nonzero, those too (the others' change is overwritten there). `outcome`
+ * may be NULL. The outcome's message and conflicts:
+ * filigree_session_edit_message and filigree_session_edit_conflicts. */
+FILIGREE_API int filigree_undo(filigree_session* session, const char* token, const char* client_name, int force,
+                               filigree_edit_outcome* outcome);
+/* Redoes `client_name`'s latest undone change (since its last new one); as filigree_undo. */
+FILIGREE_API int filigree_redo(filigree_session* session, const char* token, const char* client_name, int force,
+                               filigree_edit_outcome* outcome);
+
+/* The latest undo, redo or restore made through this handle: what it did,
+ * in a sentence; and its conflicts, one line each,
+ * "author<TAB>entry<TAB>base vertices separated by spaces<LF>" (tabs and
+ * line breaks in names become spaces), "" when none. Strings, as
+ * filigree_session_id; "" before the first. */
+FILIGREE_API int filigree_session_edit_message(const filigree_session* session, char* buffer, size_t capacity,
+                                               size_t* required);
+FILIGREE_API int filigree_session_edit_conflicts(const filigree_session* session, char* buffer, size_t capacity,
+                                                 size_t* required);
+
+typedef struct filigree_checkpoint {
+  uint64_t id;
+  double time;          /* when it was made, Unix seconds */
+  uint64_t version;     /* the session's version then */
+  uint64_t after_entry; /* the newest history entry it includes (0: none) */
+} filigree_checkpoint;
+
+/* Names the current pose and threshold (editor token; NULL: the
+ * session's): `name` 1 to 200 bytes, `client_name` its author (NULL:
+ * "filigree-c"). `checkpoint` (may be NULL) gets it. */
+FILIGREE_API int filigree_create_checkpoint(filigree_session* session, const char* token, const char* name,
+                                            const char* client_name, filigree_checkpoint* checkpoint);
+/* Goes back to checkpoint `id` (editor token): itself a history entry of
+ * `client_name`, so filigree_undo takes it back. FILIGREE_NOT_FOUND: no
+ * such checkpoint. `outcome` may be NULL. */
+FILIGREE_API int filigree_restore_checkpoint(filigree_session* session, const char* token, uint64_t id,
+                                             const char* client_name, filigree_edit_outcome* outcome);
+
+typedef struct filigree_checkpoint_diff {
+  uint64_t checkpoint;
+  uint64_t version;      /* the current pose's */
+  uint64_t vertex_count; /* base vertices that differ */
+  double max_distance;   /* in the mesh's units */
+  double rms_distance;   /* over every base vertex */
+  int32_t threshold_differs;
+} filigree_checkpoint_diff;
+
+/* The current base pose against checkpoint `id` (either token). `diff`
+ * must not be NULL. The base vertices that differ go to `vertices`
+ * (vertex_count of them) by the buffer rules, except that a NULL `vertices`
+ * with capacity 0 asks for `diff` alone (FILIGREE_OK). */
+FILIGREE_API int filigree_diff_checkpoint(filigree_session* session, const char* token, uint64_t id,
+                                          filigree_checkpoint_diff* diff, uint32_t* vertices, size_t capacity,
+                                          size_t* required);
+
+/* The history as read at one moment: a handle (immutable, so any thread
+ * may read it) with the entries, oldest first, and the checkpoints. */
+typedef struct filigree_history filigree_history;
+
+typedef enum filigree_history_kind {
+  FILIGREE_HISTORY_POSE = 0,      /* poses, partial poses or joints: base vertices moved */
+  FILIGREE_HISTORY_HANDLES = 1,   /* the author's handles (and the pose solved from them) */
+  FILIGREE_HISTORY_THRESHOLD = 2, /* the threshold */
+  FILIGREE_HISTORY_RESTORE = 3,   /* a checkpoint restored (target: its id) */
+  FILIGREE_HISTORY_UNDO = 4,      /* the author undid entry `target` */
+  FILIGREE_HISTORY_REDO = 5       /* the author redid entry `target` */
+} filigree_history_kind;
+
+typedef struct filigree_history_info {
+  uint64_t entry_count;
+  uint64_t checkpoint_count;
+  uint64_t first_seq; /* entries below it were dropped to keep the history in its bounds */
+  uint64_t bytes;     /* what the history holds on the server */
+} filigree_history_info;
+
+typedef struct filigree_history_entry {
+  uint64_t seq;          /* increasing within the session */
+  int32_t kind;          /* filigree_history_kind */
+  int32_t undone;        /* 1: undone and not redone since */
+  double start_time;     /* Unix seconds */
+  double end_time;       /* its last change */
+  uint64_t target;       /* RESTORE: the checkpoint; UNDO, REDO: the entry */
+  uint64_t gesture_id;
+  uint64_t version;      /* the session's version at its last change */
+  uint64_t vertex_count; /* base vertices it changed (filigree_history_entry_vertices) */
+} filigree_history_entry;
+
+/* Reads the history (either token; NULL: the session's); `newest` > 0:
+ * only the newest that many entries. */
+FILIGREE_API int filigree_history_read(filigree_session* session, const char* token, uint32_t newest,
+                                       filigree_history** out);
+FILIGREE_API int filigree_history_info_get(const filigree_history* history, filigree_history_info* info);
+/* Entry `index` (0: the oldest read); an index >= entry_count gives FILIGREE_OUT_OF_RANGE. */
+FILIGREE_API int filigree_history_entry_get(const filigree_history* history, size_t index,
+                                            filigree_history_entry* entry);
+FILIGREE_API int filigree_history_entry_author(const filigree_history* history, size_t index, char* buffer,
+                                               size_t capacity, size_t* required);
+/* The base vertices entry `index` changed (base order). */
+FILIGREE_API int filigree_history_entry_vertices(const filigree_history* history, size_t index, uint32_t* buffer,
+                                                 size_t capacity, size_t* required);
+/* Checkpoint `index` (0 … checkpoint_count - 1), its name and author. */
+FILIGREE_API int filigree_history_checkpoint_get(const filigree_history* history, size_t index,
+                                                 filigree_checkpoint* checkpoint);
+FILIGREE_API int filigree_history_checkpoint_name(const filigree_history* history, size_t index, char* buffer,
+                                                  size_t capacity, size_t* required);
+FILIGREE_API int filigree_history_checkpoint_author(const filigree_history* history, size_t index, char* buffer,
+                                                    size_t capacity, size_t* required);
+FILIGREE_API const char* filigree_history_last_error(const filigree_history* history);
+/* NULL: FILIGREE_OK. */
+FILIGREE_API int filigree_history_free(filigree_history* history);
+
+/* ---- presence: who is here and what they touch */
+
+typedef struct filigree_presence filigree_presence;
+
+typedef struct filigree_participant {
+  int32_t role;           /* 0: viewer, 1: editor */
+  uint32_t colour;        /* 0xRRGGBB, fixed for a name */
+  int32_t has_pointer;    /* 1: pointer and pointer_vertex are set */
+  float pointer[3];       /* where it points on the mesh */
+  uint32_t pointer_vertex; /* the detailed-mesh vertex nearest the pointer */
+  double idle_seconds;    /* since its last change, pointer move or join */
+  uint64_t touching_count; /* base vertices of its latest change, while under 10 s old */
+  uint64_t handle_count;   /* detailed-mesh vertices of its handles */
+} filigree_participant;
+
+/* Opens a presence stream (either token; NULL: the session's), on which
+ * `client_name` (NULL: "filigree-c") is listed as present while it is open.
+ * Its background thread keeps the newest presence for filigree_presence_poll;
+ * it reconnects by itself as a watcher does. */
+FILIGREE_API int filigree_presence_open(filigree_session* session, const char* token, const char* client_name,
+                                        filigree_presence** out);
+/* Takes the newest presence if it is newer than the last one polled
+ * (*updated 1; else 0 and nothing changes); the participant functions below
+ * describe the presence polled. `version` (may be NULL) gets the session's
+ * version it was made at. Once the stream has ended and its last presence
+ * was polled, returns why (FILIGREE_ERROR_STREAM_ENDED for a normal end).
+ * Never waits. */
+FILIGREE_API int filigree_presence_poll(filigree_presence* presence, uint64_t* version, int* updated);
+/* Waits up to timeout_ms (negative: without limit; 0: just checks) for a
+ * presence newer than the last one polled: FILIGREE_OK, FILIGREE_DEADLINE_EXCEEDED,
+ * or why the stream ended. */
+FILIGREE_API int filigree_presence_wait(filigree_presence* presence, int64_t timeout_ms);
+/* Participants of the polled presence, by name (0 before the first poll). */
+FILIGREE_API int filigree_presence_participant_count(const filigree_presence* presence, size_t* count);
+FILIGREE_API int filigree_presence_participant_get(const filigree_presence* presence, size_t index,
+                                                   filigree_participant* participant);
+FILIGREE_API int filigree_presence_participant_name(const filigree_presence* presence, size_t index, char* buffer,
+                                                    size_t capacity, size_t* required);
+FILIGREE_API int filigree_presence_participant_touching(const filigree_presence* presence, size_t index,
+                                                        uint32_t* buffer, size_t capacity, size_t* required);
+FILIGREE_API int filigree_presence_participant_handles(const filigree_presence* presence, size_t index,
+                                                       uint32_t* buffer, size_t capacity, size_t* required);
+/* Stops the stream, waits for the background thread and returns FILIGREE_OK
+ * or why the stream had failed before. Idempotent. */
+FILIGREE_API int filigree_presence_close(filigree_presence* presence);
+FILIGREE_API const char* filigree_presence_last_error(const filigree_presence* presence);
+/* Closes if needed and releases the handle. NULL: FILIGREE_OK. */
+FILIGREE_API int filigree_presence_free(filigree_presence* presence);
+
+/* Sets `client_name`'s pointer (either token; NULL: the session's):
+ * `pointer` x y z on the mesh and the nearest detailed-mesh vertex; a NULL
+ * `pointer` clears it. */
+FILIGREE_API int filigree_set_presence(filigree_session* session, const char* token, const char* client_name,
+                                       const float* pointer, uint32_t pointer_vertex);
+
+/* ---- export: the state after each history entry */
+
+typedef struct filigree_history_export filigree_history_export;
+
+typedef struct filigree_history_state {
+  uint64_t entry;   /* the state after this history entry */
+  uint64_t version; /* the session's version at that entry's last change */
+  double time;      /* that change's time, Unix seconds */
+  float max_error;  /* largest |decoded − exact| coordinate error of its positions */
+} filigree_history_state;
+
+/* Exports the states after the history entries from `from_entry` to
+ * `to_entry` (0: the oldest kept, the newest), oldest first (either token;
+ * NULL: the session's), each deformed at full detail (T = 0) as the
+ * session's frames are. At most 2000 entries at a time. */
+FILIGREE_API int filigree_export_history(filigree_session* session, const char* token, uint64_t from_entry,
+                                         uint64_t to_entry, filigree_history_export** out);
+/* Blocks for the next state: its positions (3·n floats, session order: the
+ * detailed mesh) into `positions` by the buffer rules (checked before
+ * anything is read), and `state` (may be NULL). FILIGREE_ERROR_STREAM_ENDED
+ * once every state was read; else why the stream failed
+ * (FILIGREE_INVALID_ARGUMENT: a range the server refused). */
+FILIGREE_API int filigree_history_export_next(filigree_history_export* history_export, float* positions,
+                                              size_t capacity, size_t* required, filigree_history_state* state);
+/* The latest state read: its author (a string, as filigree_session_id) and
+ * its base pose (3·m floats, base order: what replaying it would submit). */
+FILIGREE_API int filigree_history_export_author(const filigree_history_export* history_export, char* buffer,
+                                                size_t capacity, size_t* required);
+FILIGREE_API int filigree_history_export_base_pose(const filigree_history_export* history_export, float* buffer,
+                                                   size_t capacity, size_t* required);
+/* Ends the stream (cancels what is left) and returns FILIGREE_OK, or why it
+ * had failed. Idempotent; from any thread, also to wake a blocked next. */
+FILIGREE_API int filigree_history_export_close(filigree_history_export* history_export);
+FILIGREE_API const char* filigree_history_export_last_error(const filigree_history_export* history_export);
+/* Closes if needed and releases the handle. NULL: FILIGREE_OK. */
+FILIGREE_API int filigree_history_export_free(filigree_history_export* history_export);
 
 #ifdef __cplusplus
 }
