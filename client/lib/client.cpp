@@ -237,12 +237,25 @@ v1::SessionLocation Client::locate(const std::string& session_id, const std::str
 
 std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,
                                       const std::string& client_name, Reconnect reconnect) {
-  return std::unique_ptr<Driver>(new Driver(*stub_, session_id, token, client_name, routing_, std::move(reconnect)));
+  return drive(session_id, token, client_name, DriveOptions{}, std::move(reconnect));
+}
+
+std::unique_ptr<Driver> Client::drive(const std::string& session_id, const std::string& token,
+                                      const std::string& client_name, const DriveOptions& options,
+                                      Reconnect reconnect) {
+  return std::unique_ptr<Driver>(
+      new Driver(*stub_, session_id, token, client_name, options, routing_, std::move(reconnect), call_timeout_));
 }
 
 std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
                                        std::uint64_t after_version, Reconnect reconnect) {
-  return std::unique_ptr<Watcher>(new Watcher(*stub_, session_id, token, after_version, routing_, std::move(reconnect)));
+  return watch(session_id, token, WatchOptions{.after_version = after_version}, std::move(reconnect));
+}
+
+std::unique_ptr<Watcher> Client::watch(const std::string& session_id, const std::string& token,
+                                       const WatchOptions& options, Reconnect reconnect) {
+  return std::unique_ptr<Watcher>(
+      new Watcher(*stub_, session_id, token, options, routing_, std::move(reconnect), call_timeout_));
 }
 
 std::unique_ptr<Watcher> Client::play_clip(const std::string& session_id, const std::string& token,
@@ -257,7 +270,7 @@ std::unique_ptr<Watcher> Client::play_clip(const std::string& session_id, const 
   request.set_max_rate(playback.max_rate);
   request.set_client_name(client_name);
   request.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
-  return std::unique_ptr<Watcher>(new Watcher(*stub_, request, token, routing_));
+  return std::unique_ptr<Watcher>(new Watcher(*stub_, request, token, routing_, call_timeout_));
 }
 
 }  // namespace filigree

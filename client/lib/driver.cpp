@@ -2,6 +2,7 @@
 
 #include <stdexcept>
 
+#include "detail_switch.h"
 #include "filigree/call_metadata.h"
 #include "pose_check.h"
 
@@ -14,9 +15,11 @@ constexpr std::size_t kSpareRequests = 2;
 }  // namespace
 
 Driver::Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-               std::string client_name, Routing routing, Reconnect reconnect)
+               std::string client_name, const DriveOptions& options, Routing routing, Reconnect reconnect,
+               std::chrono::milliseconds call_timeout)
     : stub_(stub), session_id_(session_id), token_(token), client_name_(std::move(client_name)), routing_(routing),
-      reconnect_(std::move(reconnect)) {
+      call_timeout_(call_timeout), reconnect_(std::move(reconnect)),
+      detail_(std::make_unique<DetailSwitch>(options.max_vertices)) {
   std::unique_lock lock(mutex_);
   open(lock);
 }
@@ -49,8 +52,12 @@ void Driver::open(std::unique_lock<std::mutex>&) {
   }
   stream_ = stub_.Drive(raw);
   broken_ = false;
-  // In order: the server merges them as they would have been.
-  for (const v1::DriveRequest& pose : unacknowledged_) {
+  detail_->opened();
+  // In order: the server merges them as they would have been. The first
+  // opens the stream at the latest budget (set_detail's, if it changed).
+  const std::uint32_t max_vertices = detail_->max_vertices();
+  for (v1::DriveRequest& pose : unacknowledged_) {
+    pose.set_max_vertices(max_vertices);
     if (!stream_->Write(pose)) {
       broken_ = true;
       return;
@@ -66,6 +73,9 @@ bool Driver::write() {
   request_.set_client_name(client_name_);
   request_.set_gesture_id(gesture_.load());
   request_.set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+  // Read from a stream's first request only; on every one, so that the
+  // first of a reopened stream carries it too.
+  request_.set_max_vertices(detail_->max_vertices());
   std::lock_guard lock(mutex_);
   if (status_ || writes_done_) return false;
   if (!broken_ && !stream_->Write(request_)) broken_ = true;
@@ -151,6 +161,7 @@ std::optional<v1::Frame> Driver::read() {
       // Only a frame that answers a pose shows the link works: a server that
       // sends its current frame and fails again must not reset the backoff.
       if (frame.pose_id() != 0) reconnect_.reset();
+      detail_->observe(frame);
       std::lock_guard lock(mutex_);
       while (!unacknowledged_.empty() && unacknowledged_.front().pose_id() <= frame.pose_id()) {
         if (spare_.size() < kSpareRequests) spare_.push_back(std::move(unacknowledged_.front()));
@@ -183,6 +194,10 @@ bool Driver::writes_done() {
   // A broken stream's successor sends it (open()).
   if (!broken_ && !stream_->WritesDone()) broken_ = true;
   return !broken_ || reconnect_.enabled();
+}
+
+std::uint32_t Driver::set_detail(std::uint32_t max_vertices) {
+  return detail_->set(stub_, session_id_, token_, routing_, call_timeout_, max_vertices);
 }
 
 void Driver::cancel() {

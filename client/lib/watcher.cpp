@@ -2,20 +2,24 @@
 
 #include <algorithm>
 
+#include "detail_switch.h"
 #include "filigree/call_metadata.h"
 
 namespace filigree {
 
 Watcher::Watcher(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token,
-                 std::uint64_t after_version, Routing routing, Reconnect reconnect)
-    : stub_(stub), token_(token), routing_(routing), session_id_(session_id), last_version_(after_version),
-      reconnect_(std::move(reconnect)) {
+                 const WatchOptions& options, Routing routing, Reconnect reconnect,
+                 std::chrono::milliseconds call_timeout)
+    : stub_(stub), token_(token), routing_(routing), call_timeout_(call_timeout), session_id_(session_id),
+      last_version_(options.after_version), reconnect_(std::move(reconnect)),
+      detail_(std::make_unique<DetailSwitch>(options.max_vertices)) {
   open();
 }
 
 Watcher::Watcher(v1::Filigree::Stub& stub, const v1::PlayClipRequest& request, const std::string& token,
-                 Routing routing)
-    : stub_(stub), token_(token), routing_(routing), clip_(request), session_id_(request.session_id()) {
+                 Routing routing, std::chrono::milliseconds call_timeout)
+    : stub_(stub), token_(token), routing_(routing), call_timeout_(call_timeout), clip_(request),
+      session_id_(request.session_id()), detail_(std::make_unique<DetailSwitch>(0)) {
   reconnect_.disable();  // a clip that started over would play twice
   open();
 }
@@ -35,9 +39,11 @@ void Watcher::open() {
     first.mutable_watch()->set_session_id(session_id_);
     first.mutable_watch()->set_after_version(last_version_);
     first.mutable_watch()->set_frame_format(v1::FRAME_FORMAT_CHUNKED);
+    first.mutable_watch()->set_max_vertices(detail_->max_vertices());
     first.set_max_in_flight(kFramesInFlight);
     follow->Write(first);  // a failed write shows as the stream's end in read()
   }
+  detail_->opened();
   std::lock_guard lock(mutex_);
   clip_stream_.reset(), follow_.reset();  // the old stream goes before its context
   context_ = std::move(context);
@@ -57,6 +63,7 @@ std::optional<v1::Frame> Watcher::read() {
     v1::Frame frame;
     if (follow_ ? follow_->Read(&frame) : clip_stream_->Read(&frame)) {
       last_version_ = std::max(last_version_, frame.version());
+      detail_->observe(frame);
       if (follow_) {
         v1::FollowRequest read;
         read.set_read_version(frame.version());
@@ -74,6 +81,10 @@ std::optional<v1::Frame> Watcher::read() {
     }
   }
   return std::nullopt;
+}
+
+std::uint32_t Watcher::set_detail(std::uint32_t max_vertices) {
+  return detail_->set(stub_, session_id_, token_, routing_, call_timeout_, max_vertices);
 }
 
 void Watcher::cancel() {

@@ -125,11 +125,20 @@ class Client {
   // acknowledged, as `reconnect` says (Driver).
   std::unique_ptr<Driver> drive(const std::string& session_id, const std::string& token,
                                 const std::string& client_name, Reconnect reconnect = {});
+  // The same with options: a level of detail for the frames that answer
+  // (DriveOptions::max_vertices; Driver::set_detail changes it).
+  std::unique_ptr<Driver> drive(const std::string& session_id, const std::string& token,
+                                const std::string& client_name, const DriveOptions& options, Reconnect reconnect = {});
   // Opens a Watch stream (either token): frames newer than after_version.
   // It reconnects by itself after UNAVAILABLE (a restart, a failover) as
   // `reconnect` says; with reconnect.enabled false it ends there instead.
   std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token,
                                  std::uint64_t after_version = 0, Reconnect reconnect = {});
+  // The same with options: after_version, and a level of detail
+  // (WatchOptions::max_vertices; Watcher::set_detail changes it):
+  //   auto watcher = client.watch(id, token, filigree::WatchOptions{.max_vertices = 4096});
+  std::unique_ptr<Watcher> watch(const std::string& session_id, const std::string& token, const WatchOptions& options,
+                                 Reconnect reconnect = {});
 
   // Plays the session's clip `clip` (SessionMesh::skeleton.clips) on the
   // server (editor token): the returned stream carries the frames, as a
@@ -189,7 +198,7 @@ class Client {
   // to a server started with --api-keys; empty (the default): none.
   void set_api_key(std::string key) { api_key_ = std::move(key); }
   // How long a unary call (join, state, options, handles, close, list,
-  // locate) may take before it fails with DEADLINE_EXCEEDED, so a server
+  // locate, a stream's set_detail) may take before it fails with DEADLINE_EXCEEDED, so a server
   // that hangs (frozen, partitioned) cannot block the caller forever.
   // Uploads and streams are not bounded by it. Default 60 s.
   void set_call_timeout(std::chrono::milliseconds timeout) { call_timeout_ = timeout; }

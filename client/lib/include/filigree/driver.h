@@ -2,6 +2,7 @@
 // One Drive stream: numbered poses out, frames in.
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -19,6 +20,17 @@
 #include "filigree/v1/filigree.grpc.pb.h"
 
 namespace filigree {
+
+class DetailSwitch;
+
+// What Client::drive() asks of the stream.
+struct DriveOptions {
+  // A level of detail for the frames that answer the poses, as
+  // WatchOptions::max_vertices (0: full detail): the stream's first message
+  // after the first pose is the level (v1::Frame::has_level():
+  // FrameDecoder::set_level). Driver::set_detail changes it.
+  std::uint32_t max_vertices = 0;
+};
 
 // Made by Client::drive(). Threading: one thread may send() while another
 // read()s (the usual engine split); cancel() may be called from any thread;
@@ -91,6 +103,12 @@ class Driver {
   // Tells the server no more poses come (it then ends the stream). Idempotent.
   bool writes_done();
 
+  // Moves a stream opened with a vertex budget (DriveOptions::max_vertices)
+  // to the level of `max_vertices`, as Watcher::set_detail: returns the
+  // level's vertex count; the stream then sends the level and frames of it.
+  // Needs the stream's level read (it follows the first pose). Thread-safe.
+  std::uint32_t set_detail(std::uint32_t max_vertices);
+
   // Ends the stream at once, a reconnection wait too (thread-safe, any
   // time); reads then return nullopt.
   void cancel();
@@ -110,7 +128,7 @@ class Driver {
  private:
   friend class Client;
   Driver(v1::Filigree::Stub& stub, const std::string& session_id, const std::string& token, std::string client_name,
-         Routing routing, Reconnect reconnect);
+         const DriveOptions& options, Routing routing, Reconnect reconnect, std::chrono::milliseconds call_timeout);
   // Opens a stream (again) and re-sends the unacknowledged poses; mutex_ held.
   void open(std::unique_lock<std::mutex>& lock);
   // Remembers request_ as unacknowledged and writes it.
@@ -119,7 +137,9 @@ class Driver {
   v1::Filigree::Stub& stub_;
   const std::string session_id_, token_, client_name_;
   const Routing routing_;
+  const std::chrono::milliseconds call_timeout_;  // of set_detail's SetDetail
   ReconnectSchedule reconnect_;  // the reading thread's
+  std::unique_ptr<DetailSwitch> detail_;  // the budget, and the stream id the level names
   std::atomic<std::uint64_t> gesture_{0};  // set_gesture's, for the poses sent from then on
   v1::DriveRequest request_;  // filled by send(); recycled (spare_), so no allocation per pose once warm
 
