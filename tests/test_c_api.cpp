@@ -23,6 +23,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <filesystem>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <numbers>
@@ -61,7 +62,9 @@ const std::set<std::string> kApi = {
     "filigree_session_free", "filigree_driver_open", "filigree_driver_send_positions",
     "filigree_driver_send_partial", "filigree_driver_send_joints", "filigree_driver_poll",
     "filigree_driver_frame_info", "filigree_driver_wait_frame", "filigree_driver_wait_for_pose", "filigree_driver_reconnects", "filigree_driver_changes", "filigree_driver_close", "filigree_driver_last_error", "filigree_driver_free",
-    "filigree_watcher_open", "filigree_play_clip", "filigree_play_clip_with", "filigree_watcher_poll",
+    "filigree_watcher_open", "filigree_watcher_open_with", "filigree_play_clip", "filigree_play_clip_with", "filigree_watcher_poll",
+    "filigree_watcher_level_vertex_count", "filigree_watcher_level_original_ids", "filigree_watcher_level_faces",
+    "filigree_watcher_set_detail",
     "filigree_watcher_frame_info", "filigree_watcher_clip_seconds", "filigree_watcher_wait_frame", "filigree_watcher_reconnects", "filigree_watcher_changes", "filigree_watcher_wait", "filigree_watcher_close", "filigree_watcher_last_error", "filigree_watcher_free",
     "filigree_set_handles_in_gesture", "filigree_driver_set_gesture", "filigree_undo", "filigree_redo",
     "filigree_session_edit_message", "filigree_session_edit_conflicts", "filigree_create_checkpoint",
@@ -981,6 +984,237 @@ TEST_F(CApiServer, HandlesThresholdAndChangesOfParticipants) {
   EXPECT_EQ(filigree_driver_close(driver), FILIGREE_OK) << filigree_driver_last_error(driver);
   EXPECT_EQ(filigree_driver_free(driver), FILIGREE_OK);
   EXPECT_EQ(filigree_watcher_free(watcher), FILIGREE_OK);
+}
+
+// ---------------------------------------------------------------- levels of detail
+
+// A watcher (at a level or at full detail) and its latest polled frame, with
+// the level that frame is at.
+struct LevelWatch {
+  explicit LevelWatch(std::size_t session_vertices) : n(session_vertices) {}
+  filigree_watcher* watcher = nullptr;
+  std::size_t n = 0;             // the session's vertex count
+  std::vector<float> positions;  // 3 per vertex of the level, as polled
+  std::size_t vertex_count = 0;  // filigree_watcher_level_vertex_count after the poll
+  std::vector<uint32_t> ids, faces;
+  filigree_frame_info info{};
+  bool polled = false;
+
+  // Polls until its frame's version is at least `version` and (unless 0)
+  // its level has `vertices` vertices.
+  void poll_until(uint64_t version, std::size_t vertices = 0) {
+    std::vector<float> buffer(3 * n);  // 3·n always fits
+    uint64_t at = 0;
+    int updated = 0;
+    while (!polled || info.version < version || (vertices != 0 && vertex_count != vertices)) {
+      ASSERT_EQ(filigree_watcher_wait_frame(watcher, 30000), FILIGREE_OK)
+          << filigree_watcher_last_error(watcher) << " (waiting for version " << version << " at " << vertices << ")";
+      ASSERT_EQ(filigree_watcher_poll(watcher, buffer.data(), buffer.size(), &at, nullptr, &updated), FILIGREE_OK)
+          << filigree_watcher_last_error(watcher);
+      ASSERT_EQ(updated, 1);
+      ASSERT_EQ(filigree_watcher_level_vertex_count(watcher, &vertex_count), FILIGREE_OK);
+      ASSERT_EQ(filigree_watcher_frame_info(watcher, &info), FILIGREE_OK);
+      ASSERT_EQ(info.version, at);
+      positions.assign(buffer.begin(), buffer.begin() + 3 * vertex_count);
+      ids = array(filigree_watcher_level_original_ids);
+      faces = array(filigree_watcher_level_faces);
+      polled = true;
+    }
+  }
+  std::vector<uint32_t> array(int (*get)(const filigree_watcher*, uint32_t*, size_t, size_t*)) const {
+    size_t required = 0;
+    const int rc = get(watcher, nullptr, 0, &required);  // the size query
+    EXPECT_EQ(rc, required == 0 ? FILIGREE_OK : FILIGREE_ERROR_BUFFER_TOO_SMALL);
+    std::vector<uint32_t> out(required);
+    EXPECT_EQ(get(watcher, out.data(), out.size(), &required), FILIGREE_OK);
+    EXPECT_EQ(required, out.size());
+    return out;
+  }
+};
+
+// Polls `level` (at `vertices`, unless 0) and `full` until both show one
+// version, at least `version`: a new level makes the session compute a
+// frame for it, so a later frame may follow the one a pose asked for.
+void poll_to_one_version(LevelWatch& level, LevelWatch& full, uint64_t version, std::size_t vertices = 0) {
+  level.poll_until(version, vertices);
+  if (::testing::Test::HasFatalFailure()) return;
+  full.poll_until(level.info.version);
+  while (!::testing::Test::HasFatalFailure() && level.info.version != full.info.version) {
+    if (level.info.version < full.info.version) level.poll_until(full.info.version, vertices);
+    else full.poll_until(level.info.version);
+  }
+}
+
+// Every level vertex where the full frame of the same version has its
+// session vertex, within both frames' errors; and the pose moved them.
+void expect_at_full_positions(const LevelWatch& level, const LevelWatch& full, const std::vector<float>& rest) {
+  ASSERT_EQ(level.info.version, full.info.version);
+  ASSERT_EQ(full.vertex_count, full.n);
+  const bool full_detail = level.vertex_count == level.n;
+  ASSERT_EQ(level.ids.size(), full_detail ? 0u : level.vertex_count);
+  ASSERT_EQ(level.positions.size(), 3 * level.vertex_count);
+  double worst = 0.0, moved = 0.0;
+  for (std::size_t i = 0; i < level.vertex_count; ++i) {
+    const std::size_t id = full_detail ? i : level.ids[i];
+    for (int c = 0; c < 3; ++c) {
+      worst = std::max(worst, double(std::fabs(level.positions[3 * i + c] - full.positions[3 * id + c])));
+      moved = std::max(moved, double(std::fabs(full.positions[3 * id + c] - rest[3 * id + c])));
+    }
+  }
+  const double tolerance = double(level.info.max_error) + double(full.info.max_error) + 1e-6;
+  EXPECT_LE(worst, tolerance) << "level vertices away from their place in the full frame";
+  EXPECT_GT(moved, 100 * tolerance) << "the pose moved nothing: the comparison proves nothing";
+}
+
+struct LevelCallbackState {
+  std::mutex mutex;
+  std::condition_variable changed;
+  std::atomic<filigree_watcher*> watcher{nullptr};
+  uint64_t version = 0;
+  std::size_t float_count = 0, level_vertex_count = 0;  // of the latest frame handed over
+};
+
+void on_level_frame(const float*, size_t float_count, uint64_t version, void* user) {
+  auto* state = static_cast<LevelCallbackState*>(user);
+  size_t k = 0;
+  if (filigree_watcher* w = state->watcher.load()) filigree_watcher_level_vertex_count(w, &k);
+  std::lock_guard lock(state->mutex);
+  state->version = version;
+  state->float_count = float_count;
+  state->level_vertex_count = k;
+  state->changed.notify_all();
+}
+
+TEST_F(CApiServer, WatchersAtABudgetGetTheirLevelsFramesOfTheFullFramesPositions) {
+  upload();
+  ASSERT_EQ(n_, 1839u);
+  ASSERT_EQ(m_, 150u);
+  // Budgets round down to a power of two; the base below its size, the full
+  // mesh at or above it.
+  const std::vector<std::pair<uint32_t, std::size_t>> cases = {
+      {1, 150}, {200, 150}, {300, 256}, {1000, 512}, {1838, 1024}, {1839, 1839}, {100000, 1839}};
+  std::vector<LevelWatch> watches(cases.size(), LevelWatch(n_));
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const filigree_watch_options options{0, cases[i].first};
+    ASSERT_EQ(filigree_watcher_open_with(session_, nullptr, &options, nullptr, nullptr, &watches[i].watcher), FILIGREE_OK)
+        << last_error();
+  }
+  LevelWatch full(n_);
+  ASSERT_EQ(filigree_watcher_open_with(session_, nullptr, nullptr, nullptr, nullptr, &full.watcher), FILIGREE_OK);
+  LevelCallbackState state;
+  filigree_watcher* called = nullptr;
+  const filigree_watch_options at_300{0, 300};
+  ASSERT_EQ(filigree_watcher_open_with(session_, nullptr, &at_300, on_level_frame, &state, &called), FILIGREE_OK);
+  state.watcher = called;
+
+  filigree_driver* driver = nullptr;
+  ASSERT_EQ(filigree_driver_open(session_, nullptr, "full", &driver), FILIGREE_OK) << last_error();
+  const std::vector<float> bent = bend(45.0);
+  ASSERT_EQ(filigree_driver_send_positions(driver, 1, bent.data(), bent.size()), FILIGREE_OK);
+  std::vector<float> frame(3 * n_);
+  const uint64_t posed = poll_until(driver, 1, frame).version;
+
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    SCOPED_TRACE("budget " + std::to_string(cases[i].first));
+    LevelWatch& w = watches[i];
+    poll_to_one_version(w, full, posed);
+    if (::testing::Test::HasFatalFailure()) return;
+    EXPECT_EQ(w.vertex_count, cases[i].second);
+    if (cases[i].second == n_) {
+      EXPECT_TRUE(w.ids.empty() && w.faces.empty()) << "full detail is the rest mesh itself";
+    } else {
+      ASSERT_EQ(w.ids.size(), cases[i].second);
+      EXPECT_TRUE(std::adjacent_find(w.ids.begin(), w.ids.end(), std::greater_equal<>()) == w.ids.end())
+          << "ids must ascend";
+      EXPECT_LT(w.ids.back(), n_);
+      ASSERT_FALSE(w.faces.empty());
+      EXPECT_EQ(w.faces.size() % 3, 0u);
+      EXPECT_LT(*std::max_element(w.faces.begin(), w.faces.end()), cases[i].second);
+    }
+    expect_at_full_positions(w, full, rest_);
+  }
+
+  // At a level a poll needs 3·k floats, not 3·n.
+  LevelWatch& at_256 = watches[2];
+  ASSERT_EQ(at_256.vertex_count, 256u);
+  ASSERT_EQ(filigree_driver_send_positions(driver, 2, base_.data(), base_.size()), FILIGREE_OK);
+  const uint64_t second = poll_until(driver, 2, frame).version;
+  ASSERT_EQ(filigree_watcher_wait_frame(at_256.watcher, 30000), FILIGREE_OK);
+  std::vector<float> small(3 * 256);
+  EXPECT_EQ(filigree_watcher_poll(at_256.watcher, small.data(), small.size() - 1, nullptr, nullptr, nullptr),
+            FILIGREE_ERROR_BUFFER_TOO_SMALL);
+  EXPECT_NE(std::string(filigree_watcher_last_error(at_256.watcher)).find("768"), std::string::npos)
+      << filigree_watcher_last_error(at_256.watcher);
+  int updated = 0;
+  EXPECT_EQ(filigree_watcher_poll(at_256.watcher, small.data(), small.size(), nullptr, nullptr, &updated), FILIGREE_OK)
+      << filigree_watcher_last_error(at_256.watcher);
+  EXPECT_EQ(updated, 1);
+
+  // The callback gets 3·k floats, and the level it asks for is theirs (of
+  // a frame handed over once it knew its watcher).
+  {
+    std::unique_lock lock(state.mutex);
+    ASSERT_TRUE(state.changed.wait_for(lock, std::chrono::seconds(30), [&] { return state.version >= second; }));
+    EXPECT_EQ(state.float_count, 3u * 256);
+    EXPECT_EQ(state.level_vertex_count, 256u);
+  }
+  EXPECT_EQ(filigree_watcher_free(called), FILIGREE_OK);
+  EXPECT_EQ(filigree_driver_close(driver), FILIGREE_OK);
+  EXPECT_EQ(filigree_driver_free(driver), FILIGREE_OK);
+  EXPECT_EQ(filigree_watcher_free(full.watcher), FILIGREE_OK);
+  for (LevelWatch& w : watches) EXPECT_EQ(filigree_watcher_free(w.watcher), FILIGREE_OK);
+}
+
+TEST_F(CApiServer, SetDetailMovesAWatcherToAnotherLevelMidStream) {
+  upload();
+  LevelWatch w(n_), full(n_);
+  const filigree_watch_options options{0, 300};
+  ASSERT_EQ(filigree_watcher_open_with(session_, nullptr, &options, nullptr, nullptr, &w.watcher), FILIGREE_OK)
+      << last_error();
+  ASSERT_EQ(filigree_watcher_open(session_, nullptr, 0, nullptr, nullptr, &full.watcher), FILIGREE_OK);
+  // At once after the open: it waits for the stream's level, then switches.
+  uint32_t k = 0;
+  ASSERT_EQ(filigree_watcher_set_detail(w.watcher, 1000, &k), FILIGREE_OK) << filigree_watcher_last_error(w.watcher);
+  EXPECT_EQ(k, 512u);
+  w.poll_until(0, 512);  // with no pose sent
+  if (::testing::Test::HasFatalFailure()) return;
+  EXPECT_EQ(w.ids.size(), 512u);
+
+  filigree_driver* driver = nullptr;
+  ASSERT_EQ(filigree_driver_open(session_, nullptr, "full", &driver), FILIGREE_OK) << last_error();
+  std::vector<float> frame(3 * n_);
+  std::vector<float> pose = bend(35.0);
+  ASSERT_EQ(filigree_driver_send_positions(driver, 1, pose.data(), pose.size()), FILIGREE_OK);
+  poll_to_one_version(w, full, poll_until(driver, 1, frame).version, 512);
+  expect_at_full_positions(w, full, rest_);
+
+  // Down to the base, and a pose at it.
+  ASSERT_EQ(filigree_watcher_set_detail(w.watcher, 1, &k), FILIGREE_OK) << filigree_watcher_last_error(w.watcher);
+  EXPECT_EQ(k, m_);
+  pose = bend(-30.0);
+  ASSERT_EQ(filigree_driver_send_positions(driver, 2, pose.data(), pose.size()), FILIGREE_OK);
+  poll_to_one_version(w, full, poll_until(driver, 2, frame).version, m_);
+  EXPECT_EQ(w.ids.size(), m_);
+  expect_at_full_positions(w, full, rest_);
+
+  // Up to full detail: the rest mesh's frames, no ids or faces.
+  ASSERT_EQ(filigree_watcher_set_detail(w.watcher, 100000, nullptr), FILIGREE_OK);
+  poll_to_one_version(w, full, full.info.version, n_);
+  EXPECT_TRUE(w.ids.empty() && w.faces.empty());
+  expect_at_full_positions(w, full, rest_);
+
+  // Refusals: a budget of 0, a watcher opened at full detail.
+  EXPECT_EQ(filigree_watcher_set_detail(w.watcher, 0, &k), FILIGREE_INVALID_ARGUMENT);
+  EXPECT_EQ(filigree_watcher_set_detail(full.watcher, 512, &k), FILIGREE_FAILED_PRECONDITION);
+  EXPECT_NE(std::string(filigree_watcher_last_error(full.watcher)).find("full detail"), std::string::npos)
+      << filigree_watcher_last_error(full.watcher);
+  EXPECT_EQ(filigree_watcher_set_detail(nullptr, 512, &k), FILIGREE_ERROR_INVALID_HANDLE);
+  EXPECT_EQ(filigree_watcher_level_vertex_count(w.watcher, nullptr), FILIGREE_ERROR_NULL_ARGUMENT);
+  EXPECT_EQ(filigree_driver_close(driver), FILIGREE_OK);
+  EXPECT_EQ(filigree_driver_free(driver), FILIGREE_OK);
+  EXPECT_EQ(filigree_watcher_close(w.watcher), FILIGREE_OK) << filigree_watcher_last_error(w.watcher);
+  EXPECT_EQ(filigree_watcher_free(w.watcher), FILIGREE_OK);
+  EXPECT_EQ(filigree_watcher_free(full.watcher), FILIGREE_OK);
 }
 
 }  // namespace

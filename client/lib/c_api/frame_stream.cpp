@@ -24,12 +24,13 @@ void merge_changes(const std::vector<v1::Change>& changes, std::map<std::string,
 }  // namespace
 
 FrameStream::FrameStream(Hooks hooks, std::vector<float> rest_positions, unsigned decode_threads,
-                         filigree_frame_callback callback, void* user)
+                         filigree_frame_callback callback, void* user, bool at_level)
     : hooks_(std::move(hooks)),
       decoder_(std::move(rest_positions), decode_threads),
       float_count_(decoder_.rest_positions().size()),
       callback_(callback),
-      user_(user) {
+      user_(user),
+      frame_floats_(at_level ? 0 : float_count_) {
   // Poll mode keeps a buffer of the frame size: the decoded frames are
   // swapped into it, so the steady state allocates only inside decode().
   if (!callback_) latest_.resize(float_count_);
@@ -48,6 +49,15 @@ void FrameStream::run() noexcept {
     while (auto frame = hooks_.read()) {
       if (failure) continue;  // draining the cancelled call (gRPC wants reads until the end)
       try {
+        if (frame->has_level()) {
+          // A level starts (the stream's first message, and after each
+          // set_detail): the frames after it are its.
+          decoder_.set_level(frame->level());
+          std::lock_guard lock(mutex_);
+          ++levels_received_;
+          changed_cv_.notify_all();
+          continue;
+        }
         DecodedFrame decoded = decoder_.decode(*frame);
         deliver(decoded);
       } catch (const ClientError& e) {
@@ -99,6 +109,8 @@ void FrameStream::deliver(DecodedFrame& frame) {
       info.frames_received = ++frames_received_;
       polled_info_ = info;  // set first, so that the callback may ask for it
       polled_clip_seconds_ = frame.clip_seconds;
+      polled_level_ = frame.level;
+      polled_vertex_count_ = frame.vertex_count();
       polled_changes_.clear();
       merge_changes(frame.changes, polled_changes_);
     }
@@ -107,9 +119,11 @@ void FrameStream::deliver(DecodedFrame& frame) {
   }
   std::lock_guard lock(mutex_);
   latest_.swap(frame.positions);
+  frame_floats_ = latest_.size();
   info.frames_received = ++frames_received_;
   latest_info_ = info;
   latest_clip_seconds_ = frame.clip_seconds;
+  latest_level_ = std::move(frame.level);
   merge_changes(frame.changes, pending_changes_);
   fresh_ = true;
   changed_cv_.notify_all();
@@ -134,11 +148,15 @@ int FrameStream::poll(ErrorSlot& slot, const char* function, float* positions, s
     return fail(&slot, FILIGREE_FAILED_PRECONDITION,
                 std::string(function) + ": this watcher hands its frames to its callback; there is nothing to poll");
   if (!positions) return null_argument(&slot, function, "positions");
-  if (capacity < float_count_)
+  std::unique_lock lock(mutex_);
+  // At full detail always 3·n; at a level, the newest frame's (its level's).
+  if (capacity < frame_floats_) {
+    const std::size_t needed = frame_floats_;
+    lock.unlock();
     return fail(&slot, FILIGREE_ERROR_BUFFER_TOO_SMALL,
                 std::string(function) + ": the buffer holds " + std::to_string(capacity) + " floats, a frame needs " +
-                    std::to_string(float_count_) + " (3 per vertex)");
-  std::unique_lock lock(mutex_);
+                    std::to_string(needed) + " (3 per vertex" + (needed < float_count_ ? " of its level" : "") + ")");
+  }
   const bool fresh = fresh_;
   if (fresh) {
     // The one copy of a frame: into the caller's buffer (a mapped or staging
@@ -147,6 +165,8 @@ int FrameStream::poll(ErrorSlot& slot, const char* function, float* positions, s
     fresh_ = false;
     polled_info_ = latest_info_;
     polled_clip_seconds_ = latest_clip_seconds_;
+    polled_level_ = latest_level_;
+    polled_vertex_count_ = latest_.size() / 3;
     polled_changes_.swap(pending_changes_);
     pending_changes_.clear();
   }
@@ -169,6 +189,26 @@ filigree_frame_info FrameStream::info() const {
 double FrameStream::clip_seconds() const {
   std::lock_guard lock(mutex_);
   return polled_clip_seconds_;
+}
+
+std::size_t FrameStream::level_vertex_count() const {
+  std::lock_guard lock(mutex_);
+  return polled_vertex_count_;
+}
+
+std::shared_ptr<const DecodedLevel> FrameStream::level() const {
+  std::lock_guard lock(mutex_);
+  return polled_level_;
+}
+
+int FrameStream::wait_level(ErrorSlot& slot, const char* function, std::chrono::milliseconds timeout) const {
+  std::unique_lock lock(mutex_);
+  if (!changed_cv_.wait_for(lock, timeout, [this] { return levels_received_ > 0 || ended_; }))
+    return fail(&slot, FILIGREE_DEADLINE_EXCEEDED, std::string(function) + ": the stream's level has not arrived");
+  if (levels_received_ > 0) return FILIGREE_OK;
+  const End end = end_;
+  lock.unlock();
+  return report_end(slot, function, end);
 }
 
 int FrameStream::wait_frame(ErrorSlot& slot, const char* function,

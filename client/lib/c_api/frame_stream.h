@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -43,8 +44,10 @@ class FrameStream {
   };
 
   // Starts the thread. `callback` may be null (then frames wait for poll()).
+  // `at_level`: the stream was opened with a vertex budget, so its frames'
+  // size is known only once they come.
   FrameStream(Hooks hooks, std::vector<float> rest_positions, unsigned decode_threads,
-              filigree_frame_callback callback, void* user);
+              filigree_frame_callback callback, void* user, bool at_level = false);
   // stop() and join() unless done.
   ~FrameStream();
   FrameStream(const FrameStream&) = delete;
@@ -58,6 +61,13 @@ class FrameStream {
   // That frame's DecodedFrame::clip_seconds (not in filigree_frame_info,
   // whose size existing binaries rely on).
   double clip_seconds() const;
+  // That frame's vertex count (the level's; 0 before the first frame) and
+  // level (null at full detail).
+  std::size_t level_vertex_count() const;
+  std::shared_ptr<const DecodedLevel> level() const;
+  // filigree_*_set_detail's wait: until the stream has received a level
+  // (FILIGREE_OK), ended (why), or `timeout` passed (FILIGREE_DEADLINE_EXCEEDED).
+  int wait_level(ErrorSlot& slot, const char* function, std::chrono::milliseconds timeout) const;
   // filigree_*_wait_frame: waits until poll() has a frame newer than the last
   // polled one (FILIGREE_OK), the stream ended without one (why it ended) or
   // `timeout` passed (FILIGREE_DEADLINE_EXCEEDED; nullopt: no limit).
@@ -93,7 +103,7 @@ class FrameStream {
 
   Hooks hooks_;
   FrameDecoder decoder_;  // used by the thread only
-  const std::size_t float_count_;
+  const std::size_t float_count_;  // of a frame at full detail
   const filigree_frame_callback callback_;
   void* const user_;
 
@@ -102,6 +112,10 @@ class FrameStream {
   std::vector<float> latest_;  // the newest frame not polled yet, when fresh_
   filigree_frame_info latest_info_{}, polled_info_{};
   double latest_clip_seconds_ = 0.0, polled_clip_seconds_ = 0.0;  // as the infos
+  std::shared_ptr<const DecodedLevel> latest_level_, polled_level_;  // as the infos
+  std::size_t polled_vertex_count_ = 0;  // 3 floats each in the polled frame
+  std::size_t frame_floats_;  // poll()'s buffer needs: the newest frame's size
+  std::uint64_t levels_received_ = 0;
   // Frames' changes merged by client: since the last poll, and up to it.
   std::map<std::string, v1::Change> pending_changes_, polled_changes_;
   std::uint64_t frames_received_ = 0;

@@ -139,6 +139,7 @@ struct filigree_watcher {
   static constexpr const char* kName = "filigree_watcher";
   std::shared_ptr<filigree::c_api::Connection> connection;
   std::atomic<std::uint64_t> reconnects{0};  // attempts to reopen the stream (Reconnect)
+  bool at_level = false;  // opened with a vertex budget: its level can change
   std::unique_ptr<filigree::Watcher> watcher;
   std::unique_ptr<filigree::c_api::FrameStream> stream;  // declared after watcher: stopped first
   mutable filigree::c_api::ErrorSlot error;  // mutable: accessors on const handles record failures too

@@ -4,29 +4,50 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <memory>
 #include <optional>
+#include <vector>
 
 #include "c_api/internal.h"
 
 namespace filigree::c_api {
 namespace {
 
-// Wraps a Watcher made by `open` (Client::watch or Client::play_clip) in a handle.
+// How long filigree_watcher_set_detail waits for the stream's level (its
+// first message) when called right after the open.
+constexpr std::chrono::seconds kLevelWait{30};
+
+// Wraps a Watcher made by `open` (Client::watch or Client::play_clip) in a
+// handle; `at_level`: it was opened with a vertex budget.
 template <class Open>
 int open_watcher(filigree_session& s, const char* function, filigree_frame_callback callback, void* user,
-                 filigree_watcher** out, Open&& open) {
+                 filigree_watcher** out, bool at_level, Open&& open) {
   if (!out) return null_argument(&s.error, function, "out");
   *out = nullptr;
   auto handle = std::make_unique<filigree_watcher>();
   handle->connection = s.connection;
+  handle->at_level = at_level;
   filigree::Reconnect reconnect;
   reconnect.on_reconnect = [w = handle.get()](const grpc::Status&, int) { ++w->reconnects; };
   handle->watcher = open(std::move(reconnect));
   filigree::Watcher* w = handle->watcher.get();
   FrameStream::Hooks hooks{[w] { return w->read(); }, [w] { return w->finish(); }, [w] { w->cancel(); }};
   handle->stream = std::make_unique<FrameStream>(std::move(hooks), s.mesh.rest_positions,
-                                                 s.connection->decode_threads.load(), callback, user);
+                                                 s.connection->decode_threads.load(), callback, user, at_level);
   return hand_out(std::move(handle), out);
+}
+
+// A level's array (ids or faces) of the latest polled frame: empty at full detail.
+template <class Get>
+int copy_level_array(const filigree_watcher* watcher, const char* function, Get&& get, uint32_t* buffer,
+                     size_t capacity, size_t* required) {
+  return with_handle(watcher, function, [&](const filigree_watcher& w) -> int {
+    const std::shared_ptr<const filigree::DecodedLevel> level = w.stream->level();
+    static const std::vector<std::uint32_t> kNone;
+    const std::vector<std::uint32_t>& values = level ? get(*level) : kNone;
+    return copy_out(&w.error, function, values.data(), values.size(), sizeof(std::uint32_t), buffer, capacity,
+                    required);
+  });
 }
 
 // What is wrong with a playback's numbers (the server's rules for
@@ -55,7 +76,7 @@ int play_clip(filigree_session& s, const char* function, const char* token, cons
   *out = nullptr;
   if (const auto why = playback_error(playback))
     return fail(&s.error, FILIGREE_INVALID_ARGUMENT, std::string(function) + ": " + *why);
-  return open_watcher(s, function, callback, user, out, [&](filigree::Reconnect) {
+  return open_watcher(s, function, callback, user, out, false, [&](filigree::Reconnect) {
     return s.connection->client.play_clip(s.mesh.session_id, token ? token : s.token, clip, playback, "filigree-c");
   });
 }
@@ -82,9 +103,24 @@ int filigree_watcher_open(filigree_session* session, const char* token, uint64_t
                           filigree_frame_callback callback, void* user, filigree_watcher** out) {
   constexpr const char* kFunction = "filigree_watcher_open";
   return with_handle(session, kFunction, [&](filigree_session& s) -> int {
-    return open_watcher(s, kFunction, callback, user, out, [&](filigree::Reconnect reconnect) {
+    return open_watcher(s, kFunction, callback, user, out, false, [&](filigree::Reconnect reconnect) {
       return s.connection->client.watch(s.mesh.session_id, token ? token : s.token, after_version,
                                         std::move(reconnect));
+    });
+  });
+}
+
+int filigree_watcher_open_with(filigree_session* session, const char* token, const filigree_watch_options* options,
+                               filigree_frame_callback callback, void* user, filigree_watcher** out) {
+  constexpr const char* kFunction = "filigree_watcher_open_with";
+  return with_handle(session, kFunction, [&](filigree_session& s) -> int {
+    filigree::WatchOptions watch;  // NULL options: these defaults
+    if (options) {
+      watch.after_version = options->after_version;
+      watch.max_vertices = options->max_vertices;
+    }
+    return open_watcher(s, kFunction, callback, user, out, watch.max_vertices > 0, [&](filigree::Reconnect reconnect) {
+      return s.connection->client.watch(s.mesh.session_id, token ? token : s.token, watch, std::move(reconnect));
     });
   });
 }
@@ -156,6 +192,47 @@ int filigree_watcher_wait_frame(filigree_watcher* watcher, int64_t timeout_ms) {
   constexpr const char* kFunction = "filigree_watcher_wait_frame";
   return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
     return w.stream->wait_frame(w.error, kFunction, timeout_of(timeout_ms));
+  });
+}
+
+int filigree_watcher_level_vertex_count(const filigree_watcher* watcher, size_t* count) {
+  constexpr const char* kFunction = "filigree_watcher_level_vertex_count";
+  return with_handle(watcher, kFunction, [&](const filigree_watcher& w) -> int {
+    if (!count) return null_argument(&w.error, kFunction, "count");
+    *count = w.stream->level_vertex_count();
+    return FILIGREE_OK;
+  });
+}
+
+int filigree_watcher_level_original_ids(const filigree_watcher* watcher, uint32_t* buffer, size_t capacity,
+                                        size_t* required) {
+  return copy_level_array(
+      watcher, "filigree_watcher_level_original_ids",
+      [](const filigree::DecodedLevel& l) -> const std::vector<std::uint32_t>& { return l.original_ids; }, buffer,
+      capacity, required);
+}
+
+int filigree_watcher_level_faces(const filigree_watcher* watcher, uint32_t* buffer, size_t capacity,
+                                 size_t* required) {
+  return copy_level_array(
+      watcher, "filigree_watcher_level_faces",
+      [](const filigree::DecodedLevel& l) -> const std::vector<std::uint32_t>& { return l.faces; }, buffer, capacity,
+      required);
+}
+
+int filigree_watcher_set_detail(filigree_watcher* watcher, uint32_t max_vertices, uint32_t* vertex_count) {
+  constexpr const char* kFunction = "filigree_watcher_set_detail";
+  return with_handle(watcher, kFunction, [&](filigree_watcher& w) -> int {
+    if (max_vertices == 0)
+      return fail(&w.error, FILIGREE_INVALID_ARGUMENT, std::string(kFunction) + ": a budget is at least 1 vertex");
+    if (w.at_level) {
+      // Right after the open the level (the stream's first message, which
+      // names the stream) may not have come yet.
+      if (const int status = w.stream->wait_level(w.error, kFunction, kLevelWait); status != FILIGREE_OK) return status;
+    }
+    const std::uint32_t count = w.watcher->set_detail(max_vertices);
+    if (vertex_count) *vertex_count = count;
+    return FILIGREE_OK;
   });
 }
 

@@ -421,6 +421,24 @@ FILIGREE_API int filigree_driver_free(filigree_driver* driver);
 FILIGREE_API int filigree_watcher_open(filigree_session* session, const char* token, uint64_t after_version,
                                        filigree_frame_callback callback, void* user, filigree_watcher** out);
 
+/* How filigree_watcher_open_with watches (WatchRequest in the contract).
+ * Zero fields mean the defaults, so {0} is a valid value. */
+typedef struct filigree_watch_options {
+  uint64_t after_version; /* as filigree_watcher_open's */
+  /* A level of detail: frames of a coarser mesh of at most this many
+   * vertices (0: full detail). Budgets round down to a power of two; below
+   * the base's vertex count m they get the base, at or above n the full
+   * mesh. Frames then carry k ≤ n vertices, those of the level
+   * (filigree_watcher_level_*), and filigree_watcher_set_detail changes it. */
+  uint32_t max_vertices;
+} filigree_watch_options;
+
+/* As filigree_watcher_open, with every option of the contract; `options`
+ * may be NULL (the defaults: from the current frame, at full detail). */
+FILIGREE_API int filigree_watcher_open_with(filigree_session* session, const char* token,
+                                            const filigree_watch_options* options, filigree_frame_callback callback,
+                                            void* user, filigree_watcher** out);
+
 /* Plays the session's clip `clip` (its name, see filigree_session_clip_name)
  * on the server (editor token; NULL: the session's) at `speed` (0 means 1),
  * looping while `loop` is nonzero: a watcher over the frames of the clip,
@@ -463,6 +481,37 @@ FILIGREE_API int filigree_watcher_frame_info(const filigree_watcher* watcher, fi
  * which its last frame shows; a looping one wraps around to 0. 0 when that
  * frame includes no sample, before the first frame, and for Watch streams. */
 FILIGREE_API int filigree_watcher_clip_seconds(const filigree_watcher* watcher, double* seconds);
+
+/* Levels of detail (filigree_watch_options.max_vertices). Each frame is at
+ * a level: a mesh of k vertices of the detailed mesh, in ascending session
+ * order, and faces between them. A polled frame holds 3·k floats, x y z of
+ * the level's vertices in order (capacity 3·n always fits; at a level poll
+ * needs 3·k for the level of the frame waiting), and these functions
+ * describe the level of the latest frame polled (or handed to the
+ * callback), so that the positions and the level go together:
+ *   - level_vertex_count: k (n at full detail; 0 before the first frame);
+ *   - level_original_ids: k session vertex ids, level vertex i is session
+ *     vertex ids[i] (its rest position is that vertex's);
+ *   - level_faces: 3 indices into the level's vertices per triangle.
+ * At full detail (k = n) the level is the rest mesh itself and both arrays
+ * are empty: use the session's rest faces (filigree_session_rest_faces). A
+ * level's vertex count identifies it: when k changes from one poll to the
+ * next, read the ids and faces again. Arrays as filigree_session_rest_faces. */
+FILIGREE_API int filigree_watcher_level_vertex_count(const filigree_watcher* watcher, size_t* count);
+FILIGREE_API int filigree_watcher_level_original_ids(const filigree_watcher* watcher, uint32_t* buffer,
+                                                     size_t capacity, size_t* required);
+FILIGREE_API int filigree_watcher_level_faces(const filigree_watcher* watcher, uint32_t* buffer, size_t capacity,
+                                              size_t* required);
+
+/* Moves a watcher opened with a vertex budget to the level of `max_vertices`
+ * (>= 1; rounded as filigree_watch_options.max_vertices): the stream then
+ * sends that level and its frames. *vertex_count (may be NULL) gets the
+ * level's k; frames of it follow the ones in flight, so poll until
+ * level_vertex_count says k. Waits for the stream's first message if it has
+ * not come yet, then one round trip. FILIGREE_FAILED_PRECONDITION for a
+ * watcher opened at full detail or a clip's, and while it reconnects (try
+ * again); FILIGREE_NOT_FOUND once its stream has ended on the server. */
+FILIGREE_API int filigree_watcher_set_detail(filigree_watcher* watcher, uint32_t max_vertices, uint32_t* vertex_count);
 
 /* How many times the stream has begun to reconnect (as filigree_driver_reconnects). */
 FILIGREE_API int filigree_watcher_reconnects(const filigree_watcher* watcher, uint64_t* count);
