@@ -63,6 +63,7 @@ struct PlayArgs : SessionArgs {
 struct WatchArgs : SessionArgs {
   std::uint64_t after = 0;
   double fps = 30.0;
+  std::uint32_t max_vertices = 0;  // a level of detail; 0: full detail
 };
 
 std::string read_file(const std::string& path) {
@@ -110,11 +111,22 @@ TriMesh rest_mesh(const SessionMesh& m) {
   return mesh;
 }
 
-// .glb: every frame as a morph-target animation; any other format: the last frame.
-void write_frames(const SessionMesh& session, const std::vector<std::vector<Vec3>>& frames, double fps,
-                  const std::string& path) {
+// The rest mesh of the level frames are at: the level's vertices (in its
+// order) and faces; the session's rest mesh at full detail.
+TriMesh level_rest_mesh(const SessionMesh& session, const DecodedLevel* level) {
+  if (level == nullptr || level->full_detail) return rest_mesh(session);
+  TriMesh mesh;
+  mesh.positions = points_from_xyz(level->rest_positions);
+  mesh.faces.resize(level->faces.size() / 3);
+  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
+    mesh.faces[f] = {level->faces[3 * f], level->faces[3 * f + 1], level->faces[3 * f + 2]};
+  return mesh;
+}
+
+// .glb: every frame as a morph-target animation of `mesh` (their rest
+// mesh); any other format: the last frame.
+void write_frames(TriMesh mesh, const std::vector<std::vector<Vec3>>& frames, double fps, const std::string& path) {
   if (frames.empty()) throw std::runtime_error("no frames received: nothing to write to " + path);
-  TriMesh mesh = rest_mesh(session);
   if (format_of(path) == "glb") {
     write_glb_animation(mesh, frames, fps, path);
     std::fprintf(stderr, "wrote %s: %zu frames of %zu vertices\n", path.c_str(), frames.size(), mesh.vertex_count());
@@ -123,6 +135,11 @@ void write_frames(const SessionMesh& session, const std::vector<std::vector<Vec3
     write_mesh(mesh, path);
     std::fprintf(stderr, "wrote %s: the last of %zu frames\n", path.c_str(), frames.size());
   }
+}
+
+void write_frames(const SessionMesh& session, const std::vector<std::vector<Vec3>>& frames, double fps,
+                  const std::string& path) {
+  write_frames(rest_mesh(session), frames, fps, path);
 }
 
 double percentile(std::vector<double> v, double p) {
@@ -295,19 +312,36 @@ void watch(const WatchArgs& a) {
   reconnect.on_reconnect = [](const grpc::Status& why, int attempt) {
     std::fprintf(stderr, "stream ended (%s); reconnecting, attempt %d\n", why.error_message().c_str(), attempt);
   };
-  auto watcher = client.watch(a.session, token, a.after, std::move(reconnect));
+  auto watcher = client.watch(a.session, token, WatchOptions{.after_version = a.after, .max_vertices = a.max_vertices},
+                              std::move(reconnect));
   bool enough = false;
-  while (auto frame = watcher->read()) {
-    const DecodedFrame d = decoder.decode(*frame);
+  // The level the recorded frames are at (with --max-vertices): one mesh for all.
+  std::shared_ptr<const DecodedLevel> recorded_level;
+  while (auto message = watcher->read()) {
+    if (message->has_level()) {
+      // A level starts (the stream's first message with --max-vertices, and
+      // again after a reconnection): its frames follow.
+      const DecodedLevel& level = decoder.set_level(message->level());
+      std::printf("level %u vertices  %u faces%s\n", level.vertex_count, level.face_count,
+                  level.full_detail ? "  (the full mesh)" : "");
+      std::fflush(stdout);
+      continue;
+    }
+    const DecodedFrame d = decoder.decode(*message);
     std::string changes;
     for (const auto& c : d.changes)
       changes += (changes.empty() ? "" : ",") + c.client_name() + ":" + std::to_string(c.pose_id()) + ":" +
                  std::to_string(c.vertex_count());
-    std::printf("version %llu  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
-                static_cast<unsigned long long>(d.version), d.encoded_bytes, d.max_error, d.stats.compute_ms(),
-                changes.empty() ? "-" : changes.c_str());
+    const std::string level = d.level ? "  level " + std::to_string(d.vertex_count()) : "";
+    std::printf("version %llu%s  bytes %zu  max_error %.3g  compute_ms %.2f  changes %s\n",
+                static_cast<unsigned long long>(d.version), level.c_str(), d.encoded_bytes, d.max_error,
+                d.stats.compute_ms(), changes.empty() ? "-" : changes.c_str());
     std::fflush(stdout);
-    if (!a.output.empty()) frames.push_back(points_from_xyz(d.positions));
+    if (!a.output.empty()) {
+      if (!frames.empty() && d.vertex_count() != frames.back().size()) frames.clear();  // a new level: its frames only
+      recorded_level = d.level;
+      frames.push_back(points_from_xyz(d.positions));
+    }
     if (a.frames > 0 && ++count >= a.frames) {
       watcher->cancel();  // enough: the CANCELLED status below is ours
       enough = true;
@@ -319,7 +353,7 @@ void watch(const WatchArgs& a) {
     throw_if_error(status);
     std::fprintf(stderr, "the session was closed\n");
   }
-  if (!a.output.empty()) write_frames(session, frames, a.fps, a.output);
+  if (!a.output.empty()) write_frames(level_rest_mesh(session, recorded_level.get()), frames, a.fps, a.output);
 }
 
 // ---------------------------------------------------------------- play
@@ -431,6 +465,10 @@ void add_service_commands(CLI::App& app) {
       ->check(CLI::Range(1, 1000000));
   wa->add_option("--after", w->after, "Skip frames up to this version");
   wa->add_option("--fps", w->fps, "Frame rate of the .glb animation")->check(CLI::PositiveNumber);
+  wa->add_option("--max-vertices", w->max_vertices,
+                 "Watch a level of detail: a coarser mesh of at most N vertices (rounded down to a power of two; the "
+                 "base below its size, the full mesh at or above it). -o then writes the level's mesh")
+      ->check(CLI::Range(1u, 4294967295u));
   wa->callback([w] { watch(*w); });
 
   auto pl = std::make_shared<PlayArgs>();
