@@ -21,7 +21,7 @@ from .history import Checkpoint, CheckpointDiff, Conflict, EditOutcome, History,
 from .history_export import HistoryExport, HistoryState
 from .presence import Participant, Presence, PresenceWatcher
 from .session import Clip, Joint, Session
-from .streams import JOINTS_LOCAL_TRS, JOINTS_MODEL_MATRIX, Change, Driver, Frame, Watcher
+from .streams import JOINTS_LOCAL_TRS, JOINTS_MODEL_MATRIX, Change, Driver, Frame, Level, Watcher
 
 __version__ = "0.1.0"
 
@@ -34,7 +34,7 @@ def library_version() -> str:
 
 
 __all__ = [
-    "Client", "SessionOptions", "Session", "Joint", "Clip", "Driver", "Watcher", "Frame", "Change",
+    "Client", "SessionOptions", "Session", "Joint", "Clip", "Driver", "Watcher", "Frame", "Level", "Change",
     "FiligreeError", "Status", "InvalidArgument", "NotFound", "PermissionDenied", "Unauthenticated",
     "Unavailable", "ResourceExhausted", "DeadlineExceeded", "FailedPrecondition", "StreamEnded", "LINEAR_BLEND", "DUAL_QUATERNION",
     "JOINTS_LOCAL_TRS", "JOINTS_MODEL_MATRIX", "library_path", "library_version",

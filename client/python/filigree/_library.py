@@ -43,6 +43,10 @@ class ClipPlayback(ctypes.Structure):
     _fields_ = [("speed", c_double), ("loop", c_int32), ("start_seconds", c_double), ("max_rate", c_double)]
 
 
+class WatchOptions(ctypes.Structure):
+    _fields_ = [("after_version", c_uint64), ("max_vertices", c_uint32)]
+
+
 class EditOutcome(ctypes.Structure):
     _fields_ = [("result", c_int32), ("conflict_count", c_uint32), ("entry", c_uint64), ("recorded", c_uint64),
                 ("accepted_at_version", c_uint64), ("conflict_vertex_count", c_uint64)]
@@ -133,6 +137,7 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_driver_last_error": ([_P], c_char_p),
     "filigree_driver_free": ([_P], c_int),
     "filigree_watcher_open": ([_P, c_char_p, c_uint64, FrameCallback, c_void_p, POINTER(_P)], c_int),
+    "filigree_watcher_open_with": ([_P, c_char_p, POINTER(WatchOptions), FrameCallback, c_void_p, POINTER(_P)], c_int),
     "filigree_play_clip": ([_P, c_char_p, c_char_p, c_double, c_int, FrameCallback, c_void_p, POINTER(_P)], c_int),
     "filigree_play_clip_with": ([_P, c_char_p, c_char_p, POINTER(ClipPlayback), FrameCallback, c_void_p, POINTER(_P)],
                                 c_int),
@@ -140,6 +145,10 @@ _SIGNATURES: dict[str, tuple[list, object]] = {
     "filigree_watcher_frame_info": ([_P, POINTER(FrameInfo)], c_int),
     "filigree_watcher_clip_seconds": ([_P, POINTER(c_double)], c_int),
     "filigree_watcher_wait_frame": ([_P, c_int64], c_int),
+    "filigree_watcher_level_vertex_count": ([_P, _SIZE], c_int),
+    "filigree_watcher_level_original_ids": ([_P, _U32, c_size_t, _SIZE], c_int),
+    "filigree_watcher_level_faces": ([_P, _U32, c_size_t, _SIZE], c_int),
+    "filigree_watcher_set_detail": ([_P, c_uint32, POINTER(c_uint32)], c_int),
     "filigree_watcher_reconnects": ([_P, POINTER(c_uint64)], c_int),
     "filigree_watcher_changes": ([_P, c_char_p, c_size_t, _SIZE], c_int),
     "filigree_watcher_wait": ([_P, c_int64], c_int),

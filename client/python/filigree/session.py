@@ -111,11 +111,15 @@ class Session:
         """Opens a Drive stream (editor token; None: the session's)."""
         return Driver(self, client_name, token)
 
-    def watch(self, after_version: int = 0, token: Optional[str] = None) -> "Watcher":
+    def watch(self, after_version: int = 0, token: Optional[str] = None, max_vertices: int = 0) -> "Watcher":
         """Opens a Watch stream (either token): frames newer than `after_version`.
         It reconnects by itself when the server restarts or fails over (for up
-        to 60 s), from the last frame it decoded."""
-        return Watcher.open(self, after_version, token)
+        to 60 s), from the last frame it decoded. `max_vertices` > 0 asks
+        for a level of detail: frames of a coarser mesh of at most that many
+        vertices (rounded down to a power of two; the base below its size,
+        the full mesh at or above n), each with its `level`;
+        Watcher.set_detail changes it."""
+        return Watcher.open(self, after_version, token, max_vertices)
 
     def play_clip(self, clip: str, speed: float = 1.0, loop: bool = False, start_seconds: float = 0.0,
                   max_rate: float = 0.0, token: Optional[str] = None) -> "Watcher":

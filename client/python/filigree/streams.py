@@ -39,13 +39,32 @@ class Change:
     vertex_count: int
 
 
+@dataclass(frozen=True)
+class Level:
+    """A level of detail: a mesh of `vertex_count` (k) vertices of the
+    detailed mesh. Level vertex i is session vertex `original_ids[i]`
+    (ascending), at rest at `rest_positions[i]`; `faces` (f × 3 uint32)
+    index the level's vertices. At full detail (`full_detail`, k = n) it is
+    the session's rest mesh: ids 0…n-1, the rest faces."""
+
+    vertex_count: int
+    original_ids: np.ndarray
+    faces: np.ndarray
+    rest_positions: np.ndarray
+    full_detail: bool
+
+
 @dataclass
 class Frame:
     """A decoded frame: `positions` is the posed detailed mesh (n × 3
     float32, session order), within `max_error` of the server's. A clip's
     frames (Session.play_clip) number the newest sample they include in
     `pose_id` and give its clip time, in seconds, in `clip_seconds` (0 for
-    other streams and for a frame that includes no sample)."""
+    other streams and for a frame that includes no sample). A watcher's
+    frames at a level of detail (Session.watch(max_vertices=…)) hold the
+    level's vertices only: `positions` is k × 3, vertex i at session vertex
+    `level.original_ids[i]`; `level` is the Level of the frame (a
+    full-detail one for frames of the whole mesh)."""
 
     version: int
     pose_id: int
@@ -56,6 +75,7 @@ class Frame:
     frames_received: int
     changes: list[Change] = field(default_factory=list)
     clip_seconds: float = 0.0
+    level: Optional[Level] = None
 
 
 def _wait(function, handle, timeout: Optional[float]) -> bool:
@@ -88,6 +108,18 @@ def _number(name: str, value: float, at_least_zero: bool) -> float:
     return number
 
 
+def _uint32_array(function, handle) -> np.ndarray:
+    """A uint32 array out of a (handle, buffer, capacity, required) function."""
+    required = ctypes.c_size_t(0)
+    status = function(handle, None, 0, ctypes.byref(required))
+    if status not in (0, 101):  # 101: FILIGREE_ERROR_BUFFER_TOO_SMALL, the size query answered
+        check(status)
+    out = np.empty(required.value, dtype=np.uint32)
+    if required.value:
+        check(function(handle, out.ctypes.data_as(_library._U32), out.size, None))
+    return out
+
+
 def _parse_changes(text: str) -> list[Change]:
     out = []
     for line in text.splitlines():
@@ -101,11 +133,14 @@ class _Stream:
 
     _poll = _info = _wait_frame = _reconnects = _changes = _close = _free = None  # the C functions, set by subclasses
     _clip_seconds = None  # a watcher's only: drivers play no clips
+    _level_count = _level_ids = _level_faces = None  # a watcher's only: levels of detail
 
-    def __init__(self, session: Session, handle: ctypes.c_void_p) -> None:
+    def __init__(self, session: Session, handle: ctypes.c_void_p, at_level: bool = False) -> None:
         self._session = session  # its meshes size the frames; it outlives the handle's use
         self._handle = handle
         self._n = session.vertex_count
+        self._at_level = at_level  # opened with a vertex budget: frames of k <= n vertices
+        self._level: Optional[Level] = None  # of the latest frame polled
         self._end_raised = False  # why the stream ended was raised already (close() need not again)
 
     def _check_stream(self, status: int) -> None:
@@ -126,9 +161,10 @@ class _Stream:
     def poll(self, out: Optional[np.ndarray] = None) -> Optional[Frame]:
         """The newest frame if it is newer than the last one polled, else
         None (frames in between are skipped). Never waits. `out`: an n × 3
-        (or 3n) float32 C-contiguous array to decode into (no allocation).
-        Raises StreamEnded (or why it failed) once the stream ended and its
-        last frame was polled."""
+        (or 3n) float32 C-contiguous array to decode into (no allocation);
+        at a level of detail the frame fills its first k × 3 values and its
+        `positions` are a view of them. Raises StreamEnded (or why it
+        failed) once the stream ended and its last frame was polled."""
         if out is None:
             out = np.empty((self._n, 3), dtype=np.float32)
         elif out.dtype != np.float32 or not out.flags.c_contiguous or out.size != 3 * self._n:
@@ -143,8 +179,41 @@ class _Stream:
         clip_seconds = ctypes.c_double(0.0)
         if type(self)._clip_seconds is not None:
             check(type(self)._clip_seconds(self.handle, ctypes.byref(clip_seconds)))
-        return Frame(version.value, pose_id.value, out, info.encoded_bytes, info.max_error, bool(info.keyframe),
-                     info.frames_received, self.changes(), clip_seconds.value)
+        level = self._polled_level()
+        positions = out
+        if level.vertex_count != self._n:  # the level's vertices, the first 3k values
+            positions = out[:level.vertex_count] if out.ndim == 2 else out[:3 * level.vertex_count]
+        return Frame(version.value, pose_id.value, positions, info.encoded_bytes, info.max_error, bool(info.keyframe),
+                     info.frames_received, self.changes(), clip_seconds.value, level)
+
+    def _full_level(self) -> Level:
+        s = self._session
+        return Level(s.vertex_count, np.arange(s.vertex_count, dtype=np.uint32), s.rest_faces, s.rest_positions, True)
+
+    def _polled_level(self) -> Level:
+        """The level of the frame just polled: read from the library when
+        its vertex count (which identifies a level) changed."""
+        count = self._n
+        if type(self)._level_count is not None:
+            k = ctypes.c_size_t(0)
+            check(type(self)._level_count(self.handle, ctypes.byref(k)))
+            count = k.value
+        if self._level is None or self._level.vertex_count != count:
+            if count == self._n:
+                self._level = self._full_level()
+            else:
+                ids = _uint32_array(type(self)._level_ids, self.handle)
+                faces = _uint32_array(type(self)._level_faces, self.handle).reshape(-1, 3)
+                rest = self._session.rest_positions[ids]
+                for array in (ids, faces, rest):
+                    array.flags.writeable = False  # shared by the frames of the level
+                self._level = Level(count, ids, faces, rest, False)
+        return self._level
+
+    @property
+    def level(self) -> Optional[Level]:
+        """The level of detail of the latest frame polled (None before the first)."""
+        return self._level
 
     @property
     def reconnects(self) -> int:
@@ -324,13 +393,31 @@ class Watcher(_Stream):
     _changes = lib.filigree_watcher_changes
     _close = lib.filigree_watcher_close
     _free = lib.filigree_watcher_free
+    _level_count = lib.filigree_watcher_level_vertex_count
+    _level_ids = lib.filigree_watcher_level_original_ids
+    _level_faces = lib.filigree_watcher_level_faces
 
     @classmethod
-    def open(cls, session: Session, after_version: int, token: Optional[str]) -> "Watcher":
+    def open(cls, session: Session, after_version: int, token: Optional[str], max_vertices: int = 0) -> "Watcher":
+        if not isinstance(max_vertices, numbers.Integral) or not 0 <= max_vertices < 2**32:
+            raise ValueError(f"max_vertices must be an integer in [0, 2**32), not {max_vertices!r}")
+        options = _library.WatchOptions(after_version=int(after_version), max_vertices=int(max_vertices))
         handle = ctypes.c_void_p()
-        check(lib.filigree_watcher_open(session.handle, token_bytes(token), int(after_version), _library.NULL_CALLBACK,
-                                        None, ctypes.byref(handle)))
-        return cls(session, handle)
+        check(lib.filigree_watcher_open_with(session.handle, token_bytes(token), ctypes.byref(options),
+                                             _library.NULL_CALLBACK, None, ctypes.byref(handle)))
+        return cls(session, handle, at_level=max_vertices > 0)
+
+    def set_detail(self, max_vertices: int) -> int:
+        """Moves a watcher opened with a vertex budget to the level of
+        `max_vertices` (>= 1, rounded as Session.watch's) and returns its
+        vertex count k; frames of that level follow the ones in flight
+        (poll until `frame.level.vertex_count` is k). FailedPrecondition for
+        a watcher opened at full detail or a clip's."""
+        if not isinstance(max_vertices, numbers.Integral) or not 1 <= max_vertices < 2**32:
+            raise ValueError(f"max_vertices must be an integer in [1, 2**32), not {max_vertices!r}")
+        count = ctypes.c_uint32(0)
+        check(lib.filigree_watcher_set_detail(self.handle, int(max_vertices), ctypes.byref(count)))
+        return count.value
 
     @classmethod
     def play(cls, session: Session, clip: str, speed: float, loop: bool, start_seconds: float, max_rate: float,
