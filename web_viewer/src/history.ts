@@ -313,7 +313,7 @@ export class HistoryPanel {
       const result = document.createElement('span');
       result.className = 'note compare-result';
       result.textContent = this.compared.get(String(c.id)) ?? '';
-      compare.addEventListener('click', () => void this.compare(c, result));
+      compare.addEventListener('click', () => void this.compare(c));
       const buttons = document.createElement('span');
       buttons.className = 'checkpoint-buttons';
       buttons.append(restore, compare);
@@ -408,18 +408,24 @@ export class HistoryPanel {
     }
   }
 
-  private async compare(c: CheckpointLine, result: HTMLElement): Promise<void> {
-    result.textContent = 'Comparing…';
+  private async compare(c: CheckpointLine): Promise<void> {
+    this.showComparison(c.id, 'Comparing…');
     try {
       const diff = await this.client.diffCheckpoint(c.id);
       const text = `Now against “${c.name}”: ${diffText(diff, this.events.meshSize)}`;
       this.compared.set(String(c.id), text);
-      result.textContent = text;
-      result.className = 'note compare-result';
+      this.showComparison(c.id, text);
     } catch (error) {
-      result.textContent = this.events.describe(error);
-      result.className = 'note bad compare-result';
+      this.showComparison(c.id, this.events.describe(error), true);
     }
+  }
+
+  // In the checkpoint's line as shown now (the list may have been rebuilt meanwhile).
+  private showComparison(id: bigint, text: string, bad = false): void {
+    const result = this.checkpointList.querySelector<HTMLElement>(`li[data-checkpoint="${id}"] .compare-result`);
+    if (!result) return;
+    result.textContent = text;
+    result.className = bad ? 'note bad compare-result' : 'note compare-result';
   }
 
   private checkpointNote(text: string, bad = false): void {

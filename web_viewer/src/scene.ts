@@ -14,7 +14,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
-import { fitDistance, type Framing } from './geometry';
+import { firstHit, fitDistance, type Framing } from './geometry';
 import { levelIndexOf } from './levels';
 
 const FOV = 40;
@@ -23,8 +23,6 @@ const SLOW_DRAW_MS = 50;
 const FAST_DRAW_MS = 25;
 const MIN_PIXEL_RATIO = 0.5;
 
-// A bounding sphere that culls nothing (pointVertex).
-const UNBOUNDED = new THREE.Sphere(new THREE.Vector3(), Infinity);
 
 export class MeshView {
   readonly scene = new THREE.Scene();
@@ -71,6 +69,8 @@ export class MeshView {
   // without a layout read).
   private cssWidth = 0;
   private cssHeight = 0;
+  // The canvas's place on the page, as of the last resize or pointer entry (pointVertex: no layout read per call).
+  private canvasRect: { left: number; top: number; width: number; height: number } = { left: 0, top: 0, width: 0, height: 0 };
   private readonly scratch = new THREE.Vector3();
 
   // `dense`: a mesh heavy enough to be drawn coarser while busy; it is drawn
@@ -129,6 +129,7 @@ export class MeshView {
     this.scene.add(this.camera);
 
     new ResizeObserver(() => this.resize()).observe(container);
+    this.renderer.domElement.addEventListener('pointerenter', () => { this.canvasRect = this.canvas.getBoundingClientRect(); });
     this.resize();
     this.fit();
     this.renderer.setAnimationLoop(() => this.render());
@@ -343,28 +344,31 @@ export class MeshView {
 
   // The vertex under a page point, cheaply enough to follow a pointer (the
   // pointer others see, up to 10 times a second): the corner nearest the hit
-  // of the triangle hit, on the stand-in when there is one, without the
-  // pass over every vertex pickVertex makes (the bounding sphere is not
-  // recomputed: an unbounded one culls nothing). Its original id; null: the background.
+  // of the first triangle the ray meets, on the stand-in when there is one (firstHit: a flat loop, no three.js
+  // raycast, no pass over every vertex, no layout read: the canvas's place is
+  // the last resize's). Its original id; null: the background.
   pointVertex(clientX: number, clientY: number): number | null {
-    const drawn = this.mesh.geometry;
-    const target = this.coarse ?? this.geometry;
-    const sphere = target.boundingSphere;
-    target.boundingSphere = UNBOUNDED;
-    this.mesh.geometry = target;
-    const hit = this.rayAt(clientX, clientY).intersectObject(this.mesh, false)[0] ?? null;
-    this.mesh.geometry = drawn;
-    target.boundingSphere = sphere;
-    if (!hit?.face) return null;
+    const rect = this.canvasRect;
+    if (rect.width === 0 || rect.height === 0) return null;
+    const ndc = new THREE.Vector2(((clientX - rect.left) / rect.width) * 2 - 1, -((clientY - rect.top) / rect.height) * 2 + 1);
+    const raycaster = new THREE.Raycaster();
+    raycaster.setFromCamera(ndc, this.camera);
+    const { origin, direction } = raycaster.ray;
+    const faces = (this.coarse ?? this.geometry).index!.array as Uint32Array;
+    const hit = firstHit(this.positions, faces, [origin.x, origin.y, origin.z], [direction.x, direction.y, direction.z]);
+    if (hit === null) return null;
     const p = this.positions;
-    const { x, y, z } = hit.point;
-    let best = -1;
+    const x = origin.x + hit.t * direction.x;
+    const y = origin.y + hit.t * direction.y;
+    const z = origin.z + hit.t * direction.z;
+    let best = faces[3 * hit.face];
     let bestDistance = Infinity;
-    for (const v of [hit.face.a, hit.face.b, hit.face.c]) {
+    for (let k = 0; k < 3; ++k) {
+      const v = faces[3 * hit.face + k];
       const d = (p[3 * v] - x) ** 2 + (p[3 * v + 1] - y) ** 2 + (p[3 * v + 2] - z) ** 2;
       if (d < bestDistance) [best, bestDistance] = [v, d];
     }
-    return best < 0 ? null : this.idOf(best);
+    return this.idOf(best);
   }
 
   // Where a world point is drawn, in page coordinates.
@@ -459,6 +463,7 @@ export class MeshView {
     this.camera.aspect = width / height;
     this.camera.updateProjectionMatrix();
     this.invalidate();
+    this.canvasRect = this.canvas.getBoundingClientRect();
     if (width !== this.cssWidth || height !== this.cssHeight) {
       this.cssWidth = width;
       this.cssHeight = height;

@@ -9,7 +9,7 @@ import { Code, ConnectError } from '@connectrpc/connect';
 import * as THREE from 'three';
 import { describe, expect, it } from 'vitest';
 
-import { coarseIndex, falloff, fitDistance, frameMesh, principalAxes, vertexNormals, type Vec3 } from '../src/geometry';
+import { coarseIndex, falloff, firstHit, fitDistance, frameMesh, principalAxes, vertexNormals, type Vec3 } from '../src/geometry';
 import { isFinal, LONG_CAP_MS, retryDelay, SHORT_CAP_MS } from '../src/reconnect';
 // @ts-expect-error: a plain ES module of the browser test, without types
 import { writeEllipsoidObj } from './harness.mjs';
@@ -165,5 +165,22 @@ describe('reconnect policy', () => {
     }
     expect(isFinal(null)).toBe(false);
     expect(isFinal(new TypeError('Failed to fetch'))).toBe(false);
+  });
+});
+
+describe('firstHit', () => {
+  // Two unit squares facing +z, at z = 0 and z = −1, as four triangles.
+  const positions = new Float32Array([0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, -1, 1, 0, -1, 1, 1, -1, 0, 1, -1]);
+  const faces = new Uint32Array([0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7]);
+
+  it('finds the nearest triangle along the ray, from either side, with its barycentric weights', () => {
+    const hit = firstHit(positions, faces, [0.9, 0.2, 5], [0, 0, -1]);
+    expect(hit?.face).toBe(0);
+    expect(hit!.t).toBeCloseTo(5);
+    expect(1 - hit!.u - hit!.v).toBeCloseTo(0.1);  // a weight per corner: (0.9, 0.2) is 0.7 of corner 1
+    expect(hit!.u).toBeCloseTo(0.7);
+    expect(firstHit(positions, faces, [0.2, 0.9, -5], [0, 0, 1])?.face).toBe(3);  // from behind: the far square first
+    expect(firstHit(positions, faces, [2, 2, 5], [0, 0, -1])).toBeNull();
+    expect(firstHit(positions, faces, [0.5, 0.5, 5], [0, 0, 1])).toBeNull();  // pointing away
   });
 });
