@@ -14,7 +14,7 @@ PACKAGES=(
   redis-server nginx
   chromium fonts-liberation
   python3-numpy python3-pytest python3-venv python3-setuptools python3-pip
-  blender clang
+  blender xvfb xauth clang
 )
 
 container=false

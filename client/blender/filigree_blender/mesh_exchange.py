@@ -52,6 +52,32 @@ def set_positions(obj: "bpy.types.Object", positions: np.ndarray) -> None:
     obj.data.update()
 
 
+def offset_positions(obj: "bpy.types.Object", indices: np.ndarray, offsets: np.ndarray) -> None:
+    """Moves vertices `indices` of `obj` by `offsets` (k × 3) in what the
+    artist sees: the edit-mode mesh in edit mode; else the mesh and every
+    shape key alike, so the evaluated shape moves by the offsets whatever
+    the keys' values."""
+    if obj.mode == "EDIT":
+        import bmesh
+        from mathutils import Vector
+
+        edited = bmesh.from_edit_mesh(obj.data)
+        edited.verts.ensure_lookup_table()
+        for i, offset in zip(indices.tolist(), offsets.tolist()):
+            edited.verts[i].co += Vector(offset)
+        bmesh.update_edit_mesh(obj.data)
+        return
+    blocks = [obj.data] + (list(obj.data.shape_keys.key_blocks) if obj.data.shape_keys else [])
+    for block in blocks:
+        points = block.vertices if block is obj.data else block.data
+        co = np.empty(3 * len(points), dtype=np.float32)
+        points.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+        co[indices] += offsets
+        points.foreach_set("co", co.reshape(-1))
+    obj.data.update()
+
+
 def posed_positions(obj: "bpy.types.Object", depsgraph) -> np.ndarray:
     """What the artist sees of `obj`: in edit mode the edited mesh; else the
     evaluated one (shape keys, armature, modifiers)."""

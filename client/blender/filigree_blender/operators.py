@@ -1,5 +1,7 @@
-"""Upload, Join, Leave and Copy token. Failures are reported in Blender's
-report area (self.report), never as tracebacks."""
+"""Upload, Join, Leave, Copy token, and Undo and Redo in the session (bound
+to Ctrl+Z and Ctrl+Shift+Z in the 3D View while a live object is active).
+Failures are reported in Blender's report area (self.report), never as
+tracebacks."""
 
 from __future__ import annotations
 
@@ -15,8 +17,8 @@ def _filigree(context):
     return client_package.load(bpy.path.abspath(preferences.library_path) if preferences.library_path else "")
 
 
-def _start(link: live_link.LiveLink) -> None:
-    link.open()
+def _start(link: live_link.LiveLink, joined: bool = False) -> None:
+    link.open(joined)
     live_link.ERRORS.pop(link.detailed_name, None)
     live_link.LINKS[link.detailed_name] = link
     live_link.start_timer()
@@ -107,7 +109,7 @@ class FILIGREE_OT_join(_Reporting, bpy.types.Operator):
         detailed.select_set(True)
         context.view_layer.objects.active = detailed  # the panel shows the session at once
         _start(live_link.LiveLink(session, detailed.name, base.name if base else None, wm.filigree_role,
-                                  wm.filigree_name, None))
+                                  wm.filigree_name, None), joined=True)
         self.report({"INFO"}, f"Filigree: joined {session.id} as {wm.filigree_role.lower()}")
         return {"FINISHED"}
 
@@ -124,8 +126,12 @@ class FILIGREE_OT_leave(_Reporting, bpy.types.Operator):
 
     def run(self, context):
         link = live_link.link_of(context.active_object)
-        link.close()
-        del live_link.LINKS[link.detailed_name]
+        try:
+            link.end_gesture(context.evaluated_depsgraph_get())  # the last edit goes out first
+        finally:
+            link.close()
+            del live_link.LINKS[link.detailed_name]
+            live_link.show_people(context.window_manager)
         return {"FINISHED"}
 
 
@@ -150,14 +156,94 @@ class FILIGREE_OT_copy_token(_Reporting, bpy.types.Operator):
         return {"FINISHED"}
 
 
-_CLASSES = (FILIGREE_OT_upload, FILIGREE_OT_join, FILIGREE_OT_leave, FILIGREE_OT_copy_token)
+def not_undoable(link) -> str:
+    """Why the session's undo is not the one for this link ('' when it is)."""
+    if link.role != live_link.EDITOR or not link.base_name:
+        return "Filigree: a viewer has no changes to undo in the session; Blender's undo runs"
+    if link.skinned:
+        return ("Filigree: an armature poses this session: its bones are Blender's, so Blender's undo runs "
+                "(the pose it brings back is sent as a new change)")
+    return ""
+
+
+class _SessionUndo(_Reporting):
+    """Undo or redo of this client's latest gesture in the session (the
+    others' later work on the same base vertices stays, and is named)."""
+
+    bl_options = set()  # not registered: no Blender undo step, and no gesture boundary of its own
+    redo = False
+
+    force: bpy.props.BoolProperty(
+        name="Force", default=False,
+        description="Also restore base vertices someone else changed since (their change is overwritten there)")
+
+    @classmethod
+    def poll(cls, context):
+        return live_link.link_of(context.active_object) is not None
+
+    def invoke(self, context, event):
+        # From Ctrl+Z: where the session's undo is not the one, Blender's runs instead.
+        link = live_link.link_of(context.active_object)
+        why = not_undoable(link)
+        if why:
+            link.note = why
+            self.report({"INFO"}, why)
+            return {"PASS_THROUGH"}
+        return self.execute(context)
+
+    def run(self, context):
+        link = live_link.link_of(context.active_object)
+        why = not_undoable(link)
+        if why:
+            self.report({"ERROR"}, why)
+            return {"CANCELLED"}
+        outcome = link.undo(context.evaluated_depsgraph_get(), redo=self.redo, force=self.force)
+        # done, nothing: as planned; partial, conflict: others' work stayed, said as a warning.
+        self.report({"INFO" if outcome.result in ("done", "nothing") else "WARNING"}, f"Filigree: {link.note}")
+        return {"FINISHED"}
+
+
+class FILIGREE_OT_undo(_SessionUndo, bpy.types.Operator):
+    """Undo your latest change to the session (Ctrl+Z in the 3D View while a live object is active)"""
+
+    bl_idname = "filigree.undo"
+    bl_label = "Undo in session"
+
+
+class FILIGREE_OT_redo(_SessionUndo, bpy.types.Operator):
+    """Redo your latest change undone in the session (Ctrl+Shift+Z in the 3D View while a live object is active)"""
+
+    bl_idname = "filigree.redo"
+    bl_label = "Redo in session"
+    redo = True
+
+
+_CLASSES = (FILIGREE_OT_upload, FILIGREE_OT_join, FILIGREE_OT_leave, FILIGREE_OT_copy_token, FILIGREE_OT_undo,
+            FILIGREE_OT_redo)
+
+# Ctrl+Z and Ctrl+Shift+Z in the 3D View's main region: its keymaps are
+# looked at before the window's, where Blender's own undo is bound, and an
+# operator whose poll fails (no live object active) lets the key through.
+KEYS = (("filigree.undo", {"type": "Z", "value": "PRESS", "ctrl": True}),
+        ("filigree.redo", {"type": "Z", "value": "PRESS", "ctrl": True, "shift": True}))
+_keymap_items = []
 
 
 def register() -> None:
     for c in _CLASSES:
         bpy.utils.register_class(c)
+    keyconfig = bpy.context.window_manager.keyconfigs.addon
+    if keyconfig is not None:
+        keymap = keyconfig.keymaps.new(name="3D View", space_type="VIEW_3D")
+        for idname, key in KEYS:
+            _keymap_items.append((keymap, keymap.keymap_items.new(idname, **key)))
+    live_link.add_handlers()
 
 
 def unregister() -> None:
+    live_link.remove_handlers()
+    for keymap, item in _keymap_items:
+        keymap.keymap_items.remove(item)
+    _keymap_items.clear()
     for c in reversed(_CLASSES):
         bpy.utils.unregister_class(c)

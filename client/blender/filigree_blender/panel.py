@@ -53,13 +53,57 @@ class FILIGREE_PT_session(bpy.types.Panel):
         row.operator("filigree.copy_token", text="Viewer token", icon="COPYDOWN").which = "VIEWER"
         row.operator("filigree.copy_token", text="Editor token", icon="COPYDOWN").which = "EDITOR"
         box.operator("filigree.leave", icon="UNLINKED")
+        if link.role == live_link.EDITOR and link.base_name:
+            history = layout.box()
+            history.label(text="Your changes in the session", icon="LOOP_BACK")
+            row = history.row(align=True)
+            row.enabled = not link.skinned
+            row.operator("filigree.undo", text="Undo", icon="LOOP_BACK")
+            row.operator("filigree.redo", text="Redo", icon="LOOP_FORWARDS")
+            history.label(text="Ctrl+Z / Ctrl+Shift+Z in the 3D View" if not link.skinned
+                          else "Posed by an armature: Ctrl+Z is Blender's")
+            if link.note:
+                for line in _wrap(link.note, 48):
+                    history.label(text=line)
+            if link.refused:
+                force = history.operator(f"filigree.{link.refused}", text=f"{link.refused.title()} anyway",
+                                         icon="ERROR")
+                force.force = True
+        here = layout.box()
+        here.label(text="In the session", icon="COMMUNITY")
+        present = [p for p in wm.filigree_people if p.session == link.session.id]
+        if link.presence is None:
+            here.label(text="(this filigree package shows no presence)")
+        elif not present:
+            here.label(text="Waiting for the server…")
+        for person in sorted(present, key=lambda p: (not p.you, p.name)):
+            row = here.row(align=True)
+            swatch = row.row()
+            swatch.ui_units_x = 1.2
+            swatch.prop(person, "colour", text="")
+            role = "editor" if person.editor else "viewer"
+            you = " (you)" if person.you else ""
+            busy = f" · touching {person.touching}" if person.touching else f" · idle {person.idle_seconds:.0f} s"
+            row.label(text=f"{person.name}{you} · {role}{busy}")
         people = layout.box()
-        people.label(text="Participants", icon="COMMUNITY")
+        people.label(text="Latest changes", icon="MOD_HUE_SATURATION")
         if not link.participants:
             people.label(text="No changes yet")
         for p in sorted(link.participants.values(), key=lambda p: -p.seen_version):
             you = " (you)" if p.name == link.client_name else ""
             people.label(text=f"{p.name}{you} · pose {p.pose_id} · {p.vertex_count} v · frame {p.seen_version}")
+
+
+def _wrap(text: str, width: int) -> list[str]:
+    """Lines of at most about `width` characters (a label does not wrap)."""
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return lines + ([line] if line else [])
 
 
 def register() -> None:

@@ -5,7 +5,8 @@ travel with a scene), and the threshold of a linked object."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, FloatVectorProperty,
+                       IntProperty, StringProperty)
 
 from . import live_link
 
@@ -19,6 +20,19 @@ class FiligreePreferences(bpy.types.AddonPreferences):
 
     def draw(self, context):
         self.layout.prop(self, "library_path")
+
+
+class FiligreePerson(bpy.types.PropertyGroup):
+    """Someone in a live session (the session's presence), as the panel
+    shows them: `name` is their client name."""
+
+    session: StringProperty()
+    colour: FloatVectorProperty(subtype="COLOR_GAMMA", size=3, min=0.0, max=1.0,
+                                description="Their colour in every client of the session")
+    editor: BoolProperty()
+    you: BoolProperty()
+    idle_seconds: FloatProperty()
+    touching: IntProperty(description="Base vertices of their latest change (while under 10 s old)")
 
 
 def _threshold_changed(obj, context) -> None:
@@ -51,8 +65,10 @@ _WM_PROPERTIES = {
 
 def register() -> None:
     bpy.utils.register_class(FiligreePreferences)
+    bpy.utils.register_class(FiligreePerson)
     for name, prop in _WM_PROPERTIES.items():
         setattr(bpy.types.WindowManager, name, prop)
+    bpy.types.WindowManager.filigree_people = CollectionProperty(type=FiligreePerson)
     bpy.types.Object.filigree_threshold = FloatProperty(
         name="Threshold", default=0.0, min=0.0, update=_threshold_changed,
         description="Performance threshold T of the session's cut: larger is faster, 0 is direct recovery only")
@@ -61,6 +77,8 @@ def register() -> None:
 def unregister() -> None:
     live_link.close_all()
     del bpy.types.Object.filigree_threshold
+    del bpy.types.WindowManager.filigree_people
     for name in _WM_PROPERTIES:
         delattr(bpy.types.WindowManager, name)
+    bpy.utils.unregister_class(FiligreePerson)
     bpy.utils.unregister_class(FiligreePreferences)
