@@ -70,6 +70,7 @@ bench: build
 	$(BUILD)/bench/filigree_bench_preprocess
 	$(BUILD)/bench/filigree_bench_runtime
 	$(BUILD)/bench/filigree_bench_service
+	$(BUILD)/bench/filigree_bench_history
 	$(BUILD)/bench/filigree_bench_encoder
 	$(BUILD)/bench/filigree_bench_cluster
 	$(BUILD)/bench/filigree_bench_upstream

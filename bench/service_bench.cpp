@@ -46,198 +46,20 @@
 #include <grpcpp/grpcpp.h>
 
 #include "bench/sample_stats.h"
+#include "bench/service_harness.h"
 #include "bench/subdivide.h"
-#include "filigree/channel_arguments.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "mesh/mesh_io.h"
 #include "mesh/mesh_validation.h"
-#include "mesh/vertex_order.h"
 #include "runtime/procedural_motion.h"
 #include "support/server_process.h"
 
 namespace {
 
 using namespace filigree;
-using bench::percentile;
-using Clock = std::chrono::steady_clock;
-
-constexpr int kWarmupFrames = 8;
-
-struct Result {
-  double first = 0, p50 = 0, p99 = 0, fps = 0, compute_p50 = 0, compute_p99 = 0, encode_p50 = 0, both_p99 = 0,
-         bytes_per_vertex = 0, max_error_rel = 0, present = 0, other_p50 = 0;
-  std::size_t watcher_frames = 0;
-};
+using namespace filigree::bench;
 
 v1::FrameFormat g_format = v1::FRAME_FORMAT_CHUNKED;
-
-// Bytes of a frame's deltas on the wire, either format.
-std::size_t delta_bytes(const v1::Frame& f) {
-  std::size_t bytes = f.deltas().size();
-  for (const v1::DeltaChunk& c : f.chunks()) bytes += c.deltas().size() + 4 * static_cast<std::size_t>(c.runs_size());
-  return bytes;
-}
-
-enum class Movement { kWholeBody, kLocal };
-
-std::unique_ptr<grpc::ClientContext> context(const std::string& id, const std::string& token) {
-  auto c = std::make_unique<grpc::ClientContext>();
-  c->AddMetadata("x-filigree-token", token);
-  c->AddMetadata("x-session-id", id);
-  return c;
-}
-
-Result run(v1::Filigree::Stub& stub, const v1::CreateSessionResponse::Created& created, int watchers, int poses,
-           Movement motion = Movement::kWholeBody) {
-  const std::string id = created.info().session_id();
-  const auto& base = created.info().base();
-  const std::size_t n = created.info().rest().vertex_count();
-  std::vector<Vec3> base_rest;
-  for (int i = 0; i + 2 < base.positions_size(); i += 3)
-    base_rest.emplace_back(base.positions(i), base.positions(i + 1), base.positions(i + 2));
-  Vec3 lo = base_rest[0], hi = lo;
-  for (const Vec3& p : base_rest) lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
-  const double diag = (hi - lo).norm();
-
-  // Watchers read as fast as they can on their own threads.
-  std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
-  std::vector<std::thread> threads;
-  std::atomic<std::size_t> watcher_frames{0};
-  for (int w = 0; w < watchers; ++w) {
-    contexts.push_back(context(id, created.viewer_token()));
-    threads.emplace_back([&, ctx = contexts.back().get()] {
-      v1::WatchRequest wr;
-      wr.set_session_id(id);
-      wr.set_frame_format(g_format);
-      auto reader = stub.Watch(ctx, wr);
-      v1::Frame f;
-      while (reader->Read(&f)) ++watcher_frames;
-      reader->Finish();
-    });
-  }
-
-  auto ctx = context(id, created.editor_token());
-  auto drive = stub.Drive(ctx.get());
-  std::vector<double> latency, compute, encode, both, other;
-  double first_ms = 0.0;
-  double bytes = 0.0, worst_error = 0.0, present = 0.0;
-  // The local motion: a bump of 2% of the diagonal under the base vertices
-  // within 8% of the diagonal from base vertex 0, rising and falling (a
-  // sculpted or dragged detail).
-  std::vector<std::uint32_t> bumped;
-  for (std::uint32_t i = 0; i < base_rest.size(); ++i)
-    if ((base_rest[i] - base_rest[0]).norm() < 0.08 * diag) bumped.push_back(i);
-  auto start = Clock::now();
-  for (int p = 1; p <= kWarmupFrames + poses; ++p) {
-    if (p == kWarmupFrames + 1) start = Clock::now();
-    v1::DriveRequest r;
-    r.set_session_id(id);
-    r.set_pose_id(static_cast<std::uint64_t>(p));
-    r.set_frame_format(g_format);
-    if (motion == Movement::kWholeBody) {
-      const Pose pose = procedural_pose(base_rest, filigree::Motion::kBend, 0.5 + 0.5 * std::sin(0.2 * p));
-      for (const Vec3& v : pose.positions)
-        for (int k = 0; k < 3; ++k) r.add_positions(static_cast<float>(v[k]));
-    } else {
-      const double h = 0.02 * diag * std::sin(0.2 * p);
-      for (std::uint32_t i : bumped) {
-        const double d = (base_rest[i] - base_rest[0]).norm() / (0.08 * diag);
-        const Vec3 v = base_rest[i] + h * (1.0 - d * d) * Vec3(0.0, 1.0, 0.0);
-        r.add_indices(i);
-        for (int k = 0; k < 3; ++k) r.add_positions(static_cast<float>(v[k]));
-      }
-    }
-    const auto sent = Clock::now();
-    drive->Write(r);
-    v1::Frame f;
-    do {
-      if (!drive->Read(&f)) return {};
-    } while (f.pose_id() != static_cast<std::uint64_t>(p));
-    const double ms = std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
-    worst_error = std::max(worst_error, static_cast<double>(f.max_error()));  // every frame keeps the promise
-    if (p == 1) first_ms = ms;
-    if (p <= kWarmupFrames) continue;
-    latency.push_back(ms);
-    compute.push_back(f.stats().compute_ms());
-    encode.push_back(f.stats().encode_ms());
-    both.push_back(f.stats().compute_ms() + f.stats().encode_ms());
-    other.push_back(latency.back() - both.back());
-    bytes += static_cast<double>(delta_bytes(f));
-    present += f.stats().present_vertices() ? f.stats().present_vertices() : static_cast<double>(n);
-  }
-  const double seconds = std::chrono::duration<double>(Clock::now() - start).count();
-  drive->WritesDone();
-  v1::Frame f;
-  while (drive->Read(&f)) {
-  }
-  drive->Finish();
-  for (auto& c : contexts) c->TryCancel();
-  for (auto& t : threads) t.join();
-
-  Result out;
-  out.first = first_ms;
-  out.p50 = percentile(latency, 0.5);
-  out.p99 = percentile(latency, 0.99);
-  out.compute_p50 = percentile(compute, 0.5);
-  out.compute_p99 = percentile(compute, 0.99);
-  out.encode_p50 = percentile(encode, 0.5);
-  out.both_p99 = percentile(both, 0.99);
-  out.other_p50 = percentile(other, 0.5);
-  out.present = present / poses / static_cast<double>(n);
-  out.fps = poses / seconds;
-  out.bytes_per_vertex = bytes / poses / static_cast<double>(n);
-  // Relative to the rest mesh's diagonal, as the server's error target is.
-  const auto& rest = created.info().rest().positions();
-  Vec3 rlo = Vec3::Constant(std::numeric_limits<double>::infinity()), rhi = -rlo;
-  for (int i = 0; i + 2 < rest.size(); i += 3) {
-    const Vec3 p(rest[i], rest[i + 1], rest[i + 2]);
-    rlo = rlo.cwiseMin(p), rhi = rhi.cwiseMax(p);
-  }
-  out.max_error_rel = worst_error / (rhi - rlo).norm();
-  out.watcher_frames = watcher_frames;
-  return out;
-}
-
-std::string obj_bytes(const TriMesh& mesh) {
-  const auto path = std::filesystem::temp_directory_path() / ("filigree_bench_" + std::to_string(::getpid()) + ".obj");
-  write_mesh(mesh, path);
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  std::filesystem::remove(path);
-  return s.str();
-}
-
-// The server's resident memory (VmRSS), in bytes.
-double resident_bytes(int pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind("VmRSS:", 0) == 0) return 1024.0 * std::stod(line.substr(6));
-  return 0.0;
-}
-
-v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::string& bytes) {
-  grpc::ClientContext ctx;
-  auto up = stub.CreateSession(&ctx);
-  v1::CreateSessionRequest begin;
-  begin.mutable_begin()->set_format("obj");
-  begin.mutable_begin()->set_total_bytes(bytes.size());
-  up->Write(begin);
-  for (std::size_t at = 0; at < bytes.size(); at += 1 << 20) {
-    v1::CreateSessionRequest chunk;
-    chunk.set_chunk(bytes.substr(at, 1 << 20));
-    up->Write(chunk);
-  }
-  up->WritesDone();
-  v1::CreateSessionResponse r;
-  v1::CreateSessionResponse::Created created;
-  while (up->Read(&r))
-    if (r.has_created()) created = r.created();
-  const grpc::Status status = up->Finish();
-  if (!status.ok()) throw std::runtime_error("upload failed: " + status.error_message());
-  return created;
-}
 
 // 8 or 16 sessions of one mesh, each driven closed-loop (whole-body) on its
 // own thread for `seconds`: frames per session.
@@ -292,56 +114,6 @@ std::vector<double> run_many(v1::Filigree::Stub& stub, const std::string& bytes,
   return fps;
 }
 
-// A server of the bench's own on a fresh data directory, and a stub with the
-// client library's channel settings: no limit on a SessionInfo's size, and a
-// fixed frame window (filigree/channel_arguments.h; with gRPC's adaptive one
-// a 1.25M frame took 3 ms more to arrive). Stopped, its data removed, when
-// destroyed.
-struct BenchServer {
-  BenchServer(const std::string& binary, const std::string& tag)
-      : data(std::filesystem::temp_directory_path() / ("filigree_bench_" + tag + "_" + std::to_string(::getpid()))),
-        server(binary, {"--data-dir", data.string(), "--max-message-mib", "256"}),
-        stub(v1::Filigree::NewStub(
-            grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()))) {}
-  ~BenchServer() {
-    server.terminate();
-    std::error_code ignored;  // a destructor must not throw
-    std::filesystem::remove_all(data, ignored);
-  }
-  BenchServer(const BenchServer&) = delete;
-  BenchServer& operator=(const BenchServer&) = delete;
-
-  std::filesystem::path data;
-  test::ServerProcess server;
-  std::unique_ptr<v1::Filigree::Stub> stub;
-};
-
-// The bench's meshes by size: "small" ≈10k and "medium" ≈150k (the real
-// camel, and the bunny scan subdivided once: no real mesh of that size here
-// is manifold) when the shared meshes are there, else the shipped Armadillo
-// and its subdivision; "large" ≥ 1M (the Armadillo subdivided, Loop twice
-// and √3 once, 1.25M), in locality order.
-struct Case {
-  std::string name;
-  TriMesh mesh;
-};
-Case bench_mesh(const std::string& size) {
-  const std::string repo = FILIGREE_REPO_DATA_DIR, shared = FILIGREE_SHARED_DATA_DIR;
-  const bool have_shared = std::filesystem::exists(shared + "/camel.off") && std::filesystem::exists(shared + "/bunny.off");
-  RepairReport report;
-  const auto load = [&](const std::string& path) { return repair_mesh(read_mesh(path), {}, &report); };
-  if (size == "small")
-    return have_shared ? Case{"camel (real, 9.8k)", load(shared + "/camel.off")} : Case{"armadillo (real, 26k)", load(repo + "/armadillo.off")};
-  if (size == "medium")
-    return have_shared ? Case{"bunny Loop x1", bench::subdivide(load(shared + "/bunny.off"), 1, 0)}
-                       : Case{"armadillo Loop x1 (104k)", bench::subdivide(load(repo + "/armadillo.off"), 1, 0)};
-  if (size == "large") {
-    const TriMesh large = bench::subdivide(load(repo + "/armadillo.off"), 2, 1);
-    return {"armadillo Loop x2 + sqrt3", permute_vertices(large, locality_order(large.positions))};
-  }
-  throw std::invalid_argument("--mesh must be small, medium or large, got " + size);
-}
-
 // --against: `a` and `b` alternate on one mesh, `rounds` times each (one
 // server idle while the other is driven), and print each round and the
 // medians of both with b's over a's.
@@ -369,7 +141,7 @@ int compare_servers(const std::string& a, const std::string& b, const std::strin
     for (int i = 0; i < 2; ++i) {
       // Each round starts with the other server, so neither always runs first.
       Side& s = sides[static_cast<std::size_t>((r + i) % 2)];
-      const Result res = run(*s.server->stub, s.created, 1, poses);
+      const Result res = run(*s.server->stub, s.created, 1, poses, Movement::kWholeBody, g_format);
       s.encode.push_back(res.encode_p50), s.compute.push_back(res.compute_p50), s.p50.push_back(res.p50);
       s.ratio.push_back(res.encode_p50 / res.compute_p50);
       std::printf("| %d | %s | %.3f | %.3f | %.3f | %.3f |\n", r + 1, (r + i) % 2 == 0 ? "a" : "b", res.compute_p50, res.encode_p50,
@@ -405,7 +177,7 @@ int single_stall(const std::string& server_binary) {
   std::atomic<int> calls{0};
   std::vector<std::thread> load;
   load.emplace_back([&] {
-    while (!stop) run(*stub, big, 0, 20);
+    while (!stop) run(*stub, big, 0, 20, Movement::kWholeBody, g_format);
   });
   for (int k = 0; k < 2; ++k)
     load.emplace_back([&] {
@@ -509,7 +281,7 @@ int main_impl(int argc, char** argv) {
     };
     for (const Run r : {Run{Movement::kWholeBody, 1}, Run{Movement::kWholeBody, 8}, Run{Movement::kLocal, 1}}) {
       if (large_only && r.watchers > 1) continue;
-      const Result res = run(*stub, created, r.watchers, poses, r.motion);
+      const Result res = run(*stub, created, r.watchers, poses, r.motion, g_format);
       std::printf("| %s | %zu | %s | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f | %.3f | %.1f%% | %.2e | %zu |\n",
                   c.name.c_str(), c.mesh.vertex_count(), r.motion == Movement::kWholeBody ? "whole body" : "local bump",
                   r.watchers, res.first, res.p50, res.p99, res.compute_p50, res.encode_p50, res.other_p50, res.encode_p50 / res.compute_p50,
@@ -521,7 +293,7 @@ int main_impl(int argc, char** argv) {
     // what a session holds of its own (issue 10: ≤ 64 bytes per vertex).
     const double one = resident_bytes(server.pid());
     constexpr int kFurther = 3;
-    for (int i = 0; i < kFurther; ++i) run(*stub, upload(*stub, bytes), 0, 5);
+    for (int i = 0; i < kFurther; ++i) run(*stub, upload(*stub, bytes), 0, 5, Movement::kWholeBody, g_format);
     const double n = static_cast<double>(c.mesh.vertex_count());
     memory.push_back({c.name, c.mesh.vertex_count(), (one - empty) / n, (resident_bytes(server.pid()) - one) / kFurther / n});
   }
