@@ -2,7 +2,8 @@
 // poses the base exactly as procedural_pose does, the older motions keep their
 // poses, phase 0 is the identity, and each motion does what it says — the fold
 // turns the far side a quarter turn, keeps the near side, and bends the band
-// without compressing or shearing it.
+// without compressing or shearing it, and the 360° twist turns a full turn
+// end to end.
 
 #include <algorithm>
 #include <cmath>
@@ -17,7 +18,7 @@
 namespace filigree {
 namespace {
 
-constexpr Motion kMotions[] = {Motion::kBend, Motion::kTwist, Motion::kWave, Motion::kBump, Motion::kFold};
+constexpr Motion kMotions[] = {Motion::kBend, Motion::kTwist, Motion::kWave, Motion::kBump, Motion::kFold, Motion::kTwist360};
 
 // n random points in the box [lo, lo + extent], plus its corners (so the box
 // is exactly the reference's bbox).
@@ -212,6 +213,49 @@ TEST(ProceduralMotion, BendKeepsTheNearHalfAndTwistTurnsAboutTheLongAxis) {
     }
   }
   EXPECT_GT(moved, 100);
+}
+
+// The angle a point at radius r from the long axis y (through `center`) turns
+// through about it, unwrapped along the axis from s = −1 to s = 1: the twist's
+// end-to-end angle. In 400 steps no step turns by half a turn for any twist
+// under 200 turns, so atan2's wrap cannot hide a turn.
+double end_to_end_angle(const MotionField& twist, const Vec3& center, double half, double r) {
+  double total = 0.0, previous = 0.0;
+  constexpr int kSteps = 400;
+  for (int k = 0; k <= kSteps; ++k) {
+    const double s = -1.0 + 2.0 * k / kSteps;
+    const Vec3 p = center + Vec3(r, s * half, 0.0);  // off the axis along +x
+    const Vec3 q = twist(p) - center;
+    const double angle = std::atan2(q.x(), q.z()) - std::atan2(r, 0.0);
+    if (k > 0) total += std::remainder(angle - previous, 2 * std::numbers::pi);
+    previous = angle;
+  }
+  return total;
+}
+
+TEST(ProceduralMotion, Twist360TurnsAFullTurnEndToEnd) {
+  const std::vector<Vec3> rest = cloud(Vec3(1, -1, 0), Vec3(2, 6, 3), 800, 8);  // a = y
+  const MotionField twist(rest, Motion::kTwist360, 1.0), quarter(rest, Motion::kTwist, 1.0);
+  const Vec3 center = twist.frame().center;
+  ASSERT_EQ(twist.frame().a, 1);
+  const double half = twist.frame().half;
+  // 360° end to end at full strength (−180° at s = −1, +180° at s = 1), half
+  // of it at phase ½; kTwist's 90° measured alike, as a check of the measure.
+  EXPECT_NEAR(end_to_end_angle(twist, center, half, 0.7), 2 * std::numbers::pi, 1e-9);
+  EXPECT_NEAR(end_to_end_angle(twist.with_phase(0.5), center, half, 0.7), std::numbers::pi, 1e-9);
+  EXPECT_NEAR(end_to_end_angle(quarter, center, half, 0.7), std::numbers::pi / 2, 1e-9);
+  const double diag = bounding_box_diagonal(rest);
+  for (const Vec3& p : rest) {
+    // A rotation about the long axis by 180° · s: lengths along and across it kept.
+    const double s = (p.y() - center.y()) / half;
+    const Vec3 q = twist(p) - center, r = p - center;
+    EXPECT_NEAR(q.y(), r.y(), 1e-12 * diag);
+    EXPECT_NEAR(std::hypot(q.x(), q.z()), std::hypot(r.x(), r.z()), 1e-12 * diag);
+    if (std::hypot(r.x(), r.z()) > 0.1) {
+      const double turned = std::remainder(std::atan2(q.x(), q.z()) - std::atan2(r.x(), r.z()), 2 * std::numbers::pi);
+      EXPECT_NEAR(std::remainder(turned - std::numbers::pi * s, 2 * std::numbers::pi), 0.0, 1e-9);
+    }
+  }
 }
 
 TEST(ProceduralMotion, BumpIsLocalAroundItsCentre) {

@@ -14,6 +14,7 @@ std::optional<Motion> parse_motion(const std::string& name) {
   if (name == "wave") return Motion::kWave;
   if (name == "bump") return Motion::kBump;
   if (name == "fold") return Motion::kFold;
+  if (name == "twist360") return Motion::kTwist360;
   return std::nullopt;
 }
 
@@ -24,6 +25,7 @@ const char* to_string(Motion m) {
     case Motion::kWave: return "wave";
     case Motion::kBump: return "bump";
     case Motion::kFold: return "fold";
+    case Motion::kTwist360: return "twist360";
   }
   return "?";
 }
@@ -147,6 +149,10 @@ Vec3 MotionField::operator()(const Vec3& p) const {
     }
     case Motion::kFold:
       return fold(p);
+    case Motion::kTwist360: {
+      const double angle = phase_ * std::numbers::pi * s;
+      return Eigen::AngleAxisd(angle, Vec3::Unit(f.a)) * (p - f.center) + f.center;
+    }
   }
   return p;
 }

@@ -22,9 +22,10 @@ enum class Motion {
   kWave,   // a travelling wave across the longest axis, 3% of the diagonal
   kBump,   // a local bump: points near the reference's extreme point along +b pushed out by 5% of the diagonal
   kFold,   // a sharp fold: 90° about c within the middle half of the longest axis (s in [−½, ½])
+  kTwist360,  // the twist of kTwist, ±180° at the ends: a full turn end to end
 };
 
-std::optional<Motion> parse_motion(const std::string& name);  // "bend", "twist", "wave", "bump", "fold"
+std::optional<Motion> parse_motion(const std::string& name);  // "bend", "twist", "wave", "bump", "fold", "twist360"
 const char* to_string(Motion m);
 
 // Where a motion happens: the bounding box of the reference points and what is
