@@ -16,12 +16,15 @@
 // divides the medians of those pairs.
 // Quality is measured on the last timed frame, at phase 1.
 //
-// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--bound N] [--kernels N] [--threads N]
+// Usage: filigree_bench_runtime [--mesh camel|armadillo|dragon|large] [--quick] [--bound N] [--kernels N] [--threads N] [--table]
 //   --quick: only the shipped Armadillo (for a fast look).
 //   --bound N: only the streaming-bound table, N times over (its spread on
 //   a shared machine).
 //   --kernels N: only the kernel's compiled copies against each other, N
 //   frames each.
+//   --table: only one quality table to choose T by (bench/quality_table.h):
+//   real meshes of several kinds × motions × T, and the runtime's quality
+//   targets computed from it; with --mesh, that mesh alone.
 
 #include <algorithm>
 #include <chrono>
@@ -38,14 +41,14 @@
 #include <utility>
 #include <vector>
 
-#include "bench/streaming_bound.h"
+#include "bench/quality_table.h"
+#include "bench/runtime_animation.h"
 #include "bench/sample_stats.h"
+#include "bench/session_mesh.h"
+#include "bench/streaming_bound.h"
 #include "bench/subdivide.h"
 #include "hierarchy/hierarchy.h"
 #include "metrics/mesh_metrics.h"
-#include "mesh/mesh_io.h"
-#include "mesh/mesh_validation.h"
-#include "mesh/vertex_order.h"
 #include "preprocess/preprocess.h"
 #include "runtime/deformer.h"
 #include "runtime/deformer_model.h"
@@ -58,36 +61,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
 
-constexpr int kRampFrames = 8;
-constexpr int kTimedFrames = 12;
-constexpr int kLastFrame = kRampFrames + kTimedFrames - 1;  // the quality frame
 constexpr Motion kMotions[] = {Motion::kBend, Motion::kTwist, Motion::kBump, Motion::kFold};
-
-// Ramp to full strength, then once round 0.8 … 1: the last timed frame is at
-// phase 1, so its truth is the field at full strength (the truth below still
-// takes phase_of(kLastFrame), whatever it is).
-double phase_of(int frame) {
-  if (frame < kRampFrames) return static_cast<double>(frame + 1) / kRampFrames;
-  return 0.9 + 0.1 * std::cos(2.0 * std::numbers::pi * (frame - kRampFrames) / (kTimedFrames - 1));
-}
-
-// The base vertices are original vertices: the pose is the field on their rest
-// positions, in base order.
-Pose base_pose(const Hierarchy& h, const MotionField& field) {
-  Pose pose;
-  pose.positions.reserve(h.base_vertices.size());
-  for (Index v : h.base_vertices) pose.positions.push_back(field(h.rest_positions[v]));
-  return pose;
-}
-
-TriMesh in_session_order(const TriMesh& mesh) { return permute_vertices(mesh, locality_order(mesh.positions)); }
-
-// Repaired and in the service's vertex order (a Morton curve, as sessions
-// use), so the numbers are those a session sees.
-TriMesh load_clean(const std::string& path) {
-  RepairReport report;
-  return in_session_order(repair_mesh(read_mesh(path), {}, &report));
-}
 
 // Per-frame stage times of the timed frames.
 struct Timing {
@@ -342,15 +316,32 @@ int main(int argc, char** argv) {
   std::string only;  // camel, armadillo, dragon or large; empty: all
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   int bound_only = 0, kernel_rounds = 0;
+  bool table = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) only = "armadillo";
     if (!std::strcmp(argv[i], "--mesh") && i + 1 < argc) only = argv[++i];
     if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threads = std::atoi(argv[++i]);
     if (!std::strcmp(argv[i], "--bound") && i + 1 < argc) bound_only = std::max(1, std::atoi(argv[++i]));
     if (!std::strcmp(argv[i], "--kernels") && i + 1 < argc) kernel_rounds = std::max(1, std::atoi(argv[++i]));
+    if (!std::strcmp(argv[i], "--table")) table = true;
   }
   const std::string shared = FILIGREE_SHARED_DATA_DIR, repo = FILIGREE_REPO_DATA_DIR;
   auto wanted = [&](const char* name) { return only.empty() || only == name; };
+  if (table) {
+    const std::vector<bench::TableMesh> all = {
+        {"armadillo", "scan, decimated; shipped", repo + "/armadillo.off"},
+        {"camel", "thin limbs", shared + "/camel.off"},
+        {"horse", "scan (Cyberware), faces inward", shared + "/horse.ply"},
+        {"bunny", "scan, remeshed", shared + "/bunny.off"},
+        {"elephant", "genus 3, coarse", shared + "/elephant.off"},
+        {"lion_head", "open (one boundary loop)", shared + "/lion_head.off"},
+    };
+    std::vector<bench::TableMesh> meshes;
+    for (const bench::TableMesh& m : all)
+      if (wanted(m.name.c_str())) meshes.push_back(m);
+    bench::print_quality_table(meshes, threads);
+    return 0;
+  }
   std::printf("# Filigree runtime benchmark (%d threads)\n\n"
               "Quality of each T on the last timed frame: RMS and max vertex distance as %% of the bbox diagonal and\n"
               "mean normal deviation, *to truth* (the analytic motion applied to every vertex; the base vertices are\n"
