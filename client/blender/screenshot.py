@@ -1,7 +1,7 @@
 """Makes docs/blender_addon.png: Blender with its UI (under Xvfb, see
 client/blender/screenshot.sh), the add-on's panel on a live session where
 "alice" (this Blender) lifted part of the base and "bob" (a Python client)
-pulled a vertex with a handle. For the docs; not a test."""
+pulled a vertex with a handle; both are listed as here. For the docs; not a test."""
 
 import sys
 from pathlib import Path
@@ -31,6 +31,9 @@ for panel in list(panel_classes()):
             pass
 
 
+PRESENT = []
+
+
 def setup():
     for obj in list(bpy.data.objects):
         bpy.data.objects.remove(obj)
@@ -58,6 +61,7 @@ def setup():
     bob = filigree.Client(address).join(link.session.id, link.session.editor_token)
     far = int(np.argmax(bob.rest_positions[:, 0]))
     bob.set_handles([far], [bob.rest_positions[far] + np.array([2.0, 0, 0], dtype=np.float32)], client_name="bob")
+    PRESENT.append(bob.presence("bob"))  # bob is listed as here while it is open
     for area in bpy.context.screen.areas:
         if area.type == "VIEW_3D":
             area.spaces[0].show_region_ui = True

@@ -461,8 +461,8 @@ elif mode == "undo":
     shown = []
     panel.FILIGREE_PT_session.draw(type("Panel", (), {"layout": Layout(shown)})(), bpy.context)
     labels = [item[1] for item in shown if item[0] == "label"]
-    check(any(t.startswith("alice (you) · editor") for t in labels) and any(t.startswith("carol · editor")
-                                                                           for t in labels), f"who is here: {labels}")
+    check({"alice (you)", "carol"} <= set(labels) and any(t.startswith("editor · ") for t in labels),
+          f"who is here: {labels}")
     check({("prop", "alice", "colour"), ("prop", "carol", "colour")} <= set(shown), "each with a colour swatch")
     check({("operator", "filigree.undo", "Undo"), ("operator", "filigree.redo", "Redo"),
            ("operator", "filigree.undo", "Undo anyway")} <= set(shown), f"undo, redo, undo anyway: {shown}")

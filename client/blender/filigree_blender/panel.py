@@ -55,15 +55,16 @@ class FILIGREE_PT_session(bpy.types.Panel):
         box.operator("filigree.leave", icon="UNLINKED")
         if link.role == live_link.EDITOR and link.base_name:
             history = layout.box()
-            history.label(text="Your changes in the session", icon="LOOP_BACK")
+            history.label(text="Your changes", icon="LOOP_BACK")
             row = history.row(align=True)
             row.enabled = not link.skinned
             row.operator("filigree.undo", text="Undo", icon="LOOP_BACK")
             row.operator("filigree.redo", text="Redo", icon="LOOP_FORWARDS")
-            history.label(text="Ctrl+Z / Ctrl+Shift+Z in the 3D View" if not link.skinned
-                          else "Posed by an armature: Ctrl+Z is Blender's")
+            for line in (["Ctrl+Z, Ctrl+Shift+Z", "over the 3D View"] if not link.skinned
+                         else ["Posed by an armature:", "Ctrl+Z is Blender's"]):
+                history.label(text=line)
             if link.note:
-                for line in _wrap(link.note, 48):
+                for line in _wrap(link.note, 30):
                     history.label(text=line)
             if link.refused:
                 force = history.operator(f"filigree.{link.refused}", text=f"{link.refused.title()} anyway",
@@ -81,10 +82,10 @@ class FILIGREE_PT_session(bpy.types.Panel):
             swatch = row.row()
             swatch.ui_units_x = 1.2
             swatch.prop(person, "colour", text="")
+            row.label(text=person.name + (" (you)" if person.you else ""))
             role = "editor" if person.editor else "viewer"
-            you = " (you)" if person.you else ""
-            busy = f" · touching {person.touching}" if person.touching else f" · idle {person.idle_seconds:.0f} s"
-            row.label(text=f"{person.name}{you} · {role}{busy}")
+            row.label(text=f"{role} · {person.touching} v" if person.touching
+                      else f"{role} · idle {person.idle_seconds:.0f} s")
         people = layout.box()
         people.label(text="Latest changes", icon="MOD_HUE_SATURATION")
         if not link.participants:
