@@ -131,7 +131,7 @@ class BaseMotion {
   BaseMotion(const AnimateArgs& a, const Hierarchy& h) : base_rest_(h.base_mesh().positions) {
     if (a.clip.empty()) {
       const auto motion = parse_motion(a.motion);
-      if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
+      if (!motion) throw std::invalid_argument("--motion takes bend, twist, twist360, wave, bump or fold, not '" + a.motion + "'");
       motion_ = *motion;
       return;
     }
@@ -220,7 +220,7 @@ void add_deform_commands(CLI::App& app) {
   auto an = std::make_shared<AnimateArgs>();
   CLI::App* animate_cmd = app.add_subcommand("animate", "Deform along a procedural base motion; .glb: one morph target per frame, else a file per frame");
   add_runtime_options(animate_cmd, *an);
-  animate_cmd->add_option("--motion", an->motion, "bend, twist, wave, bump or fold");
+  animate_cmd->add_option("--motion", an->motion, "bend, twist, twist360, wave, bump or fold");
   animate_cmd->add_option("--frames", an->frames, "Number of frames")->check(CLI::Range(1, 100000));
   animate_cmd->add_option("--fps", an->fps, "Frame rate of the glTF animation")->check(CLI::PositiveNumber);
   animate_cmd->add_option("--clip", an->clip, "Play this animation clip of a skinned input instead of --motion (needs H.rig from `preprocess`)");

@@ -195,7 +195,7 @@ std::vector<std::vector<float>> make_poses(const DriveArgs& a, const SessionMesh
   std::vector<std::vector<float>> out;
   if (!a.motion.empty()) {
     const auto motion = parse_motion(a.motion);
-    if (!motion) throw std::invalid_argument("--motion takes bend, twist, wave, bump or fold, not '" + a.motion + "'");
+    if (!motion) throw std::invalid_argument("--motion takes bend, twist, twist360, wave, bump or fold, not '" + a.motion + "'");
     const std::vector<Vec3> rest = points_from_xyz(session.base_positions);
     const int n = a.frames > 0 ? a.frames : 120;
     for (int f = 0; f < n; ++f) {
@@ -445,7 +445,7 @@ void add_service_commands(CLI::App& app) {
                "first frame including it, as read from the stream (before decoding); latency_decoded_*: the same "
                "with the frame decoded, as an engine uses it (what the C and Python clients' timings include)");
   add_session_options(dr, *d, "Write the received frames: .glb animation, other formats the last frame");
-  auto* m = dr->add_option("--motion", d->motion, "Procedural motion: bend, twist, wave, bump or fold");
+  auto* m = dr->add_option("--motion", d->motion, "Procedural motion: bend, twist, twist360, wave, bump or fold");
   auto* p = dr->add_option("--poses", d->poses, "Pose files (.pose or a posed base mesh), sent in turn")
                 ->check(CLI::ExistingFile)
                 ->excludes(m);
