@@ -20,7 +20,7 @@ constexpr auto kPresencePacing = std::chrono::milliseconds(100);
 
 std::string participant_colour(const std::string& name) {
   static constexpr std::array<const char*, 8> kPalette = {"#e6194b", "#3cb44b", "#4363d8", "#f58231",
-                                                          "#911eb4", "#42d4f4", "#f032e6", "#9a6324"};
+                                                          "#911eb4", "#bfef45", "#f032e6", "#9a6324"};
   // FNV-1a: the same colour on every server and in every client that hashes alike.
   std::uint32_t h = 2166136261u;
   for (unsigned char c : name) h = (h ^ c) * 16777619u;

@@ -27,7 +27,7 @@ export { MIN_INTERVAL_MS } from './paced-calls';
 // arrives (history authors, handles): FNV-1a of the name's UTF-8 bytes over
 // this palette. `darkText`: a label on it reads better in dark letters.
 export const PALETTE: readonly { css: string; darkText: boolean }[] = [
-  '#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#42d4f4', '#f032e6', '#9a6324',
+  '#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#bfef45', '#f032e6', '#9a6324',
 ].map((css) => ({ css, darkText: prefersDarkText(css) }));
 // A label's largest width and about its height (CSS: .participant-label), and its gap to the anchor.
 const LABEL_MAX_WIDTH = 160;

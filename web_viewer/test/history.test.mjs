@@ -45,7 +45,7 @@ const STOP_TIMEOUT_MS = 20_000;
 const PAUSE_MS = 600;
 const OUTCOME = { DONE: 0, PARTIAL: 1, CONFLICT: 2, NOTHING: 3 };
 // The server's palette (server/session_presence.cpp).
-const SERVER_PALETTE = ['#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#42d4f4', '#f032e6', '#9a6324'];
+const SERVER_PALETTE = ['#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#bfef45', '#f032e6', '#9a6324'];
 
 let browser;
 let server;

@@ -36,7 +36,7 @@ describe('participant colours', () => {
   it('spread over the whole palette, with label text that reads on each', () => {
     const used = new Set(Array.from({ length: 200 }, (_, i) => participantColour(`web-${i.toString(16).padStart(6, '0')}`).css));
     expect(used.size).toBe(PALETTE.length);
-    expect(PALETTE.map((p) => p.css)).toEqual(['#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#42d4f4', '#f032e6', '#9a6324']);
+    expect(PALETTE.map((p) => p.css)).toEqual(['#e6194b', '#3cb44b', '#4363d8', '#f58231', '#911eb4', '#bfef45', '#f032e6', '#9a6324']);
     expect(PALETTE.filter((p) => !p.darkText).map((p) => p.css)).toEqual(['#e6194b', '#4363d8', '#911eb4', '#9a6324']);
     expect(prefersDarkText('#ffffff')).toBe(true);
     expect(prefersDarkText('#000000')).toBe(false);
