@@ -388,6 +388,10 @@ class Session {
   // An undo, redo or restore's outcome applied (mutex_ held): handles,
   // the pose's frame, the journal's progress; returns the journal seq.
   std::uint64_t apply_history_locked(const std::string& author, const HistoryOutcome& outcome, SessionProgress& progress);
+  // An undo, redo or restore: `act` (under mutex_) changes record_.pose
+  // through the history; what it did is applied, journaled and answered.
+  v1::UndoResponse change_by_history(const std::string& author,
+                                     const std::function<HistoryOutcome(const ChangeOrigin&)>& act);
   // Finishes an undo, redo or restore: journal, threshold, answer's version.
   v1::UndoResponse finish_history(HistoryOutcome outcome, std::uint64_t seq, SessionProgress& progress,
                                   std::uint64_t accepted);

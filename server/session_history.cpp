@@ -56,7 +56,8 @@ v1::UndoResponse Session::finish_history(HistoryOutcome outcome, std::uint64_t s
   return std::move(outcome.answer);
 }
 
-v1::UndoResponse Session::undo(const std::string& author, bool redo, bool force) {
+v1::UndoResponse Session::change_by_history(const std::string& author,
+                                            const std::function<HistoryOutcome(const ChangeOrigin&)>& act) {
   HistoryOutcome outcome;
   std::uint64_t seq = 0, accepted = 0;
   SessionProgress progress;
@@ -64,17 +65,22 @@ v1::UndoResponse Session::undo(const std::string& author, bool redo, bool force)
     std::lock_guard lock(mutex_);
     if (evicted_) throw_evicted();
     accepted = assigned_version_;
-    const ChangeOrigin by{author, 0, unix_seconds(), assigned_version_};
-    outcome = redo ? history_.redo(by, force, record_.pose, threshold_locked())
-                   : history_.undo(by, force, record_.pose, threshold_locked());
+    outcome = act({author, 0, unix_seconds(), assigned_version_});
     const v1::UndoResponse::Outcome o = outcome.answer.outcome();
-    if (o == v1::UndoResponse::OUTCOME_NOTHING || o == v1::UndoResponse::OUTCOME_CONFLICT) {
+    if (o == v1::UndoResponse::OUTCOME_NOTHING || o == v1::UndoResponse::OUTCOME_CONFLICT) {  // nothing changed
       outcome.answer.set_accepted_at_version(accepted);
       return std::move(outcome.answer);
     }
     seq = apply_history_locked(author, outcome, progress);
   }
   return finish_history(std::move(outcome), seq, progress, accepted);
+}
+
+v1::UndoResponse Session::undo(const std::string& author, bool redo, bool force) {
+  return change_by_history(author, [&](const ChangeOrigin& by) {
+    return redo ? history_.redo(by, force, record_.pose, threshold_locked())
+                : history_.undo(by, force, record_.pose, threshold_locked());
+  });
 }
 
 v1::Checkpoint Session::create_checkpoint(const std::string& author, const std::string& name) {
@@ -89,21 +95,9 @@ v1::Checkpoint Session::create_checkpoint(const std::string& author, const std::
 }
 
 v1::UndoResponse Session::restore_checkpoint(const std::string& author, std::uint64_t id) {
-  HistoryOutcome outcome;
-  std::uint64_t seq = 0, accepted = 0;
-  SessionProgress progress;
-  {
-    std::lock_guard lock(mutex_);
-    if (evicted_) throw_evicted();
-    accepted = assigned_version_;
-    outcome = history_.restore({author, 0, unix_seconds(), assigned_version_}, id, record_.pose, threshold_locked());
-    if (outcome.answer.outcome() == v1::UndoResponse::OUTCOME_NOTHING) {
-      outcome.answer.set_accepted_at_version(accepted);
-      return std::move(outcome.answer);
-    }
-    seq = apply_history_locked(author, outcome, progress);
-  }
-  return finish_history(std::move(outcome), seq, progress, accepted);
+  return change_by_history(author, [&](const ChangeOrigin& by) {
+    return history_.restore(by, id, record_.pose, threshold_locked());
+  });
 }
 
 v1::CheckpointDiff Session::diff_checkpoint(std::uint64_t id) const {
