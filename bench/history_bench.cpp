@@ -21,7 +21,10 @@
 // - undo latency: after a change of one gesture (SubmitPose, its frame
 //   seen on a Watch stream), the Undo call's round trip, and the time until
 //   the frame including the undo (a version above the answer's
-//   accepted_at_version) arrives on the Watch stream; p50 and p99.
+//   accepted_at_version) arrives on the Watch stream; p50 and p99; also
+//   with the session's history at its bound (1000 entries or 64 MiB), as
+//   after a long session: an undo is answered once the whole history is
+//   written durably.
 //
 // Target: the history costs ≤ 5% of pose → frame p50 on both meshes.
 //
@@ -29,12 +32,15 @@
 //        rounds a mesh; default 9) [--poses N] (poses a drive; default 300,
 //        120 at ≥ 1M: fewer make each round's two drives closer in time)
 //        [--undos N] (undos a row; default 40) [--mesh medium|large] (one
-//        mesh only)
+//        mesh only) [--full-history] (the rounds' session with the history
+//        starts with it at its bound: each maintenance tick of a drive
+//        then writes all of it)
 
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <cstring>
 #include <mutex>
 #include <span>
 #include <stdexcept>
@@ -150,6 +156,32 @@ v1::History get_history(v1::Filigree::Stub& stub, const v1::CreateSessionRespons
   return h;
 }
 
+// Whole-body changes of an author of their own, one gesture each, until the
+// history drops its oldest entries: it is at its bound. The newest entry's
+// description (first_seq, bytes).
+v1::History fill_history(v1::Filigree::Stub& stub, const v1::CreateSessionResponse::Created& created) {
+  const std::string id = created.info().session_id();
+  const MotionPoses motions(created);
+  for (int i = 1; i <= 20000; ++i) {
+    v1::DriveRequest change;
+    change.set_session_id(id);
+    change.set_client_name("filler");
+    change.set_gesture_id(static_cast<std::uint64_t>(100000 + i));
+    motions.fill(change, Movement::kWholeBody, i);
+    v1::SubmitPoseResponse accepted;
+    const grpc::Status status = stub.SubmitPose(context(id, created.editor_token()).get(), change, &accepted);
+    if (!status.ok()) throw std::runtime_error("SubmitPose: " + status.error_message());
+    if (i % 25 != 0) continue;
+    v1::GetHistoryRequest r;
+    r.set_session_id(id);
+    r.set_newest(1);
+    v1::History h;
+    if (!stub.GetHistory(context(id, created.viewer_token()).get(), r, &h).ok()) throw std::runtime_error("GetHistory failed");
+    if (h.first_seq() > 1) return h;
+  }
+  throw std::runtime_error("the history never reached its bound");
+}
+
 struct EntrySize {
   std::size_t entries = 0, bytes = 0, vertices = 0;  // kept; History.bytes; base vertices listed over the entries
 };
@@ -169,10 +201,13 @@ EntrySize entry_size(v1::Filigree::Stub& stub, const std::string& bytes, Movemen
 struct DirectTime {
   std::size_t base_vertices = 0;
   double record_us = 0.0, serialize_ms = 0.0;  // medians: a pose recorded; the history serialized
+  std::size_t full_entries = 0, full_bytes = 0;  // the history at its bound
+  double full_serialize_ms = 0.0;                // and serialize() of it, median
 };
 
 // The history's own work in this process for `poses` whole-body poses of
-// the drive, as one stream's gesture (one entry every pose extends).
+// the drive, as one stream's gesture (one entry every pose extends); then
+// whole-body gestures of one pose each until it is at its bound.
 DirectTime direct_time(const v1::CreateSessionResponse::Created& created, int poses) {
   const auto& base = created.info().base().positions();
   DirectTime out;
@@ -199,22 +234,45 @@ DirectTime direct_time(const v1::CreateSessionResponse::Created& created, int po
   }
   out.record_us = median(record);
   out.serialize_ms = median(serialize);
+  for (int g = 1; static_cast<std::size_t>(g) == history.size(); ++g) {  // until an entry is dropped
+    v1::DriveRequest r;
+    motions.fill(r, Movement::kWholeBody, poses + g);
+    const std::span<const float> after(r.positions().data(), static_cast<std::size_t>(r.positions_size()));
+    history.record_pose({kAuthor, static_cast<std::uint64_t>(g), server::unix_seconds(), static_cast<std::uint64_t>(poses + g)},
+                        v1::HistoryEntry::KIND_POSE, {}, pose, after);
+    std::copy(after.begin(), after.end(), pose.begin());
+  }
+  out.full_entries = history.size();
+  out.full_bytes = history.bytes();
+  serialize.clear();
+  for (int i = 0; i < 5; ++i) {
+    const auto start = Clock::now();
+    const std::string bytes = history.serialize();
+    serialize.push_back(ms_since(start));
+  }
+  out.full_serialize_ms = median(serialize);
   return out;
 }
 
 struct UndoTimes {
   std::vector<double> call, frame;  // ms from sending Undo: its answer, the frame including it on the Watch stream
   std::size_t not_done = 0;
+  std::size_t entries = 0, bytes = 0;  // the history at the start (full: at its bound)
 };
 
 // `undos` times: a change of `motion` (one gesture, SubmitPose), its frame
-// seen, then the author's Undo.
-UndoTimes undo_latency(v1::Filigree::Stub& stub, const std::string& bytes, Movement motion, int undos) {
+// seen, then the author's Undo. `full`: the history filled to its bound first.
+UndoTimes undo_latency(v1::Filigree::Stub& stub, const std::string& bytes, Movement motion, int undos, bool full) {
   const auto created = upload(stub, bytes);
   const std::string id = created.info().session_id();
   const MotionPoses motions(created);
-  FrameLog frames(stub, created);
   UndoTimes out;
+  if (full) {
+    const v1::History h = fill_history(stub, created);
+    out.bytes = h.bytes();
+    out.entries = static_cast<std::size_t>(get_history(stub, created).entries_size());
+  }
+  FrameLog frames(stub, created);
   for (int i = 1; i <= undos; ++i) {
     v1::DriveRequest change;
     change.set_session_id(id);
@@ -249,17 +307,23 @@ struct Cost {
   double direct = 0.0;  // record_pose's median over the median p50 without the history
 };
 
-Cost compare(const std::string& binary, const Case& c, const std::string& bytes, int rounds, int poses_asked, int undos) {
+Cost compare(const std::string& binary, const Case& c, const std::string& bytes, int rounds, int poses_asked, int undos,
+             bool full_history) {
   const std::size_t n = c.mesh.vertex_count();
   const int poses = poses_asked > 0 ? poses_asked : n > 500000 ? 120 : 300;
   BenchServer on(binary, "history_on"), off(binary, "history_off", {"--history-entries", "0"});
   const auto on_session = upload(*on.stub, bytes), off_session = upload(*off.stub, bytes);
+  std::printf("\n## %s (%zu vertices)\n\n", c.name.c_str(), n);
+  if (full_history) {
+    const v1::History h = fill_history(*on.stub, on_session);
+    std::printf("The session with the history starts with it at its bound: %.1f MiB, oldest entry %llu.\n\n",
+                static_cast<double>(h.bytes()) / 1048576.0, static_cast<unsigned long long>(h.first_seq()));
+  }
   run(*on.stub, on_session, 1, 20);  // the first drive of each: caches, allocator, the first keyframe
   run(*off.stub, off_session, 1, 20);
-  std::printf("\n## %s (%zu vertices)\n\nPose → frame, whole body, 1 watcher, %d poses a drive, each round starting with the other "
-              "server:\n\n| round | history | p50 ms | p99 ms | compute p50 ms | encode p50 ms | other p50 ms |\n"
-              "|---:|---|---:|---:|---:|---:|---:|\n",
-              c.name.c_str(), n, poses);
+  std::printf("Pose → frame, whole body, 1 watcher, %d poses a drive, each round starting with the other server:\n\n"
+              "| round | history | p50 ms | p99 ms | compute p50 ms | encode p50 ms | other p50 ms |\n|---:|---|---:|---:|---:|---:|---:|\n",
+              poses);
   std::fflush(stdout);
   std::vector<double> p50[2], other[2], ratio;
   for (int r = 0; r < rounds; ++r) {
@@ -285,11 +349,14 @@ Cost compare(const std::string& binary, const Case& c, const std::string& bytes,
               "Rounds' on / off: median %.3f (cost %+.1f%%), range %.3f–%.3f; medians' ratio %.3f. The driven session's history "
               "after them: %d entries, %.1f KiB.\n\n"
               "In this process, the same poses into one entry (%zu base vertices a pose): EditHistory::record_pose %.1f µs a pose "
-              "(median; %.3f%% of the p50 without the history), serialize() of that history %.3f ms.\n",
+              "(median; %.3f%% of the p50 without the history), serialize() of that history %.3f ms; filled to its bound (%zu entries, "
+              "%.1f MiB), serialize() %.1f ms (under the session's lock when a maintenance tick, an undo, a redo or a checkpoint "
+              "saves it).\n",
               rounds, median(p50[1]), median(other[1]), median(p50[0]), median(other[0]), median(ratio), 100.0 * cost.cost,
               *std::min_element(ratio.begin(), ratio.end()), *std::max_element(ratio.begin(), ratio.end()),
               median(p50[0]) / median(p50[1]), driven.entries_size(), static_cast<double>(driven.bytes()) / 1024.0,
-              d.base_vertices, d.record_us, 100.0 * cost.direct, d.serialize_ms);
+              d.base_vertices, d.record_us, 100.0 * cost.direct, d.serialize_ms, d.full_entries,
+              static_cast<double>(d.full_bytes) / 1048576.0, d.full_serialize_ms);
 
   // The bytes of an entry: 4 gestures of 20 poses each.
   std::printf("\nBytes an entry holds (History.bytes / entries kept), 4 gestures of 20 poses on a fresh session:\n\n"
@@ -309,11 +376,16 @@ Cost compare(const std::string& binary, const Case& c, const std::string& bytes,
   std::printf("\nUndo, %d a row, each after a change of one gesture whose frame was seen:\n\n| change undone | undos done | "
               "Undo call p50 ms | p99 ms | to its frame on a Watch p50 ms | p99 ms |\n|---|---:|---:|---:|---:|---:|\n",
               undos);
-  for (const Movement m : {Movement::kWholeBody, Movement::kLocal}) {
-    const UndoTimes u = undo_latency(*on.stub, bytes, m, undos);
-    std::printf("| %s | %zu | %.2f | %.2f | %.2f | %.2f |\n", m == Movement::kWholeBody ? "whole body" : "local bump",
-                u.frame.size(), percentile(u.call, 0.5), percentile(u.call, 0.99), percentile(u.frame, 0.5),
-                percentile(u.frame, 0.99));
+  for (const auto& [m, full] : {std::pair{Movement::kWholeBody, false}, {Movement::kLocal, false}, {Movement::kWholeBody, true}}) {
+    const UndoTimes u = undo_latency(*on.stub, bytes, m, undos, full);
+    char what[160];
+    std::snprintf(what, sizeof what, "%s%s", m == Movement::kWholeBody ? "whole body" : "local bump",
+                  full ? ", the history at its bound" : "");
+    if (full)
+      std::snprintf(what + std::strlen(what), sizeof what - std::strlen(what), " (%zu entries, %.1f MiB)", u.entries,
+                    static_cast<double>(u.bytes) / 1048576.0);
+    std::printf("| %s | %zu | %.2f | %.2f | %.2f | %.2f |\n", what, u.frame.size(), percentile(u.call, 0.5),
+                percentile(u.call, 0.99), percentile(u.frame, 0.5), percentile(u.frame, 0.99));
     if (u.not_done) std::printf("(%zu undos did not answer OUTCOME_DONE)\n", u.not_done);
     std::fflush(stdout);
   }
@@ -323,6 +395,7 @@ Cost compare(const std::string& binary, const Case& c, const std::string& bytes,
 int main_impl(int argc, char** argv) {
   std::string binary = FILIGREE_SERVER_BINARY;
   int rounds = 9, poses = 0, undos = 40;
+  bool full_history = false;
   std::vector<std::string> sizes{"medium", "large"};
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -332,17 +405,19 @@ int main_impl(int argc, char** argv) {
       poses = std::max(1, std::stoi(argv[++i]));
     } else if (a == "--undos" && i + 1 < argc) {
       undos = std::max(1, std::stoi(argv[++i]));
+    } else if (a == "--full-history") {
+      full_history = true;
     } else if (a == "--mesh" && i + 1 < argc) {
       sizes = {argv[++i]};
     } else {
       binary = a;
     }
   }
-  std::printf("# What the edit history costs (%s)\n", binary.c_str());
+  std::printf("# What the edit history costs (%s%s)\n", binary.c_str(), full_history ? ", the history at its bound" : "");
   std::vector<Cost> costs;
   for (const std::string& size : sizes) {
     const Case c = bench_mesh(size);
-    costs.push_back(compare(binary, c, obj_bytes(c.mesh), rounds, poses, undos));
+    costs.push_back(compare(binary, c, obj_bytes(c.mesh), rounds, poses, undos, full_history));
   }
   std::printf("\nTarget: the history costs ≤ %.0f%% of pose → frame p50 (median of the rounds' on / off − 1):", 100.0 * kTarget);
   bool met = true;
