@@ -61,9 +61,11 @@ void EditHistory::close_open(const std::string& author) {
   const auto it = open_.find(author);
   if (it == open_.end()) return;
   if (Entry* e = find(it->second)) {
+    const std::size_t old_bytes = e->bytes();
     e->open = false;
     e->slot = {};
     e->slot.shrink_to_fit();
+    bytes_ -= old_bytes - e->bytes();  // the slots counted while open go
   }
   open_.erase(it);
 }
@@ -73,15 +75,19 @@ EditHistory::Entry& EditHistory::entry_for(const ChangeOrigin& origin, Kind kind
     if (Entry* e = find(it->second); e && e->open && e->info.kind() == kind) {
       const bool same_gesture = origin.gesture != 0
                                     ? e->info.gesture_id() == origin.gesture
-                                    : e->info.gesture_id() == 0 && origin.time - e->info.end_time() < limits_.pause_seconds;
+                                    : e->info.gesture_id() == 0 && e->stream == origin.stream &&
+                                          origin.time - e->info.end_time() < limits_.pause_seconds;
       if (same_gesture) return *e;
     }
   close_open(origin.author);
   // A new change: what the author undid can no longer be redone.
   redo_.erase(origin.author);
   Entry& e = append(origin, kind);
+  const std::size_t old_bytes = e.bytes();
   e.open = true;
+  e.stream = origin.stream;
   e.slot.assign(base_vertices_, kNoSlot);
+  account(e, old_bytes);  // an open entry's slots count, and go with it
   open_[origin.author] = e.info.seq();
   trim();  // may drop old entries, never this one (the newest)
   return entries_.back();

@@ -46,6 +46,9 @@ struct ChangeOrigin {
   std::uint64_t gesture = 0;
   double time = 0.0;
   std::uint64_t version = 0;
+  // The stream the change came on (a Drive stream's driver id; 0: a unary
+  // call): without a gesture id, another stream starts a new entry.
+  std::uint64_t stream = 0;
 };
 
 // What an undo, redo or restore did; `pose` was changed in place. The
@@ -121,6 +124,7 @@ class EditHistory {
     // lookups cost ~0.5 ms a full pose of 5,000 vertices.
     std::vector<std::uint32_t> slot;
     bool open = false;
+    std::uint64_t stream = 0;  // ChangeOrigin::stream of its first change
     std::size_t bytes() const;
   };
   static constexpr std::uint32_t kNoSlot = ~std::uint32_t{0};

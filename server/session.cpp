@@ -195,7 +195,7 @@ void Session::merge(const PoseOrigin& origin,
     if (closed_) return;
     // Handles edit on top of the skeleton: solved again from the new skinned base.
     if (skinned && !handles_.empty()) handles_dirty_ = true;
-    history_.record_pose({origin.client_name, origin.gesture, unix_seconds(), assigned_version_},
+    history_.record_pose({origin.client_name, origin.gesture, unix_seconds(), assigned_version_, origin.driver},
                          v1::HistoryEntry::KIND_POSE, indices, record_.pose, positions);
     for (std::size_t i = 0; i < count; ++i) {
       const std::size_t v = indices.empty() ? i : indices[i];
