@@ -109,6 +109,7 @@ class EditHistory {
   // Changes recorded since the last call (for persisting only when needed).
   bool take_dirty() { return std::exchange(dirty_, false); }
   void mark_dirty() { dirty_ = true; }
+  bool dirty() const { return dirty_; }
 
  private:
   struct Entry {

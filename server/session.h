@@ -232,9 +232,10 @@ class Session {
 
   // Writes the history where the journal keeps it (Journal::write_history)
   // if it changed since the last write; a failure is logged and retried at
-  // the next call. Called after undo, redo and checkpoints, and by the
-  // registry's maintenance for the entries of gestures.
-  void persist_history();
+  // the next call. Called after undo, redo and checkpoints, at shutdown, and
+  // by the registry's maintenance (`tick`) for the entries of gestures: then
+  // only after a second without activity, or 10 s after the last write.
+  void persist_history(bool tick = false);
   // Whether set_threshold(threshold, whole_mesh) would first derive the
   // mesh's node graph and region optimisation's data (once per mesh; ~1 s
   // at 1.25M vertices), or, for whole_mesh, make T = ∞'s factorisation
@@ -435,6 +436,7 @@ class Session {
   std::map<std::uint32_t, std::uint64_t> level_frames_encoded_;  // mutex_; for ListSessions
   std::set<std::uint32_t> levels_building_;
   EditHistory history_;  // mutex_
+  std::chrono::steady_clock::time_point history_saved_{};  // mutex_
   // Presence (session_presence.cpp), mutex_.
   struct PresenceState {
     Role role = Role::kNone;

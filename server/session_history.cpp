@@ -120,12 +120,22 @@ std::map<std::string, std::pair<std::vector<std::uint32_t>, double>> Session::la
   return history_.latest_by_author();
 }
 
-void Session::persist_history() {
+void Session::persist_history(bool tick) {
   if (!journal_.write_history) return;
   std::string bytes;
   {
     std::lock_guard lock(mutex_);
-    if (!history_.take_dirty()) return;
+    const auto now = std::chrono::steady_clock::now();
+    // The history is written whole, serialized under this lock (tens of ms
+    // at its bound): while a drag goes on the tick waits for a second's pause
+    // (at most 10 s), so the drag's frames are not held for it.
+    if (!history_.dirty()) {
+      history_saved_ = now;  // the 10 s count from when it last had nothing to write
+      return;
+    }
+    if (tick && now - last_activity_ < std::chrono::seconds(1) && now - history_saved_ < std::chrono::seconds(10)) return;
+    history_.take_dirty();
+    history_saved_ = now;
     bytes = history_.serialize();
   }
   try {

@@ -337,7 +337,7 @@ void SessionRegistry::maintain() {
   }
   for (const auto& [id, e] : entries) {
     const auto& s = e.session;
-    s->persist_history();  // the entries of gestures since the last tick
+    s->persist_history(/*tick=*/true);  // the entries of gestures since the last tick
     s->flush_presence();
     if (shared) {
       Renewal renewal = Renewal::kHeld;
