@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterator, Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
 from . import _library
 from ._library import check, lib, read_string, token_bytes
-from .errors import StreamEnded
+from .handle_stream import HandleStream
 
 if TYPE_CHECKING:
     from .session import Session
@@ -33,23 +33,20 @@ class HistoryState:
     max_error: float
 
 
-class HistoryExport:
+class HistoryExport(HandleStream[HistoryState]):
     """The states of a range of the history, oldest first (Session.export_history).
     Iterate it; each state is deformed by the server as it is read. Use as a
     context manager (or close()) to stop early."""
+
+    _what = "export"
+    _close = staticmethod(lambda handle: lib.filigree_history_export_close(handle))
+    _free = staticmethod(lambda handle: lib.filigree_history_export_free(handle))
 
     def __init__(self, session: "Session", from_entry: int, to_entry: int, token: Optional[str]) -> None:
         handle = ctypes.c_void_p()
         check(lib.filigree_export_history(session.handle, token_bytes(token), int(from_entry), int(to_entry),
                                           ctypes.byref(handle)))
-        self._session = session
-        self._handle = handle
-
-    @property
-    def handle(self) -> ctypes.c_void_p:
-        if not self._handle:
-            raise ValueError("the export was freed")
-        return self._handle
+        super().__init__(session, handle)
 
     def next(self) -> HistoryState:
         """Blocks for the next state. Raises StreamEnded once every state was
@@ -65,28 +62,3 @@ class HistoryExport:
                                                     base_pose.size, None))
         return HistoryState(state.entry, read_string(lib.filigree_history_export_author, self.handle), state.time,
                             state.version, base_pose, positions, state.max_error)
-
-    def __iter__(self) -> Iterator[HistoryState]:
-        while True:
-            try:
-                yield self.next()
-            except StreamEnded:
-                return
-
-    def close(self) -> None:
-        """Stops the export (what is left is not sent); raises if it had failed. Idempotent."""
-        check(lib.filigree_history_export_close(self.handle))
-
-    def free(self) -> None:
-        if self._handle:
-            lib.filigree_history_export_free(self._handle)
-            self._handle = None
-
-    def __enter__(self) -> "HistoryExport":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.free()
-
-    def __del__(self) -> None:
-        self.free()

@@ -5,14 +5,15 @@ from __future__ import annotations
 
 import ctypes
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterator, Optional
+from typing import TYPE_CHECKING, Optional
 
 import numpy as np
 
 from . import _library
 from ._library import check, lib, read_string, token_bytes
-from .errors import DeadlineExceeded, StreamEnded
+from .errors import DeadlineExceeded
 from .history import _indexed_uint32
+from .handle_stream import HandleStream
 from .streams import _wait
 
 if TYPE_CHECKING:
@@ -53,24 +54,21 @@ class Presence:
         return self.get(client_name) is not None
 
 
-class PresenceWatcher:
+class PresenceWatcher(HandleStream["Presence"]):
     """A presence stream (Session.presence): the current presence first,
     then a new one whenever it changes (at most every 100 ms). Its
     client_name is listed as present while it is open. Iterate it, or poll;
     use as a context manager (or close())."""
 
+    _what = "presence stream"
+    _close = staticmethod(lambda handle: lib.filigree_presence_close(handle))
+    _free = staticmethod(lambda handle: lib.filigree_presence_free(handle))
+
     def __init__(self, session: "Session", client_name: str, token: Optional[str]) -> None:
         handle = ctypes.c_void_p()
         check(lib.filigree_presence_open(session.handle, token_bytes(token), client_name.encode(),
                                          ctypes.byref(handle)))
-        self._session = session  # keeps the connection's Python objects alive
-        self._handle = handle
-
-    @property
-    def handle(self) -> ctypes.c_void_p:
-        if not self._handle:
-            raise ValueError("the presence stream was freed")
-        return self._handle
+        super().__init__(session, handle)
 
     def poll(self) -> Optional[Presence]:
         """The newest presence if it is newer than the last one polled, else
@@ -107,30 +105,3 @@ class PresenceWatcher:
         presence = self.poll()
         assert presence is not None  # wait() said one was waiting
         return presence
-
-    def __iter__(self) -> Iterator[Presence]:
-        """Presences as they change (the newest when several wait), until the stream ends."""
-        while True:
-            try:
-                yield self.next()
-            except StreamEnded:
-                return
-
-    def close(self) -> None:
-        """Ends the stream; raises if it had failed. Idempotent."""
-        check(lib.filigree_presence_close(self.handle))
-
-    def free(self) -> None:
-        """Ends the stream if open and releases the handle. Idempotent."""
-        if self._handle:
-            lib.filigree_presence_free(self._handle)
-            self._handle = None
-
-    def __enter__(self) -> "PresenceWatcher":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.free()
-
-    def __del__(self) -> None:
-        self.free()
