@@ -297,26 +297,47 @@ export class ParticipantsLayer {
   // The panel's legend: a swatch, the name and the handle count per participant.
   private renderLegend(): void {
     if (this.drawn.length === 0) {
-      const none = document.createElement('li');
-      none.className = 'note';
-      none.textContent = 'No other participant holds handles.';
-      this.legend.replaceChildren(none);
+      this.legend.replaceChildren(noteLine('No other participant holds handles.'));
       return;
     }
-    this.legend.replaceChildren(...this.drawn.map((p) => {
-      const item = document.createElement('li');
-      item.dataset.participant = p.name;
-      const swatch = document.createElement('span');
-      swatch.className = 'swatch';
-      swatch.style.background = p.colour;
-      const name = document.createElement('span');
-      name.className = 'participant-name';
-      name.textContent = p.name || '(unnamed client)';
-      const count = document.createElement('span');
-      count.className = 'participant-count';
-      count.textContent = `${p.handles.length} handle${p.handles.length === 1 ? '' : 's'}`;
-      item.append(swatch, name, count);
-      return item;
-    }));
+    this.legend.replaceChildren(...this.drawn.map((p) =>
+      participantLine(p.name, p.colour, p.name || '(unnamed client)',
+        [`${p.handles.length} handle${p.handles.length === 1 ? '' : 's'}`])));
   }
+}
+
+// A panel list's line when it has nothing to list.
+export function noteLine(text: string): HTMLLIElement {
+  const none = document.createElement('li');
+  none.className = 'note';
+  none.textContent = text;
+  return none;
+}
+
+// A participant's line in a panel list: their colour's swatch, their name
+// (`label`), then `counts` (what they hold or are) and `activity` (what they do).
+export function participantLine(name: string, colour: string, label: string, counts: string[],
+  activity?: string): HTMLLIElement {
+  const item = document.createElement('li');
+  item.dataset.participant = name;
+  const swatch = document.createElement('span');
+  swatch.className = 'swatch';
+  swatch.style.background = colour;
+  const nameSpan = document.createElement('span');
+  nameSpan.className = 'participant-name';
+  nameSpan.textContent = label;
+  item.append(swatch, nameSpan);
+  for (const text of counts) {
+    const count = document.createElement('span');
+    count.className = 'participant-count';
+    count.textContent = text;
+    item.append(count);
+  }
+  if (activity) {
+    const detail = document.createElement('span');
+    detail.className = 'participant-activity';
+    detail.textContent = activity;
+    item.append(detail);
+  }
+  return item;
 }

@@ -18,7 +18,7 @@ import * as THREE from 'three';
 import { Code, isCode, type Presence, type SessionClient } from './client';
 import { Participant_Role } from './gen/filigree/v1/filigree_pb';
 import { PacedCalls } from './paced-calls';
-import { prefersDarkText } from './participants';
+import { noteLine, participantLine, prefersDarkText } from './participants';
 import { isFinal, retryDelay } from './reconnect';
 import type { MeshView } from './scene';
 
@@ -377,33 +377,13 @@ export class PresenceLayer {
   // The panel: a line per participant (swatch, name, role, what they do).
   private renderList(): void {
     if (this.participants.length === 0) {
-      const none = document.createElement('li');
-      none.className = 'note';
-      none.textContent = 'No one is here.';
-      this.list.replaceChildren(none);
+      this.list.replaceChildren(noteLine('No one is here.'));
       return;
     }
     this.list.replaceChildren(...this.participants.map((p) => {
-      const item = document.createElement('li');
-      item.dataset.participant = p.name;
+      const item = participantLine(p.name, p.colour, (p.name || '(unnamed client)') + (p.you ? ' (you)' : ''), [p.role],
+        activity(p, this.baseIds.length) || undefined);
       item.dataset.role = p.role;
-      const swatch = document.createElement('span');
-      swatch.className = 'swatch';
-      swatch.style.background = p.colour;
-      const name = document.createElement('span');
-      name.className = 'participant-name';
-      name.textContent = (p.name || '(unnamed client)') + (p.you ? ' (you)' : '');
-      const role = document.createElement('span');
-      role.className = 'participant-count';
-      role.textContent = p.role;
-      const doing = activity(p, this.baseIds.length);
-      item.append(swatch, name, role);
-      if (doing) {
-        const detail = document.createElement('span');
-        detail.className = 'participant-activity';
-        detail.textContent = doing;
-        item.append(detail);
-      }
       return item;
     }));
   }
