@@ -16,6 +16,7 @@
 
 #include "cli/channel_security.h"
 #include "cli/commands.h"
+#include "cli/rest_mesh.h"
 #include "cli/session_token.h"
 #include "filigree/client.h"
 #include "mesh/gltf_io.h"
@@ -175,15 +176,6 @@ void checkpoint_list(const SessionTarget& a) {
 }
 
 // ---------------------------------------------------------------- export-history
-
-TriMesh rest_mesh(const SessionMesh& m) {
-  TriMesh mesh;
-  mesh.positions = points_from_xyz(m.rest_positions);
-  mesh.faces.resize(m.rest_faces.size() / 3);
-  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
-    mesh.faces[f] = {m.rest_faces[3 * f], m.rest_faces[3 * f + 1], m.rest_faces[3 * f + 2]};
-  return mesh;
-}
 
 std::string lower_extension(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();

@@ -23,6 +23,8 @@
 
 #include "cli/channel_security.h"
 #include "cli/progress_bar.h"
+#include "cli/rest_mesh.h"
+#include "cli/session_token.h"
 #include "filigree/client.h"
 #include "mesh/gltf_io.h"
 #include "mesh/mesh_io.h"
@@ -74,19 +76,7 @@ std::string read_file(const std::string& path) {
 
 // The session token: from --token-file, else $FILIGREE_TOKEN. Never an
 // argument: a command line is visible to every user of the machine (ps).
-std::string session_token(const SessionArgs& a) {
-  std::string token;
-  if (!a.token_file.empty()) {
-    std::ifstream in(a.token_file);
-    if (!in || !std::getline(in, token)) throw std::runtime_error("cannot read a token from " + a.token_file);
-  } else if (const char* env = std::getenv("FILIGREE_TOKEN")) {
-    token = env;
-  }
-  while (!token.empty() && std::isspace(static_cast<unsigned char>(token.back()))) token.pop_back();
-  if (token.empty())
-    throw std::runtime_error("no session token: set FILIGREE_TOKEN or give --token-file FILE (never on the command line)");
-  return token;
-}
+std::string session_token(const SessionArgs& a) { return read_session_token(a.token_file, "--token-file", "FILIGREE_TOKEN"); }
 
 std::string format_of(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
@@ -100,15 +90,6 @@ std::vector<float> to_floats(const std::vector<Vec3>& v) {
   for (std::size_t i = 0; i < v.size(); ++i)
     for (int c = 0; c < 3; ++c) out[3 * i + c] = static_cast<float>(v[i][c]);
   return out;
-}
-
-TriMesh rest_mesh(const SessionMesh& m) {
-  TriMesh mesh;
-  mesh.positions = points_from_xyz(m.rest_positions);
-  mesh.faces.resize(m.rest_faces.size() / 3);
-  for (std::size_t f = 0; f < mesh.faces.size(); ++f)
-    mesh.faces[f] = {m.rest_faces[3 * f], m.rest_faces[3 * f + 1], m.rest_faces[3 * f + 2]};
-  return mesh;
 }
 
 // The rest mesh of the level frames are at: the level's vertices (in its
