@@ -1,7 +1,9 @@
 // Frames as a client receives them: protobuf bytes of a v1::Frame, decoded
 // (Draco deltas, chunk runs, keyframes) onto a rest mesh of the frame's own
 // vertex count, as a client whose mesh matches would. A second input in the
-// same decoder exercises sparse frames against the first.
+// same decoder exercises sparse frames against the first, or, when the first
+// starts a level of detail (Frame.level: a Draco mesh of original ids), the
+// level's frames.
 
 #include <algorithm>
 #include <exception>
@@ -23,7 +25,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (first.vertex_count() > 1u << 16) return 0;
   try {
     filigree::FrameDecoder decoder(std::vector<float>(3 * first.vertex_count(), 0.5f), 1);
-    (void)decoder.decode(first);
+    if (first.has_level())
+      (void)decoder.set_level(first.level());
+    else
+      (void)decoder.decode(first);
     if (two) (void)decoder.decode(second);
   } catch (const std::exception&) {
     // ClientError (DATA_LOSS): what a client reports for a frame it cannot decode.

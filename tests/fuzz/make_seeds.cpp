@@ -12,6 +12,7 @@
 
 #include "codec/delta_codec.h"
 #include "codec/delta_quantization.h"
+#include "codec/level_mesh_codec.h"
 #include "filigree/v1/filigree.pb.h"
 #include "hierarchy/hierarchy_file.h"
 #include "mesh/gltf_io.h"
@@ -151,6 +152,24 @@ int main(int argc, char** argv) {
   put(out / "frame" / "chunked", std::string(1, static_cast<char>((k.size() + 15) / 16)) + k +
                                      std::string(16 * ((k.size() + 15) / 16) - k.size(), '\0') +
                                      sparse.SerializeAsString());
+
+  // A level of detail: the first message starts it (the 16 vertices of a 3×3
+  // grid's mesh, ids into the 40-vertex mesh), the second is a frame of it.
+  LevelMesh level_mesh;
+  for (std::uint32_t i = 0; i < 16; ++i) level_mesh.original_ids.push_back(2 * i);
+  for (const Triangle& f : small.faces)
+    for (Index v : f) level_mesh.faces.push_back(static_cast<std::uint32_t>(v));
+  v1::Frame start;
+  start.set_vertex_count(static_cast<std::uint32_t>(n));
+  start.mutable_level()->set_vertex_count(16);
+  start.mutable_level()->set_face_count(static_cast<std::uint32_t>(small.faces.size()));
+  start.mutable_level()->set_mesh(encode_level_mesh(level_mesh));
+  v1::Frame at_level = single_frame(std::vector<float>(values.begin(), values.begin() + 48), 4);
+  at_level.set_level_vertices(16);
+  const std::string s = start.SerializeAsString();
+  put(out / "frame" / "level", std::string(1, static_cast<char>((s.size() + 15) / 16)) + s +
+                                   std::string(16 * ((s.size() + 15) / 16) - s.size(), '\0') +
+                                   at_level.SerializeAsString());
 
   put(out / "grpc_web" / "message", server::http::encode_frame(0, std::string("\x0a\x05hello", 7)));
   put(out / "grpc_web" / "empty", server::http::encode_frame(0, ""));
