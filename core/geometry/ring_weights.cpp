@@ -26,7 +26,7 @@ bool normalise(std::vector<double>& w) {
 
 }  // namespace
 
-std::vector<double> ring_weights(const Vec3& center, std::span<const Index> ring, const std::vector<Vec3>& positions,
+std::vector<double> ring_weights(const Vec3& center, std::span<const Index> ring, std::span<const Vec3> positions,
                                  bool closed) {
   const std::size_t k = ring.size();
   const std::size_t fans = closed ? k : k - 1;

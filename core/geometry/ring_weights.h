@@ -15,7 +15,7 @@ namespace filigree {
 // positive; on an obtuse or degenerate fan they fall back to mean-value weights
 // (Floater 2003), which stay positive for any fan with angles below π, and to
 // uniform weights if even those degenerate. Never divides by a near-zero sum.
-std::vector<double> ring_weights(const Vec3& center, std::span<const Index> ring, const std::vector<Vec3>& positions,
+std::vector<double> ring_weights(const Vec3& center, std::span<const Index> ring, std::span<const Vec3> positions,
                                  bool closed);
 
 }  // namespace filigree

@@ -22,5 +22,9 @@ using Vec2 = Eigen::Vector2d;
 // is degenerate (a zero-length spoke or a total angle of ~0).
 std::vector<Vec2> conformal_ring_map(const Vec3& center, std::span<const Index> ring,
                                      std::span<const Vec3> positions, bool closed);
+// The same into `uv` (reusing its storage); false, and `uv` empty, when the
+// fan is degenerate.
+bool conformal_ring_map(const Vec3& center, std::span<const Index> ring, std::span<const Vec3> positions, bool closed,
+                        std::vector<Vec2>& uv);
 
 }  // namespace filigree

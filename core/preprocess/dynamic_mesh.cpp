@@ -1,29 +1,22 @@
 #include "preprocess/dynamic_mesh.h"
 
 #include <algorithm>
+#include <stdexcept>
 #include <utility>
 
 namespace filigree {
 
-DynamicMesh::DynamicMesh(const TriMesh& mesh)
-    : positions_(mesh.positions), faces_(mesh.faces), alive_(mesh.faces.size(), true), incident_(mesh.positions.size()),
-      boundary_(mesh.positions.size(), false) {
+DynamicMesh::DynamicMesh(const TriMesh& mesh, std::vector<std::uint8_t> boundary)
+    : positions_(mesh.positions), faces_(mesh.faces), alive_(mesh.faces.size(), 1), incident_(mesh.positions.size()),
+      boundary_(std::move(boundary)) {
+  if (boundary_.size() != positions_.size()) throw std::invalid_argument("DynamicMesh: one boundary flag per vertex");
+  // Counted first: one allocation per vertex, not a growing vector's three.
+  std::vector<std::uint32_t> count(positions_.size(), 0);
+  for (const Triangle& t : faces_)
+    for (Index v : t) ++count[v];
+  for (Index v = 0; v < positions_.size(); ++v) incident_[v].reserve(count[v]);
   for (FaceId f = 0; f < faces_.size(); ++f)
     for (Index v : faces_[f]) incident_[v].push_back(f);
-  // On a manifold mesh a vertex is on the boundary exactly when some incident
-  // face's outgoing edge from it has no twin: count edge uses around the vertex.
-  for (Index v = 0; v < positions_.size(); ++v) {
-    std::vector<Index> from, to;
-    for (FaceId f : incident_[v]) {
-      const Triangle& t = faces_[f];
-      const int c = t[0] == v ? 0 : t[1] == v ? 1 : 2;
-      from.push_back(t[(c + 1) % 3]);
-      to.push_back(t[(c + 2) % 3]);
-    }
-    std::sort(from.begin(), from.end());
-    std::sort(to.begin(), to.end());
-    boundary_[v] = from != to;
-  }
 }
 
 bool DynamicMesh::has_edge(Index a, Index b) const {
@@ -96,15 +89,26 @@ bool DynamicMesh::ring(Index v, VertexRing& out) const {
 }
 
 FaceId DynamicMesh::add_face(const Triangle& t) {
-  const FaceId f = static_cast<FaceId>(faces_.size());
-  faces_.push_back(t);
-  alive_.push_back(true);
-  for (Index v : t) incident_[v].push_back(f);
+  const FaceId f = reserve_faces(1);
+  set_face(f, t);
   return f;
 }
 
+FaceId DynamicMesh::reserve_faces(std::size_t count) {
+  const FaceId first = static_cast<FaceId>(faces_.size());
+  faces_.resize(faces_.size() + count);
+  alive_.resize(alive_.size() + count, 0);
+  return first;
+}
+
+void DynamicMesh::set_face(FaceId f, const Triangle& t) {
+  faces_[f] = t;
+  alive_[f] = 1;
+  for (Index v : t) incident_[v].push_back(f);
+}
+
 void DynamicMesh::kill_face(FaceId f) {
-  alive_[f] = false;
+  alive_[f] = 0;
   for (Index v : faces_[f]) {
     auto& inc = incident_[v];
     inc.erase(std::find(inc.begin(), inc.end(), f));

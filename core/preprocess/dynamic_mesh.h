@@ -1,8 +1,12 @@
 #pragma once
 // The mutable connectivity that vertex removal works on: a face table that
 // only grows (faces are never renumbered, so every face keeps one id for the
-// whole hierarchy) and, per vertex, its live incident faces.
+// whole hierarchy) and, per vertex, its live incident faces. Removals whose
+// closed 1-rings are disjoint touch disjoint state, so they may run on
+// several threads at once once their new faces' ids are reserved
+// (reserve_faces, then set_face and kill_face).
 
+#include <cstdint>
 #include <span>
 #include <vector>
 
@@ -22,10 +26,12 @@ struct VertexRing {
 
 class DynamicMesh {
  public:
-  // Precondition: `mesh` is edge- and vertex-manifold with consistent orientation.
-  explicit DynamicMesh(const TriMesh& mesh);
+  // Precondition: `mesh` is edge- and vertex-manifold with consistent
+  // orientation, and outlives this (its positions are read, not copied);
+  // `boundary` is boundary_vertices(mesh).
+  DynamicMesh(const TriMesh& mesh, std::vector<std::uint8_t> boundary);
 
-  const std::vector<Vec3>& positions() const { return positions_; }
+  std::span<const Vec3> positions() const { return positions_; }
   const Triangle& face(FaceId f) const { return faces_[f]; }
   std::size_t face_count_ever() const { return faces_.size(); }
   bool face_alive(FaceId f) const { return alive_[f]; }
@@ -42,16 +48,28 @@ class DynamicMesh {
   bool ring(Index v, VertexRing& out) const;
 
   FaceId add_face(const Triangle& t);
+  // Room for `total` faces ever, so that growing the table never holds two copies.
+  void reserve(std::size_t total) {
+    faces_.reserve(total);
+    alive_.reserve(total);
+  }
+  // Appends `count` dead faces and returns the first one's id; set_face then
+  // makes each alive. Not thread-safe.
+  FaceId reserve_faces(std::size_t count);
+  // Makes reserved face f the triangle t. Safe beside calls on faces none of
+  // whose vertices are t's.
+  void set_face(FaceId f, const Triangle& t);
+  // Safe beside calls on faces that share no vertex with f.
   void kill_face(FaceId f);
 
   const std::vector<Triangle>& faces() const { return faces_; }
 
  private:
-  std::vector<Vec3> positions_;
+  std::span<const Vec3> positions_;
   std::vector<Triangle> faces_;
-  std::vector<bool> alive_;
+  std::vector<std::uint8_t> alive_;  // bytes, not vector<bool>: written from several threads
   std::vector<std::vector<FaceId>> incident_;
-  std::vector<bool> boundary_;
+  std::vector<std::uint8_t> boundary_;
 };
 
 }  // namespace filigree

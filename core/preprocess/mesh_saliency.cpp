@@ -29,6 +29,20 @@ GridKey key_of(const Vec3& p, const Vec3& origin, double cell) {
           static_cast<std::int64_t>(std::floor(q.z()))};
 }
 
+// exp(−d²/2σ²) for σ = s·ε and 2s·ε, s in kScales, given d²/ε²: three exp
+// and ten square roots instead of ten exp (17% of preprocessing), since the
+// Gaussian of 2σ is the fourth root of σ's: σ 4 and 8 from 2, 6 and 12 from
+// 3, 10 from 5.
+std::array<double, 2 * kScales.size()> gaussians(double d2_over_eps2) {
+  static_assert(kScales.size() == 5 && kScales[0] == 2 && kScales[1] == 3 && kScales[4] == 6);
+  const double g2 = std::exp(-d2_over_eps2 / 8.0), g3 = std::exp(-d2_over_eps2 / 18.0),
+               g5 = std::exp(-d2_over_eps2 / 50.0);
+  const double g4 = std::sqrt(std::sqrt(g2)), g8 = std::sqrt(std::sqrt(g4)), g6 = std::sqrt(std::sqrt(g3)), g12 = std::sqrt(std::sqrt(g6)),
+               g10 = std::sqrt(std::sqrt(g5));
+  // Scales 2, 3, 4, 5, 6, then 4, 6, 8, 10, 12.
+  return {g2, g3, g4, g5, g6, g4, g6, g8, g10, g12};
+}
+
 }  // namespace
 
 std::vector<double> mesh_saliency(const TriMesh& mesh, const std::vector<double>& mean_curvature, int threads) {
@@ -70,6 +84,7 @@ std::vector<double> mesh_saliency(const TriMesh& mesh, const std::vector<double>
   for (std::size_t c = 0; c < m; ++c) buckets[key_of(c_pos[c], origin, reach)].push_back(static_cast<Index>(c));
 
   std::vector<std::array<double, kScales.size()>> per_scale(m);
+  const double sigma_max = 2.0 * kScales.back() * eps;
   parallel_for(m, threads, [&](std::size_t c) {
     std::array<double, 2 * kScales.size()> num{}, den{};
     const GridKey k = key_of(c_pos[c], origin, reach);
@@ -80,12 +95,13 @@ std::vector<double> mesh_saliency(const TriMesh& mesh, const std::vector<double>
           if (it == buckets.end()) continue;
           for (Index o : it->second) {
             const double d2 = (c_pos[o] - c_pos[c]).squaredNorm();
+            if (d2 > 4.0 * sigma_max * sigma_max) continue;
+            const std::array<double, 2 * kScales.size()> g = gaussians(d2 / (eps * eps));
             for (std::size_t s = 0; s < 2 * kScales.size(); ++s) {
               const double sigma = kScales[s % kScales.size()] * eps * (s < kScales.size() ? 1.0 : 2.0);
               if (d2 > 4.0 * sigma * sigma) continue;
-              const double g = c_w[o] * std::exp(-d2 / (2.0 * sigma * sigma));
-              num[s] += g * c_h[o];
-              den[s] += g;
+              num[s] += c_w[o] * g[s] * c_h[o];
+              den[s] += c_w[o] * g[s];
             }
           }
         }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 namespace filigree {
 namespace {
@@ -10,13 +11,13 @@ using V2 = Eigen::Vector2d;
 
 double cross(const V2& o, const V2& a, const V2& b) { return (a - o).x() * (b - o).y() - (a - o).y() * (b - o).x(); }
 
-// Smallest angle of triangle abc (radians).
-double min_angle(const V2& a, const V2& b, const V2& c) {
-  auto ang = [](const V2& p, const V2& q, const V2& r) {
-    const V2 u = q - p, v = r - p;
-    return std::atan2(std::abs(u.x() * v.y() - u.y() * v.x()), u.dot(v));
-  };
-  return std::min({ang(a, b, c), ang(b, c, a), ang(c, a, b)});
+// Cosine of the smallest angle of triangle abc: the smallest angle is the
+// one with the largest cosine (cos falls on [0, π]), so ears compare by it
+// without the three atan2 an angle costs.
+double min_angle_cosine(const V2& a, const V2& b, const V2& c) {
+  const V2 ab = b - a, bc = c - b, ca = a - c;
+  const double lab = ab.norm(), lbc = bc.norm(), lca = ca.norm();
+  return std::max({-ab.dot(ca) / (lab * lca), -bc.dot(ab) / (lbc * lab), -ca.dot(bc) / (lca * lbc)});
 }
 
 bool strictly_inside(const V2& p, const V2& a, const V2& b, const V2& c, double eps) {
@@ -62,41 +63,59 @@ void make_delaunay(std::span<const V2> p, std::vector<std::array<int, 3>>& tris)
 }  // namespace
 
 std::vector<std::array<int, 3>> triangulate_polygon(std::span<const Eigen::Vector2d> polygon) {
+  std::vector<std::array<int, 3>> tris;
+  triangulate_polygon(polygon, tris);
+  return tris;
+}
+
+bool triangulate_polygon(std::span<const Eigen::Vector2d> polygon, std::vector<std::array<int, 3>>& tris) {
+  tris.clear();
   const int n = static_cast<int>(polygon.size());
-  if (n < 3) return {};
+  if (n < 3) return false;
   double scale = 0.0;
   for (const V2& q : polygon) scale = std::max(scale, q.cwiseAbs().maxCoeff());
   const double eps = 1e-14 * scale * scale;
 
-  std::vector<int> live(n);
+  thread_local std::vector<int> live;  // the polygon's corners not yet clipped
+  live.resize(n);
   for (int i = 0; i < n; ++i) live[i] = i;
-  std::vector<std::array<int, 3>> tris;
   tris.reserve(n - 2);
+  thread_local std::vector<std::uint8_t> convex;  // per live corner
   while (live.size() > 3) {
     const int m = static_cast<int>(live.size());
+    convex.resize(m);
+    for (int i = 0; i < m; ++i)
+      convex[i] = cross(polygon[live[(i + m - 1) % m]], polygon[live[i]], polygon[live[(i + 1) % m]]) > eps;
     int best = -1;
-    double best_angle = -1.0;
+    double best_cosine = 2.0;
     for (int i = 0; i < m; ++i) {
       const int a = live[(i + m - 1) % m], b = live[i], c = live[(i + 1) % m];
-      if (cross(polygon[a], polygon[b], polygon[c]) <= eps) continue;  // reflex or flat corner
+      if (!convex[i]) continue;  // reflex or flat corner
+      // Only a reflex (or flat) corner can lie in an ear of a simple polygon.
       bool empty = true;
       for (int j = 0; j < m && empty; ++j) {
         const int q = live[j];
-        if (q != a && q != b && q != c && strictly_inside(polygon[q], polygon[a], polygon[b], polygon[c], -eps))
+        if (!convex[j] && q != a && q != c && strictly_inside(polygon[q], polygon[a], polygon[b], polygon[c], -eps))
           empty = false;
       }
       if (!empty) continue;
-      const double angle = min_angle(polygon[a], polygon[b], polygon[c]);
-      if (angle > best_angle) best_angle = angle, best = i;
+      const double cosine = min_angle_cosine(polygon[a], polygon[b], polygon[c]);
+      if (cosine < best_cosine) best_cosine = cosine, best = i;
     }
-    if (best < 0) return {};
+    if (best < 0) {
+      tris.clear();
+      return false;
+    }
     tris.push_back({live[(best + m - 1) % m], live[best], live[(best + 1) % m]});
     live.erase(live.begin() + best);
   }
-  if (cross(polygon[live[0]], polygon[live[1]], polygon[live[2]]) <= eps) return {};
+  if (cross(polygon[live[0]], polygon[live[1]], polygon[live[2]]) <= eps) {
+    tris.clear();
+    return false;
+  }
   tris.push_back({live[0], live[1], live[2]});
   make_delaunay(polygon, tris);
-  return tris;
+  return true;
 }
 
 }  // namespace filigree

@@ -16,5 +16,8 @@ namespace filigree {
 // which gives the well-shaped triangles vertex removal needs.
 // Returns an empty vector if the polygon is not simple or is degenerate.
 std::vector<std::array<int, 3>> triangulate_polygon(std::span<const Eigen::Vector2d> polygon);
+// The same into `tris` (reusing its storage); false, and `tris` empty, when
+// the polygon is not simple or is degenerate.
+bool triangulate_polygon(std::span<const Eigen::Vector2d> polygon, std::vector<std::array<int, 3>>& tris);
 
 }  // namespace filigree

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "geometry/cotangent_laplacian.h"
+#include "mesh/boundary_vertices.h"
 #include "mesh/mesh_validation.h"
 #include "preprocess/mean_curvature.h"
 #include "preprocess/mesh_saliency.h"
@@ -48,32 +49,21 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   h.rest_positions = mesh.positions;
   h.mesh_hash = hash_mesh(mesh);
 
-  // The differential coordinates are not stored: the runtime derives them
-  // from the rest mesh when it first optimises (DeformerModel).
-  const CotangentLaplacian laplacian = cotangent_laplacian(mesh);
 
-  // Boundary vertices: an edge used by one face.
-  std::vector<bool> boundary(mesh.vertex_count(), false);
-  {
-    std::vector<std::pair<Index, Index>> edges;
-    edges.reserve(mesh.faces.size() * 3);
-    for (const Triangle& f : mesh.faces)
-      for (int c = 0; c < 3; ++c) edges.emplace_back(std::minmax(f[c], f[(c + 1) % 3]));
-    std::sort(edges.begin(), edges.end());
-    for (std::size_t i = 0; i < edges.size();) {
-      std::size_t j = i;
-      while (j < edges.size() && edges[j] == edges[i]) ++j;
-      if (j - i == 1) boundary[edges[i].first] = boundary[edges[i].second] = true;
-      i = j;
-    }
-  }
   const auto check_stop = [&] {
     if (options.stop && options.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
   };
   check_stop();
-  const std::vector<double> curvature = mean_curvature(mesh, laplacian, boundary);
+  VertexTraits traits;
+  traits.boundary = boundary_vertices(mesh, options.threads);
   check_stop();
-  const std::vector<double> saliency = mesh_saliency(mesh, curvature, options.threads);
+  // The Laplacian (~110 B a vertex) only for the curvature, freed before
+  // simplifying. The differential coordinates are not stored: the runtime
+  // derives them from the rest mesh when it first optimises (DeformerModel).
+  traits.curvature =
+      mean_curvature(mesh, cotangent_laplacian(mesh), std::vector<bool>(traits.boundary.begin(), traits.boundary.end()));
+  check_stop();
+  traits.saliency = mesh_saliency(mesh, traits.curvature, options.threads);
   check_stop();
 
   SimplifyOptions so = options.simplify;
@@ -81,7 +71,7 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   so.threads = options.threads;
   so.progress = options.progress;
   so.stop = options.stop;
-  simplify(mesh, curvature, saliency, so, h);
+  simplify(mesh, traits, so, h);
 
   h.build.requested_base_vertices = target;
   h.build.threads = static_cast<std::uint32_t>(std::max(options.threads, 1));

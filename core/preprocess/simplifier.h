@@ -65,12 +65,20 @@ struct PreprocessingStopped : std::runtime_error {
   PreprocessingStopped() : std::runtime_error("preprocessing was stopped") {}
 };
 
+// Per-vertex inputs of the simplification's cost and checks.
+struct VertexTraits {
+  std::vector<double> curvature;       // mean curvature (mean_curvature.h)
+  std::vector<double> saliency;        // mesh_saliency.h
+  std::vector<std::uint8_t> boundary;  // boundary_vertices.h
+};
+
 // Simplifies `mesh` and fills `out`'s faces, nodes, base mesh and MAPS
-// parameterisation (everything but mesh_hash and build). `curvature` and `saliency` are per vertex.
+// parameterisation (everything but mesh_hash and build). The result depends
+// on the mesh and the options only, not on options.threads.
 // Precondition: mesh is edge- and vertex-manifold, consistently oriented,
 // without degenerate/duplicate faces or unreferenced vertices
-// (validate_mesh reports nothing fatal or repairable).
-void simplify(const TriMesh& mesh, const std::vector<double>& curvature, const std::vector<double>& saliency,
-              const SimplifyOptions& options, Hierarchy& out);
+// (validate_mesh reports nothing fatal or repairable); `traits` has one
+// entry per vertex in each array.
+void simplify(const TriMesh& mesh, const VertexTraits& traits, const SimplifyOptions& options, Hierarchy& out);
 
 }  // namespace filigree
