@@ -202,10 +202,12 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       progress("validating", 0.0);
       RiggedMesh upload = read_rigged_mesh_from_memory(bytes_, begin_.format());
       const TriMesh& input = upload.mesh;
+      // Before any preprocessing (the proto's Begin says so).
       if (input.vertex_count() > service_.limits().max_vertices)
         return {grpc::StatusCode::RESOURCE_EXHAUSTED, "mesh has " + std::to_string(input.vertex_count()) +
                                                           " vertices, over the server's limit of " +
-                                                          std::to_string(service_.limits().max_vertices)};
+                                                          std::to_string(service_.limits().max_vertices) +
+                                                          " (--max-vertices)"};
       RepairReport repair;
       const TriMesh repaired = repair_mesh(input, {}, &repair);
       if (!has_area(repaired))

@@ -157,6 +157,55 @@ TEST_F(LimitsTest, OverMaxMemoryIdleSessionsAreEvictedFirstAndSessionsInUseStay)
   watcher->Finish();
 }
 
+// The mesh limits are checked before any preprocessing, and the refusal
+// names the limit: --max-mesh-bytes at `begin` (nothing is read or sent
+// back), --max-vertices once the mesh is parsed (the 'validating' stage; no
+// 'simplifying'). A mesh at either limit is accepted. Before, the vertex
+// refusal did not name its flag.
+TEST_F(LimitsTest, AMeshOverTheUploadLimitsIsRefusedNamingTheLimitBeforePreprocessing) {
+  const std::string bunny = test::file_bytes(test::shipped_path("bunny_small.obj"));
+  std::size_t v = 0;  // the file's vertices ("v " lines)
+  std::istringstream lines(bunny);
+  for (std::string line; std::getline(lines, line);) v += line.rfind("v ", 0) == 0;
+  ASSERT_GT(v, 1000u);
+  const auto simplifying = [](const Upload& u) {
+    return std::count_if(u.progress.begin(), u.progress.end(), [](const auto& p) { return p.stage() == "simplifying"; });
+  };
+  {
+    Server server(data_dir_ / "vertices_over", {"--max-vertices", std::to_string(v - 1)});
+    const Upload over = upload(*server.stub);
+    EXPECT_EQ(over.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << over.status.error_message();
+    EXPECT_NE(over.status.error_message().find("mesh has " + std::to_string(v) + " vertices"), std::string::npos)
+        << over.status.error_message();
+    EXPECT_NE(over.status.error_message().find("limit of " + std::to_string(v - 1) + " (--max-vertices)"), std::string::npos)
+        << over.status.error_message();
+    EXPECT_EQ(simplifying(over), 0) << "preprocessing began before the vertex limit was checked";
+    EXPECT_TRUE(listed(*server.stub).empty());
+  }
+  {
+    Server server(data_dir_ / "vertices_at", {"--max-vertices", std::to_string(v)});
+    const Upload at = upload(*server.stub);
+    EXPECT_TRUE(at.status.ok()) << at.status.error_message();
+  }
+  {
+    Server server(data_dir_ / "bytes_over", {"--max-mesh-bytes", std::to_string(bunny.size() - 1)});
+    const Upload over = upload(*server.stub);
+    EXPECT_EQ(over.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << over.status.error_message();
+    EXPECT_NE(over.status.error_message().find("mesh of " + std::to_string(bunny.size()) + " bytes"), std::string::npos)
+        << over.status.error_message();
+    EXPECT_NE(over.status.error_message().find("limit of " + std::to_string(bunny.size() - 1) + " bytes (--max-mesh-bytes)"),
+              std::string::npos)
+        << over.status.error_message();
+    EXPECT_TRUE(over.progress.empty()) << "refused at begin: no stage was reached";
+    EXPECT_TRUE(listed(*server.stub).empty());
+  }
+  {
+    Server server(data_dir_ / "bytes_at", {"--max-mesh-bytes", std::to_string(bunny.size())});
+    const Upload at = upload(*server.stub);
+    EXPECT_TRUE(at.status.ok()) << at.status.error_message();
+  }
+}
+
 TEST_F(LimitsTest, AStalledUploadEndsAtUploadTimeoutAndOthersGoOn) {
   Server server(data_dir_, {"--upload-timeout", "1"});
   // An upload that says it will send bytes and never does.
