@@ -113,8 +113,11 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   }
 
   void OnWriteDone(bool ok) override { writer_.on_write_done(ok); }
+  // The client cancelled, or its deadline passed: preprocessing stops at
+  // its next check, its turn and memory are freed, and no session is made.
   void OnCancel() override {
     cancelled_ = true;  // before finish: a session made after this is not made, or closed again
+    stop_ = true;
     writer_.finish(grpc::Status::CANCELLED);
   }
   void OnDone() override {
@@ -162,6 +165,12 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
     return grpc::Status::OK;
   }
 
+  // Why preprocessing stopped (stop_): the client gave up, or the server is draining.
+  grpc::Status stopped() const {
+    if (cancelled_) return grpc::Status::CANCELLED;
+    return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down: upload again once it is back"};
+  }
+
   // `seconds_left`: the stage's estimate, 0 for none.
   void progress(const char* stage, double fraction, double seconds_left = 0.0) {
     v1::CreateSessionResponse r;
@@ -181,9 +190,12 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
         // Live sessions' frames come first: preprocessing runs at a lower
         // priority (threads it starts inherit it), a bounded number at once.
         ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), kPreprocessingNice);
+        service_.watch_preprocessing(&stop_);  // a server draining stops it too
         service_.acquire_preprocessing();
-        const grpc::Status status = process();
+        // One that gave up (or a server stopping) while it waited its turn starts nothing.
+        const grpc::Status status = stop_ ? stopped() : process();
         service_.release_preprocessing();
+        service_.unwatch_preprocessing(&stop_);
         // Parsing, repair and preprocessing free tens to hundreds of MB that
         // glibc would otherwise keep in this thread's arena: give them back, so
         // the server's resident memory is what its sessions hold.
@@ -208,6 +220,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
                                                           " vertices, over the server's limit of " +
                                                           std::to_string(service_.limits().max_vertices) +
                                                           " (--max-vertices)"};
+      if (stop_) return stopped();
       RepairReport repair;
       const TriMesh repaired = repair_mesh(input, {}, &repair);
       if (!has_area(repaired))
@@ -232,7 +245,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
       if (o.base_vertices() > 0) pre.base_vertices = o.base_vertices();
       if (o.base_ratio() > 0.0) pre.ratio = o.base_ratio();
       pre.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-      pre.stop = &service_.preprocessing_stop();
+      pre.stop = &stop_;  // cancelled, past its deadline, or the server draining
       // The one long stage: its progress says the time left.
       pre.progress = [this, since = std::chrono::steady_clock::now(), left = TimeLeft()](double f) mutable {
         left.add(std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count(), f);
@@ -273,7 +286,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
                    mesh.vertex_count(), !built);
       return grpc::Status::OK;
     } catch (const PreprocessingStopped&) {
-      return {grpc::StatusCode::UNAVAILABLE, "the server is shutting down: upload again once it is back"};
+      return stopped();
     } catch (const BadSessionId& e) {
       return {e.taken ? grpc::StatusCode::ALREADY_EXISTS : grpc::StatusCode::INVALID_ARGUMENT, e.what()};
     } catch (const MeshIoError& e) {
@@ -302,6 +315,7 @@ class CreateReactor final : public grpc::ServerBidiReactor<v1::CreateSessionRequ
   v1::CreateSessionRequest::Begin begin_;
   bool begun_ = false;
   std::atomic<bool> cancelled_{false};
+  std::atomic<bool> stop_{false};  // PreprocessOptions::stop: cancelled_, or the server draining
   std::string bytes_;
   std::thread job_;
   std::mutex read_mutex_;  // OnReadDone against expiry (--upload-timeout)

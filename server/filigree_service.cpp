@@ -329,10 +329,25 @@ void FiligreeService::expire_uploads() {
   }
 }
 
+void FiligreeService::watch_preprocessing(std::atomic<bool>* stop) {
+  std::lock_guard lock(stops_mutex_);
+  stops_.insert(stop);
+  if (stop_preprocessing_) *stop = true;
+}
+
+void FiligreeService::unwatch_preprocessing(std::atomic<bool>* stop) {
+  std::lock_guard lock(stops_mutex_);
+  stops_.erase(stop);
+}
+
 void FiligreeService::drain() {
   // Preprocessing in progress stops at its next check: a pathological mesh
   // cannot hold a shutdown (its upload, not yet a session, is refused).
-  stop_preprocessing_ = true;
+  {
+    std::lock_guard lock(stops_mutex_);
+    stop_preprocessing_ = true;
+    for (std::atomic<bool>* stop : stops_) *stop = true;
+  }
   std::unique_lock lock(jobs_mutex_);
   draining_ = true;
   jobs_done_.wait(lock, [&] { return jobs_ == 0; });

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <set>
 #include <string>
 
 #include "filigree/v1/filigree.grpc.pb.h"
@@ -154,8 +155,12 @@ class FiligreeService final : public FiligreeServiceBase {
   // all pass one check. *reserved holds them until it is released (the
   // upload became a session or failed). RESOURCE_EXHAUSTED with the figures.
   grpc::Status reserve_upload_memory(std::uint64_t bytes, std::shared_ptr<void>* reserved);
-  // Set when the server starts draining: preprocessing stops (PreprocessOptions::stop).
-  const std::atomic<bool>& preprocessing_stop() const { return stop_preprocessing_; }
+  // An upload's preprocessing stop flag (PreprocessOptions::stop), which
+  // its reactor sets when the call is cancelled or its deadline passes:
+  // the service sets it too when it starts draining (at once if it has).
+  // Unwatched before the flag goes away.
+  void watch_preprocessing(std::atomic<bool>* stop);
+  void unwatch_preprocessing(std::atomic<bool>* stop);
   // Calls waiting for a turn to load their session (limits().session_loads).
   std::size_t loads_waiting() const;
   // Whether a new upload fits under limits().max_memory_bytes: if the
@@ -233,7 +238,9 @@ class FiligreeService final : public FiligreeServiceBase {
   Turns preprocessing_;  // limits_.preprocessing_slots
   Turns loads_;          // limits_.session_loads, or one per core
   bool draining_ = false;
-  std::atomic<bool> stop_preprocessing_{false};
+  std::mutex stops_mutex_;
+  bool stop_preprocessing_ = false;         // under stops_mutex_: draining
+  std::set<std::atomic<bool>*> stops_;     // the watched uploads' stop flags
   std::mutex upload_memory_mutex_;
   std::uint64_t upload_memory_reserved_ = 0;  // declared bytes of uploads in progress
   std::mutex evict_mutex_;     // admit_memory's evictions, one at a time

@@ -1,6 +1,7 @@
 #include "server/hierarchy_cache.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -148,7 +149,20 @@ std::shared_ptr<const Hierarchy> HierarchyCache::get_or_build(const TriMesh& mes
       we_build = true;
     }
   }
-  if (wait_for.valid()) return wait_for.get();  // someone else builds it: share the result (or its error)
+  if (wait_for.valid()) {
+    // Someone else builds it: share the result (or its error), unless this
+    // call is stopped first (its upload cancelled: checked every 20 ms).
+    while (wait_for.wait_for(std::chrono::milliseconds(20)) != std::future_status::ready)
+      if (options.stop && options.stop->load()) throw PreprocessingStopped();
+    try {
+      return wait_for.get();
+    } catch (const PreprocessingStopped&) {
+      // The build stopped because its own upload gave up: not this call's
+      // error. Build it here (unless this call is stopped too).
+      if (options.stop && options.stop->load()) throw;
+      return get_or_build(mesh, options, key_out, built);
+    }
+  }
   if (!we_build) {
     try {
       return load(key);
