@@ -46,7 +46,6 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   const std::size_t target = target_of(options, mesh.vertex_count());
 
   Hierarchy h;
-  h.rest_positions = mesh.positions;
   h.mesh_hash = hash_mesh(mesh);
 
 
@@ -71,7 +70,8 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   so.threads = options.threads;
   so.progress = options.progress;
   so.stop = options.stop;
-  simplify(mesh, traits, so, h);
+  simplify(mesh, std::move(traits), so, h);
+  h.rest_positions = mesh.positions;  // after simplifying: not beside its peak
 
   h.build.requested_base_vertices = target;
   h.build.threads = static_cast<std::uint32_t>(std::max(options.threads, 1));

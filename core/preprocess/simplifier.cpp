@@ -30,7 +30,7 @@ constexpr std::size_t kCostSamplesPerFace = 8;
 // kMinWindow, at most kMaxWindow: the plans are kept for the round).
 constexpr std::size_t kWindowShare = 8;
 constexpr std::size_t kMinWindow = 16;
-constexpr std::size_t kMaxWindow = std::size_t{1} << 16;
+constexpr std::size_t kMaxWindow = std::size_t{1} << 15;
 // Candidates sampled to find the window's cost bound.
 constexpr std::size_t kPivotSample = 4096;
 
@@ -40,6 +40,16 @@ struct Plan {
   std::vector<Vec2> uv;
   std::vector<std::array<int, 3>> tris;
   double cost = 0.0;
+};
+
+// What a plan checks and computes. The topology checks (has the mesh each
+// diagonal already, ring valences) read the ring's neighbours' faces, the
+// slowest part of a plan, and rarely refuse: a candidate's cost is planned
+// without them, and a removal checks them once chosen.
+enum class PlanWork : std::uint8_t {
+  kFull,      // every check, and the cost
+  kCostOnly,  // the cost, without the topology checks
+  kNoCost,    // every check; p.cost left as it is (the caller knows it)
 };
 
 // A point's place in the new triangulation: triangle index and barycentrics.
@@ -90,8 +100,10 @@ void parallel_steps(std::size_t count, int threads, const std::atomic<bool>* sto
 // for byte, for any thread count.
 class Simplifier {
  public:
-  Simplifier(const TriMesh& mesh, const VertexTraits& traits, const SimplifyOptions& options, Hierarchy& out)
+  // `traits` is read here and freed by the caller's move.
+  Simplifier(const TriMesh& mesh, VertexTraits& traits, const SimplifyOptions& options, Hierarchy& out)
       : opt_(options),
+        original_faces_(mesh.faces),
         order_(locality_order(mesh.positions)),
         local_(permute_vertices(mesh, order_)),
         mesh_(local_, permuted(traits.boundary)),
@@ -125,9 +137,9 @@ class Simplifier {
     // Arena offsets are 32-bit; compaction keeps the arena under ~3n.
     if (n >= (std::size_t{1} << 29)) throw std::invalid_argument("mesh too large to simplify: 2^29 vertices or more");
     point_face_.assign(n, kNone);
-    point_bary_.assign(n, Vec3::Zero());
+    point_bary_.assign(n, PointBary{0.0f, 0.0f});
     removed_.assign(n, 0);
-    out_.original_faces = mesh.faces;  // face ids: the input's, then the removals'
+    traits = VertexTraits{};  // permuted copies made
   }
 
   void run() {
@@ -135,12 +147,21 @@ class Simplifier {
     const std::size_t target = std::max<std::size_t>(opt_.target_vertices, 1);
     const std::size_t to_remove = n > target ? n - target : 0;
     ring_offsets_ = {0};
+    // The node arrays at their final size (a growing vector would hold up to
+    // twice that): one node per removal, rings of ~6.5 vertices on average.
+    node_vertex_.reserve(to_remove);
+    node_closed_.reserve(to_remove);
+    node_offset_.reserve(to_remove);
+    ring_offsets_.reserve(to_remove + 1);
+    ring_vertices_.reserve(to_remove * 13 / 2);
+    ring_weights_.reserve(to_remove * 13 / 2);
+    created_corners_.reserve(to_remove * 9 / 2);
 
     cost_.assign(n, 0.0);
     valid_.assign(n, 0);
     stale_.assign(n, 0);
     mark_.assign(n, 0);
-    plan_all(pool_, [](Index) { return true; });
+    plan_all(pool_, PlanWork::kCostOnly, [](Index) { return true; });
 
     std::size_t remaining = n, next_report = 0;
     std::uint32_t round = 0;
@@ -149,7 +170,9 @@ class Simplifier {
       // The candidates ran out above the target: a removal that a change two
       // rings away made valid (a diagonal no longer an edge, a neighbour's
       // valence) was never planned again. Plan every vertex left once more.
-      if (pool_.empty() && (plan_all(pool_, [&](Index v) { return !removed_[v]; }), pool_.empty())) break;
+      // (With every check: the pool must not fill with removals that fail them.)
+      if (pool_.empty() && (plan_all(pool_, PlanWork::kFull, [&](Index v) { return !removed_[v]; }), pool_.empty()))
+        break;
       const std::size_t removed = remove_round(++round, remaining - target);
       remaining -= removed;
       const std::size_t done = n - remaining;
@@ -178,7 +201,7 @@ class Simplifier {
   // Plans every vertex `which` accepts (in parallel) and appends the valid
   // ones to `pool`, with their costs.
   template <class Which>
-  void plan_all(std::vector<Index>& pool, Which which) {
+  void plan_all(std::vector<Index>& pool, PlanWork work, Which which) {
     const std::size_t n = mesh_.positions().size();
     const std::size_t parts = static_cast<std::size_t>(std::max(opt_.threads, 1));
     std::vector<Plan> scratch(parts);
@@ -186,7 +209,7 @@ class Simplifier {
       for (Index v = static_cast<Index>(n * part / parts); v < n * (part + 1) / parts; ++v) {
         if ((v & 1023) == 0 && opt_.stop && opt_.stop->load(std::memory_order_relaxed)) throw PreprocessingStopped();
         if (!which(v)) continue;
-        valid_[v] = plan(v, scratch[part]) ? 1 : 0;
+        valid_[v] = plan(v, scratch[part], nullptr, work) ? 1 : 0;
         stale_[v] = 0;
         if (valid_[v]) cost_[v] = scratch[part].cost;
       }
@@ -233,12 +256,12 @@ class Simplifier {
     std::vector<std::uint32_t> stale;
     for (std::size_t i = 0; i < window; ++i)
       if (stale_[window_[i]]) stale.push_back(static_cast<std::uint32_t>(i));
-    // In vertex order: neighbours in the mesh are mostly near in memory.
-    std::sort(stale.begin(), stale.end(), [&](std::uint32_t a, std::uint32_t b) { return window_[a] < window_[b]; });
+    // (In vertex order, as the window is: neighbours in the mesh are mostly
+    // near in memory.)
     std::vector<std::uint8_t> planned(window, 0);
     parallel_steps(stale.size(), opt_.threads, opt_.stop, [&](std::size_t j) {
       const std::uint32_t i = stale[j];
-      planned[i] = plan(window_[i], plans_[i]) ? 1 : 2;
+      planned[i] = plan(window_[i], plans_[i], nullptr, PlanWork::kCostOnly) ? 1 : 2;
     });
     std::vector<std::uint32_t> order;
     order.reserve(window);
@@ -252,23 +275,43 @@ class Simplifier {
     // The removals, cheapest first, while no dearer than any candidate left
     // out and with closed rings disjoint from those already chosen.
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return cheaper(window_[a], window_[b]); });
+    order.erase(std::find_if(order.begin(), order.end(), [&](std::uint32_t i) { return cost_[window_[i]] > bound; }),
+                order.end());
+    // Each one's neighbours gathered on all threads (the faces are scattered
+    // in memory), so that the choice, which is sequential, reads only marks.
+    // A candidate has at most kMaxRing faces (a stale one with more is
+    // refused when planned): at most 2·kMaxRing corners besides itself.
+    constexpr std::size_t kSlots = 2 * kMaxRing;
+    neighbours_.resize(order.size() * kSlots);
+    std::vector<std::uint8_t> neighbour_count(order.size());
+    parallel_steps(order.size(), opt_.threads, nullptr, [&](std::size_t o) {
+      const Index v = window_[order[o]];
+      std::size_t c = 0;
+      for (FaceId f : mesh_.vertex_faces(v))
+        for (Index u : mesh_.face(f))
+          if (u != v && c < kSlots) neighbours_[o * kSlots + c++] = u;
+      neighbour_count[o] = static_cast<std::uint8_t>(c);
+    });
     std::vector<std::uint32_t> picks;
-    for (std::uint32_t i : order) {
-      const Index v = window_[i];
-      if (cost_[v] > bound || picks.size() == budget) break;
-      if (!closed_ring_free(v, round)) continue;
-      mark_closed_ring(v, round);
-      picks.push_back(i);
+    for (std::size_t o = 0; o < order.size() && picks.size() < budget; ++o) {
+      const Index v = window_[order[o]];
+      const std::span<const Index> ring(neighbours_.data() + o * kSlots, neighbour_count[o]);
+      if (mark_[v] == round || std::any_of(ring.begin(), ring.end(), [&](Index u) { return mark_[u] == round; })) continue;
+      mark_[v] = round;
+      for (Index u : ring) mark_[u] = round;
+      picks.push_back(order[o]);
     }
-    // A pick planned in an earlier round has its cost, not its plan: plan it
-    // again. A removal two rings away may have made it invalid since.
-    std::vector<std::uint32_t> replan;
-    for (std::uint32_t i : picks)
-      if (planned[i] == 0) replan.push_back(i);
-    parallel_steps(replan.size(), opt_.threads, opt_.stop, [&](std::size_t j) {
-      const std::uint32_t i = replan[j];
-      plans_[i].cost = cost_[window_[i]];
-      planned[i] = plan(window_[i], plans_[i], nullptr, false) ? 1 : 2;
+    // A pick planned this round still needs its topology checked; one
+    // planned in an earlier round has its cost, not its plan: plan it again
+    // (a removal two rings away may have made it invalid since).
+    parallel_steps(picks.size(), opt_.threads, opt_.stop, [&](std::size_t j) {
+      const std::uint32_t i = picks[j];
+      if (planned[i] == 1) {
+        planned[i] = topology_ok(plans_[i]) ? 1 : 2;
+      } else {
+        plans_[i].cost = cost_[window_[i]];
+        planned[i] = plan(window_[i], plans_[i], nullptr, PlanWork::kNoCost) ? 1 : 2;
+      }
     });
     std::erase_if(picks, [&](std::uint32_t i) {
       if (planned[i] == 1) return false;
@@ -302,18 +345,6 @@ class Simplifier {
     std::vector<T> out(order_.size());
     for (std::size_t i = 0; i < order_.size(); ++i) out[i] = by_input_id[order_[i]];
     return out;
-  }
-
-  // True if no vertex of v's closed 1-ring is in a closed ring marked this round.
-  bool closed_ring_free(Index v, std::uint32_t round) const {
-    for (FaceId f : mesh_.vertex_faces(v))
-      for (Index u : mesh_.face(f))
-        if (mark_[u] == round) return false;
-    return true;
-  }
-  void mark_closed_ring(Index v, std::uint32_t round) {
-    for (FaceId f : mesh_.vertex_faces(v))
-      for (Index u : mesh_.face(f)) mark_[u] = round;
   }
 
   // Performs the chosen removals: ids and storage in pick order here, the
@@ -374,11 +405,37 @@ class Simplifier {
     point_arena_ = std::move(arena);
   }
 
+  // Manifoldness of the planned removal: every diagonal must be a new edge,
+  // and every ring vertex must keep valence ≥ 3 (≥ 2 on the boundary); the
+  // latter also rejects collapsing a tetrahedron into a doubled triangle.
+  bool topology_ok(const Plan& p) const {
+    const std::vector<Index>& r = p.ring.ring;
+    const std::size_t k = r.size();
+    const bool closed = p.ring.closed;
+    std::array<int, kMaxRing> gained{};
+    if (!closed) ++gained[0], ++gained[k - 1];
+    for (const auto& t : p.tris) {
+      for (int c = 0; c < 3; ++c) {
+        const int a = t[c], b = t[(c + 1) % 3];
+        if (a > b) continue;  // each diagonal appears in two triangles; count it once
+        const bool ring_edge = b == a + 1 || (closed && a == 0 && b == static_cast<int>(k) - 1);
+        if (ring_edge || (!closed && a == 0 && b == static_cast<int>(k) - 1)) continue;
+        if (mesh_.has_edge(r[a], r[b])) return false;
+        ++gained[a], ++gained[b];
+      }
+    }
+    for (std::size_t i = 0; i < k; ++i) {
+      const std::size_t valence = mesh_.valence(r[i]) - 1 + gained[i];
+      if (valence < (mesh_.is_boundary(r[i]) ? 2u : 3u)) return false;
+    }
+    return true;
+  }
+
   // Plans the removal of v; false if it would break manifoldness, topology,
   // the boundary, flip or produce poor triangles.
   // `why`, when given, says which check refused (set only on refusal).
-  // Without `with_cost` p.cost is left as it is (a caller that knows it).
-  bool plan(Index v, Plan& p, BaseRefusal* why = nullptr, bool with_cost = true) const {
+  // `work` may skip the topology checks or the cost (PlanWork).
+  bool plan(Index v, Plan& p, BaseRefusal* why = nullptr, PlanWork work = PlanWork::kFull) const {
     const auto refuse = [why](BaseRefusal r) {
       if (why) *why = r;
       return false;
@@ -400,25 +457,7 @@ class Simplifier {
     if (!conformal_ring_map(x[v], r, x, closed, p.uv)) return refuse(BaseRefusal::kShape);
     if (!triangulate_polygon(p.uv, p.tris)) return refuse(BaseRefusal::kShape);
 
-    // Manifoldness: every diagonal must be a new edge, and every ring vertex
-    // must keep valence ≥ 3 (≥ 2 on the boundary); the latter also rejects
-    // collapsing a tetrahedron into a doubled triangle.
-    std::array<int, kMaxRing> gained{};
-    if (!closed) ++gained[0], ++gained[k - 1];
-    for (const auto& t : p.tris) {
-      for (int c = 0; c < 3; ++c) {
-        const int a = t[c], b = t[(c + 1) % 3];
-        if (a > b) continue;  // each diagonal appears in two triangles; count it once
-        const bool ring_edge = b == a + 1 || (closed && a == 0 && b == static_cast<int>(k) - 1);
-        if (ring_edge || (!closed && a == 0 && b == static_cast<int>(k) - 1)) continue;
-        if (mesh_.has_edge(r[a], r[b])) return refuse(BaseRefusal::kTopology);
-        ++gained[a], ++gained[b];
-      }
-    }
-    for (std::size_t i = 0; i < k; ++i) {
-      const std::size_t valence = mesh_.valence(r[i]) - 1 + gained[i];
-      if (valence < (mesh_.is_boundary(r[i]) ? 2u : 3u)) return refuse(BaseRefusal::kTopology);
-    }
+    if (work != PlanWork::kCostOnly && !topology_ok(p)) return refuse(BaseRefusal::kTopology);
 
     // Geometry: no flips, no needles/caps worse than what was there.
     Vec3 fan_normal = Vec3::Zero();
@@ -439,7 +478,7 @@ class Simplifier {
       if (fan_len > 0.0 && n.dot(fan_normal) < cos_max * n.norm() * fan_len) return refuse(BaseRefusal::kNormal);
     }
 
-    if (!with_cost) return true;
+    if (work == PlanWork::kNoCost) return true;
     // Error: how far v and the points parameterised in its fan would end up
     // from their true positions on the coarser mesh.
     double error = (image(p, locate(Vec2::Zero(), p.uv, p.tris)) - x[v]).norm();
@@ -470,11 +509,13 @@ class Simplifier {
     const Triangle& t = mesh_.face(p.ring.fan[i]);
     const std::size_t k = p.ring.ring.size();
     Vec2 uv = Vec2::Zero();
+    const PointBary& b = point_bary_[q];
+    const double bary[3] = {b[0], b[1], 1.0 - double(b[0]) - double(b[1])};
     for (int c = 0; c < 3; ++c) {
       if (t[c] == p.ring.ring[i])
-        uv += point_bary_[q][c] * p.uv[i];
+        uv += bary[c] * p.uv[i];
       else if (t[c] == p.ring.ring[(i + 1) % k])
-        uv += point_bary_[q][c] * p.uv[(i + 1) % k];
+        uv += bary[c] * p.uv[(i + 1) % k];
     }
     return uv;
   }
@@ -517,7 +558,7 @@ class Simplifier {
     auto place = [&](Index q, const Vec2& uv) {
       const Location l = locate(uv, p.uv, p.tris);
       point_face_[q] = first_face + static_cast<FaceId>(l.tri);
-      point_bary_[q] = l.bary;
+      point_bary_[q] = {static_cast<float>(l.bary[0]), static_cast<float>(l.bary[1])};
       ++count[static_cast<std::size_t>(l.tri)];
     };
     const auto fan_points = [&](std::size_t i) {
@@ -547,6 +588,7 @@ class Simplifier {
   // Base mesh and MAPS coordinates relative to it.
   void finish() {
     const std::size_t n = mesh_.positions().size();
+    out_.original_faces = original_faces_;  // face ids: the input's, then the removals'
     out_.node_vertex = std::move(node_vertex_);
     out_.node_closed = std::move(node_closed_);
     out_.ring_offsets = std::move(ring_offsets_);
@@ -573,7 +615,8 @@ class Simplifier {
     for (Index v = 0; v < n; ++v) {
       if (removed_[v]) {
         maps_face[order_[v]] = base_index[point_face_[v]];
-        maps_bary[order_[v]] = quantize_barycentric(point_bary_[v]);
+        const PointBary& b = point_bary_[v];
+        maps_bary[order_[v]] = quantize_barycentric(Vec3(b[0], b[1], 1.0 - double(b[0]) - double(b[1])));
       } else {
         // A base vertex is the corner of its first live face.
         const FaceId f = mesh_.vertex_faces(v).front();
@@ -587,6 +630,7 @@ class Simplifier {
   }
 
   const SimplifyOptions& opt_;
+  const std::vector<Triangle>& original_faces_;
   // The simplifier works on the mesh in a spatially local vertex order (it
   // is bound by memory latency: 1.2× faster on the 435k dragon) and speaks
   // input ids in everything it writes. order_[local] = input id.
@@ -606,7 +650,10 @@ class Simplifier {
   std::vector<std::uint32_t> face_points_at_;
   std::vector<std::uint32_t> face_point_count_;
   std::vector<FaceId> point_face_;  // per removed vertex: its current face
-  std::vector<Vec3> point_bary_;    // ... and barycentrics in it
+  // ... and its first two barycentrics there: float is ~100× finer than the
+  // file's 16 bits, at a third of the memory.
+  using PointBary = std::array<float, 2>;
+  std::vector<PointBary> point_bary_;
   std::vector<std::uint8_t> removed_;
 
   // Candidates: each vertex's last known cost and whether its last plan was
@@ -616,7 +663,8 @@ class Simplifier {
   std::vector<std::uint8_t> valid_;
   std::vector<std::uint8_t> stale_;  // its ring changed since its cost was computed
   std::vector<Index> pool_;
-  std::vector<Index> window_;  // the round's planned candidates
+  std::vector<Index> window_;      // the round's planned candidates
+  std::vector<Index> neighbours_;  // the round's choice: each candidate's neighbours
   std::vector<Plan> plans_;
   std::vector<std::uint32_t> mark_;
 
@@ -643,7 +691,7 @@ const char* describe(BaseRefusal why) {
   return "?";
 }
 
-void simplify(const TriMesh& mesh, const VertexTraits& traits, const SimplifyOptions& options, Hierarchy& out) {
+void simplify(const TriMesh& mesh, VertexTraits traits, const SimplifyOptions& options, Hierarchy& out) {
   const std::size_t n = mesh.positions.size();
   if (traits.curvature.size() != n || traits.saliency.size() != n || traits.boundary.size() != n)
     throw std::invalid_argument("simplify: one curvature, saliency and boundary flag per vertex");

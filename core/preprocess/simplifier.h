@@ -79,6 +79,7 @@ struct VertexTraits {
 // without degenerate/duplicate faces or unreferenced vertices
 // (validate_mesh reports nothing fatal or repairable); `traits` has one
 // entry per vertex in each array.
-void simplify(const TriMesh& mesh, const VertexTraits& traits, const SimplifyOptions& options, Hierarchy& out);
+// `traits` is taken (and freed early): pass it with std::move.
+void simplify(const TriMesh& mesh, VertexTraits traits, const SimplifyOptions& options, Hierarchy& out);
 
 }  // namespace filigree
