@@ -515,12 +515,13 @@ double ms_until_turn(UploadInFlight& waiting, SteadyClock::time_point from) {
 constexpr int kLongSphere = 8;
 
 // How soon the preprocessing turn of an upload that gave up is free. The
-// target is 100 ms. With the simplifier of 2026-11-28 the waiting upload
-// had its turn 60–83 ms after a cancel as 'simplifying' began and 93–142
-// ms after a deadline 1–2 s into it (quiet machine; 700 ms once beside a
-// browser test), nearly all of it unwinding the simplifier (perf: ~95% of
-// that time in free()), more the further it got. Lower this to 100 once
-// preprocessing frees its memory faster. An upload that keeps
+// target is 100 ms. The waiting upload had its turn, after a cancel as
+// 'simplifying' began / a deadline 1–3 s into it: with the simplifier of
+// 6e32e8c 60–128 / 93–151 ms, nearly all of it unwinding the simplifier
+// (perf: ~95% of that time in free()), more the further it got; with the
+// rounds of ea13ac2 28–120 / 62–109 ms (2026-11-28, this 2-core machine,
+// other work beside it at times; 700 ms once beside a browser test). Lower
+// this to 100 once preprocessing stops that fast. An upload that keeps
 // preprocessing holds the turn for seconds.
 constexpr double kTurnFreedWithinMs = 250.0;
 
@@ -531,7 +532,7 @@ constexpr double kTurnFreedWithinMs = 250.0;
 // would be far over the bound. The bound is not 1 s: this client's
 // connection, idle once the upload ended, holds gRPC's Shutdown until the
 // client lets it go or the 1 s deadline of server/main.cpp passes, so the
-// server stopped in 0.20–1.18 s over 12 runs (2026-11-28; ~60 ms of it
+// server stopped in 0.20–1.21 s over 22 runs (2026-11-28; ~60 ms of it
 // stopping the preprocessing).
 TEST_F(TrustTest, ShutdownDoesNotWaitForPreprocessing) {
   ChildServer server;
