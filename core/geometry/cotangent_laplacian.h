@@ -31,7 +31,10 @@ struct CotangentLaplacian {
 
 // Precondition: faces index valid vertices; the mesh may be non-manifold, an
 // edge's weight then sums the cotangents of all its faces before clamping.
-CotangentLaplacian cotangent_laplacian(std::span<const Vec3> positions, std::span<const Triangle> faces);
-inline CotangentLaplacian cotangent_laplacian(const TriMesh& mesh) { return cotangent_laplacian(mesh.positions, mesh.faces); }
+// Rows are built on up to `threads` threads; the result does not depend on it.
+CotangentLaplacian cotangent_laplacian(std::span<const Vec3> positions, std::span<const Triangle> faces, int threads = 1);
+inline CotangentLaplacian cotangent_laplacian(const TriMesh& mesh, int threads = 1) {
+  return cotangent_laplacian(mesh.positions, mesh.faces, threads);
+}
 
 }  // namespace filigree

@@ -10,11 +10,14 @@ DynamicMesh::DynamicMesh(const TriMesh& mesh, std::vector<std::uint8_t> boundary
     : positions_(mesh.positions), faces_(mesh.faces), alive_(mesh.faces.size(), 1), incident_(mesh.positions.size()),
       boundary_(std::move(boundary)) {
   if (boundary_.size() != positions_.size()) throw std::invalid_argument("DynamicMesh: one boundary flag per vertex");
-  // Counted first: one allocation per vertex, not a growing vector's three.
+  // Counted first: one allocation per vertex, not a growing vector's three,
+  // with room for two more faces: a neighbour's removal usually adds at most
+  // that, and a list that grows on a worker thread moves to that thread's
+  // malloc arena (2 threads peaked 70 MiB above 1 at 1.25M vertices).
   std::vector<std::uint32_t> count(positions_.size(), 0);
   for (const Triangle& t : faces_)
     for (Index v : t) ++count[v];
-  for (Index v = 0; v < positions_.size(); ++v) incident_[v].reserve(count[v]);
+  for (Index v = 0; v < positions_.size(); ++v) incident_[v].reserve(count[v] + 2);
   for (FaceId f = 0; f < faces_.size(); ++f)
     for (Index v : faces_[f]) incident_[v].push_back(f);
 }

@@ -60,7 +60,7 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   // simplifying. The differential coordinates are not stored: the runtime
   // derives them from the rest mesh when it first optimises (DeformerModel).
   traits.curvature =
-      mean_curvature(mesh, cotangent_laplacian(mesh), std::vector<bool>(traits.boundary.begin(), traits.boundary.end()));
+      mean_curvature(mesh, cotangent_laplacian(mesh, options.threads), std::vector<bool>(traits.boundary.begin(), traits.boundary.end()));
   check_stop();
   traits.saliency = mesh_saliency(mesh, traits.curvature, options.threads);
   check_stop();
