@@ -25,18 +25,23 @@
 //        [--single-stall] (a small session driven while two clients poll
 //        GetState in the single-buffer format on a driven 435k session: each
 //        new frame is transcoded into one buffer, off gRPC's callback threads)
-//        [--against OTHER-SERVER [--rounds N] [--mesh small|medium|large]]
+//        [--against OTHER-SERVER [--rounds N] [--mesh small|medium|large|huge]]
 //        (before/after: both servers, one mesh, the single-watcher whole-body
 //        drive alternating between them N times, so that a drift of the
 //        machine's speed falls on both; prints each round and the medians)
+//        [--huge [--poses N]] (only: the ≥ 2M-vertex mesh from upload to
+//        first frame with the C++ client library, on a server with its
+//        default limits; then N closed-loop poses, 40 by default.
+//        bench/service_large_mesh.py is the same with the Python package)
 
 #include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <limits>
 #include <fstream>
+#include <limits>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -48,6 +53,7 @@
 #include "bench/sample_stats.h"
 #include "bench/service_harness.h"
 #include "bench/subdivide.h"
+#include "filigree/client.h"
 #include "filigree/v1/filigree.grpc.pb.h"
 #include "mesh/mesh_io.h"
 #include "mesh/mesh_validation.h"
@@ -223,12 +229,87 @@ int single_stall(const std::string& server_binary) {
   return 0;
 }
 
+// --huge: the ≥ 2M-vertex mesh (bench_mesh("huge")) as a user meets it.
+// A server of its own with its default limits (the rest mesh, ~66 MB, is
+// over half its 64 MiB messages: it comes in GetRestMesh parts); the upload
+// as binary PLY through filigree::Client::create_session, which returns
+// with the tokens and the rest mesh (as the Python package's does); a Drive
+// stream and a FrameDecoder; the first pose, then `poses` closed loop (the
+// whole-body bend): each timed from send to its frame decoded. A join
+// afterwards times reading the rest mesh alone: upload → tokens is about
+// upload → session less it. Server memory: its peak (VmHWM) and now (VmRSS).
+int huge_end_to_end(const std::string& server_binary, int poses) {
+  const auto secs = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); };
+  const Case c = bench_mesh("huge");
+  const std::string bytes = ply_bytes(c.mesh);
+  BenchServer bench_server(server_binary, "huge", {}, /*default_limits=*/true);
+  filigree::Client client(bench_server.server.address());
+  std::map<std::string, Clock::time_point> first;  // when each stage was first reported
+  const auto start = Clock::now();
+  const SessionHandle session =
+      client.create_session(bytes, "ply", {}, "filigree_bench_service", [&](const std::string& stage, double fraction) {
+        if (stage == "uploading" && fraction < 1.0) return;  // "uploading" when the last byte went
+        first.try_emplace(stage, Clock::now());
+      });
+  const auto made = Clock::now();
+
+  std::vector<Vec3> base_rest;
+  for (std::size_t i = 0; i + 2 < session.mesh.base_positions.size(); i += 3)
+    base_rest.emplace_back(session.mesh.base_positions[i], session.mesh.base_positions[i + 1], session.mesh.base_positions[i + 2]);
+  FrameDecoder decoder(session.mesh.rest_positions);
+  auto driver = client.drive(session.session_id, session.editor_token, "filigree_bench_service");
+  // Sends pose p (the bend at its phase) and decodes the frame that includes it.
+  const auto pose_to_frame = [&](std::uint64_t p) {
+    const Pose pose = procedural_pose(base_rest, filigree::Motion::kBend, 0.5 + 0.5 * std::sin(0.2 * static_cast<double>(p)));
+    std::vector<float> flat;
+    flat.reserve(3 * pose.positions.size());
+    for (const Vec3& v : pose.positions) flat.insert(flat.end(), {float(v.x()), float(v.y()), float(v.z())});
+    if (!driver->send(p, flat)) throw std::runtime_error("the drive ended: " + driver->finish().error_message());
+    for (;;) {
+      const std::optional<v1::Frame> f = driver->read();
+      if (!f) throw std::runtime_error("the drive ended: " + driver->finish().error_message());
+      if (f->has_level()) continue;
+      const DecodedFrame d = decoder.decode(*f);
+      if (d.pose_id >= p) return d.vertex_count();
+    }
+  };
+  if (pose_to_frame(1) != session.mesh.vertex_count()) throw std::runtime_error("the first frame is not the whole mesh");
+  const auto first_frame = Clock::now();
+  std::vector<double> latency;
+  for (int p = 2; p <= poses + 1; ++p) {
+    const auto sent = Clock::now();
+    pose_to_frame(static_cast<std::uint64_t>(p));
+    latency.push_back(1e3 * secs(sent, Clock::now()));
+  }
+  driver->writes_done();
+  driver->finish();
+  const auto join_start = Clock::now();
+  const SessionMesh joined = client.join(session.session_id, session.viewer_token);
+  const double join_seconds = secs(join_start, Clock::now());
+  const int pid = bench_server.server.pid();
+
+  const auto at = [&](const std::string& stage) { return first.contains(stage) ? secs(start, first[stage]) : -1.0; };
+  std::printf("# A %zu-vertex session end to end (C++ client library), %zu faces, default server limits\n\n",
+              c.mesh.vertex_count(), c.mesh.face_count());
+  std::printf("Stages from the start of the upload (s): last byte sent %.2f, validating %.2f, simplifying %.2f, "
+              "starting %.2f; session (tokens and rest mesh) %.2f; rest mesh read again by a join: %.2f s (%zu vertices)\n\n",
+              at("uploading"), at("validating"), at("simplifying"), at("starting"), secs(start, made), join_seconds,
+              joined.vertex_count());
+  std::printf("| client | vertices | upload MB | upload → session s | session → first frame s | upload → first frame s | "
+              "frame p50 ms | frame p99 ms | poses | server peak RSS MiB | server RSS after MiB |\n"
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf("| C++ | %zu | %.1f | %.2f | %.2f | %.2f | %.1f | %.1f | %d | %.0f | %.0f |\n", session.mesh.vertex_count(),
+              bytes.size() / 1e6, secs(start, made), secs(made, first_frame), secs(start, first_frame), percentile(latency, 0.5),
+              percentile(latency, 0.99), poses, peak_resident_bytes(pid) / (1 << 20), resident_bytes(pid) / (1 << 20));
+  return 0;
+}
+
 int main_impl(int argc, char** argv) {
   std::string server_binary = FILIGREE_SERVER_BINARY;
   bool quick = false, large_only = false;
   std::string against, which = "medium";
-  bool single_stall_only = false;
-  int rounds = 5;
+  bool single_stall_only = false, huge = false;
+  int rounds = 5, poses = 40;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--single-stall") {
@@ -245,12 +326,17 @@ int main_impl(int argc, char** argv) {
       quick = true;
     } else if (a == "--large") {
       large_only = true;
+    } else if (a == "--huge") {
+      huge = true;
+    } else if (a == "--poses" && i + 1 < argc) {
+      poses = std::max(1, std::stoi(argv[++i]));
     } else {
       server_binary = a;
     }
   }
   if (!against.empty()) return compare_servers(server_binary, against, which, rounds);
   if (single_stall_only) return single_stall(server_binary);
+  if (huge) return huge_end_to_end(server_binary, poses);
   BenchServer bench_server(server_binary, "data");
   const test::ServerProcess& server = bench_server.server;
   v1::Filigree::Stub* const stub = bench_server.stub.get();

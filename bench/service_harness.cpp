@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <fstream>
 #include <limits>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -158,13 +160,42 @@ std::string obj_bytes(const TriMesh& mesh) {
   return s.str();
 }
 
-double resident_bytes(int pid) {
+std::string ply_bytes(const TriMesh& mesh) {
+  std::string out = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(mesh.vertex_count()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                    std::to_string(mesh.face_count()) + "\nproperty list uchar uint vertex_indices\nend_header\n";
+  const std::size_t header = out.size();
+  out.resize(header + 12 * mesh.vertex_count() + 13 * mesh.face_count());
+  char* at = out.data() + header;  // little-endian, as this machine is
+  for (const Vec3& p : mesh.positions)
+    for (int k = 0; k < 3; ++k) {
+      const float c = static_cast<float>(p[k]);
+      std::memcpy(at, &c, 4), at += 4;
+    }
+  for (const Triangle& f : mesh.faces) {
+    *at++ = 3;
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t i = f[k];
+      std::memcpy(at, &i, 4), at += 4;
+    }
+  }
+  return out;
+}
+
+namespace {
+// A /proc/PID/status field in kB ("VmRSS", "VmHWM"), in bytes.
+double status_bytes(int pid, const std::string& field) {
   std::ifstream in("/proc/" + std::to_string(pid) + "/status");
   std::string line;
   while (std::getline(in, line))
-    if (line.rfind("VmRSS:", 0) == 0) return 1024.0 * std::stod(line.substr(6));
+    if (line.rfind(field + ":", 0) == 0) return 1024.0 * std::stod(line.substr(field.size() + 1));
   return 0.0;
 }
+}  // namespace
+
+double resident_bytes(int pid) { return status_bytes(pid, "VmRSS"); }
+
+double peak_resident_bytes(int pid) { return status_bytes(pid, "VmHWM"); }
 
 v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::string& bytes) {
   grpc::ClientContext ctx;
@@ -189,16 +220,19 @@ v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::s
 }
 
 namespace {
-std::vector<std::string> server_args(const std::filesystem::path& data, const std::vector<std::string>& extra) {
-  std::vector<std::string> args{"--data-dir", data.string(), "--max-message-mib", "256"};
+std::vector<std::string> server_args(const std::filesystem::path& data, const std::vector<std::string>& extra,
+                                     bool default_limits) {
+  std::vector<std::string> args{"--data-dir", data.string()};
+  if (!default_limits) args.insert(args.end(), {"--max-message-mib", "256"});
   args.insert(args.end(), extra.begin(), extra.end());
   return args;
 }
 }  // namespace
 
-BenchServer::BenchServer(const std::string& binary, const std::string& tag, const std::vector<std::string>& extra)
+BenchServer::BenchServer(const std::string& binary, const std::string& tag, const std::vector<std::string>& extra,
+                         bool default_limits)
     : data(std::filesystem::temp_directory_path() / ("filigree_bench_" + tag + "_" + std::to_string(::getpid()))),
-      server(binary, server_args(data, extra)),
+      server(binary, server_args(data, extra, default_limits)),
       stub(v1::Filigree::NewStub(
           grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), filigree::frame_channel_arguments()))) {}
 
@@ -222,7 +256,34 @@ Case bench_mesh(const std::string& size) {
     const TriMesh large = bench::subdivide(load(repo + "/armadillo.off"), 2, 1);
     return {"armadillo Loop x2 + sqrt3", permute_vertices(large, locality_order(large.positions))};
   }
-  throw std::invalid_argument("--mesh must be small, medium or large, got " + size);
+  if (size == "huge") return {"bumpy UV sphere (2M)", bumpy_uv_sphere(1000, 2000)};
+  throw std::invalid_argument("--mesh must be small, medium, large or huge, got " + size);
+}
+
+TriMesh bumpy_uv_sphere(int rings, int segments) {
+  const auto point = [](double theta, double phi) {
+    const double r = 1.0 + 0.05 * std::sin(5 * theta) * std::cos(4 * phi) + 0.01 * std::sin(40 * theta) * std::sin(40 * phi);
+    return Vec3(1.5 * r * std::sin(theta) * std::cos(phi), r * std::sin(theta) * std::sin(phi), r * std::cos(theta));
+  };
+  TriMesh m;
+  const auto n = static_cast<Index>(segments);
+  m.positions.reserve(2 + static_cast<std::size_t>(rings) * n);
+  m.positions.push_back(point(0.0, 0.0));  // north pole: vertex 0
+  for (int i = 1; i <= rings; ++i)
+    for (int j = 0; j < segments; ++j)
+      m.positions.push_back(point(std::numbers::pi * i / (rings + 1), 2 * std::numbers::pi * j / segments));
+  const Index south = static_cast<Index>(m.positions.size());
+  m.positions.push_back(point(std::numbers::pi, 0.0));
+  const auto at = [&](int ring, Index j) { return 1 + static_cast<Index>(ring - 1) * n + j % n; };  // ring 1 … rings
+  m.faces.reserve(2 * static_cast<std::size_t>(rings) * n);
+  for (Index j = 0; j < n; ++j) m.faces.push_back({0, at(1, j), at(1, j + 1)});
+  for (int i = 1; i < rings; ++i)
+    for (Index j = 0; j < n; ++j) {
+      m.faces.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
+      m.faces.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
+    }
+  for (Index j = 0; j < n; ++j) m.faces.push_back({south, at(rings, j + 1), at(rings, j)});
+  return m;
 }
 
 }  // namespace filigree::bench

@@ -64,8 +64,13 @@ Result run(v1::Filigree::Stub& stub, const v1::CreateSessionResponse::Created& c
 
 // The mesh as OBJ bytes, for upload().
 std::string obj_bytes(const TriMesh& mesh);
+// The mesh as a binary PLY file's bytes, float32 coordinates (what a scan
+// of millions of vertices is usually shipped as: a third of the OBJ).
+std::string ply_bytes(const TriMesh& mesh);
 // A process's resident memory (VmRSS), in bytes.
 double resident_bytes(int pid);
+// A process's peak resident memory so far (VmHWM), in bytes.
+double peak_resident_bytes(int pid);
 // CreateSession with OBJ bytes; throws when the server refuses.
 v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::string& bytes);
 
@@ -73,9 +78,13 @@ v1::CreateSessionResponse::Created upload(v1::Filigree::Stub& stub, const std::s
 // and a stub with the client library's channel settings: no limit on a
 // SessionInfo's size, and a fixed frame window (filigree/channel_arguments.h;
 // with gRPC's adaptive one a 1.25M frame took 3 ms more to arrive). Stopped,
-// its data removed, when destroyed.
+// its data removed, when destroyed. Messages up to 256 MiB (a SessionInfo
+// carries its rest mesh whole), unless `default_limits`: then the server's
+// own limits, as a user starts it (64 MiB messages: a rest mesh over 32 MiB
+// comes from GetRestMesh in parts, which upload() does not read).
 struct BenchServer {
-  BenchServer(const std::string& binary, const std::string& tag, const std::vector<std::string>& extra = {});
+  BenchServer(const std::string& binary, const std::string& tag, const std::vector<std::string>& extra = {},
+              bool default_limits = false);
   ~BenchServer();
   BenchServer(const BenchServer&) = delete;
   BenchServer& operator=(const BenchServer&) = delete;
@@ -89,11 +98,19 @@ struct BenchServer {
 // camel, and the bunny scan subdivided once: no real mesh of that size here
 // is manifold) when the shared meshes are there, else the shipped Armadillo
 // and its subdivision; "large" ≥ 1M (the Armadillo subdivided, Loop twice
-// and √3 once, 1.25M), in locality order.
+// and √3 once, 1.25M), in locality order; "huge" ≥ 2M (bumpy_uv_sphere:
+// 2,000,002 vertices, 4,000,000 faces).
 struct Case {
   std::string name;
   TriMesh mesh;
 };
 Case bench_mesh(const std::string& size);
+
+// A closed UV ellipsoid (1.5 : 1 : 1 along x, y, z) with bumps at two
+// scales, r(θ, φ) = 1 + 0.05·sin 5θ·cos 4φ + 0.01·sin 40θ·sin 40φ: `rings`
+// rings of `segments` vertices between the two poles, 2 + rings·segments
+// vertices and 2·rings·segments faces, outward. bench/service_large_mesh.py
+// builds the same mesh for the Python side.
+TriMesh bumpy_uv_sphere(int rings, int segments);
 
 }  // namespace filigree::bench
