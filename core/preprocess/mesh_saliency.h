@@ -2,6 +2,7 @@
 // Mesh saliency (Lee, Varshney, Jacobs 2005): how much a vertex's mean
 // curvature stands out from its surroundings, across scales.
 
+#include <atomic>
 #include <vector>
 
 #include "mesh/tri_mesh.h"
@@ -16,6 +17,9 @@ namespace filigree {
 // on area-weighted clusters of a 2ε grid instead of on every vertex, and each
 // vertex takes its cluster's value; the paper's local-maxima suppression is
 // replaced by the plain max normalisation.
-std::vector<double> mesh_saliency(const TriMesh& mesh, const std::vector<double>& mean_curvature, int threads);
+// When `stop` turns true the clusters left are skipped and the result is
+// meaningless: the caller, which set it, throws it away.
+std::vector<double> mesh_saliency(const TriMesh& mesh, const std::vector<double>& mean_curvature, int threads,
+                                  const std::atomic<bool>* stop = nullptr);
 
 }  // namespace filigree

@@ -62,7 +62,7 @@ Hierarchy preprocess(const TriMesh& mesh, const PreprocessOptions& options) {
   traits.curvature =
       mean_curvature(mesh, cotangent_laplacian(mesh, options.threads), std::vector<bool>(traits.boundary.begin(), traits.boundary.end()));
   check_stop();
-  traits.saliency = mesh_saliency(mesh, traits.curvature, options.threads);
+  traits.saliency = mesh_saliency(mesh, traits.curvature, options.threads, options.stop);
   check_stop();
 
   SimplifyOptions so = options.simplify;
