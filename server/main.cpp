@@ -452,8 +452,11 @@ int main(int argc, char** argv) {
       http_server->shutdown();
       http_server.reset();
     }
-    // Streams are already finished; this only bounds unary calls still in flight.
-    server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+    // Streams are already finished; this only bounds unary calls still in
+    // flight (a pose or a join takes milliseconds) and idle client
+    // connections, which hold Shutdown to its deadline: SIGTERM ends the
+    // server within a second.
+    server->Shutdown(std::chrono::system_clock::now() + std::chrono::milliseconds(250));
     if (guard) guard->stop();
     registry.shutdown();
     spdlog::info("event=stopped");
