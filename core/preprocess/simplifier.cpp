@@ -172,9 +172,15 @@ class Simplifier {
       // rings away made valid (a diagonal no longer an edge, a neighbour's
       // valence) was never planned again. Plan every vertex left once more.
       // (With every check: the pool must not fill with removals that fail them.)
-      if (pool_.empty() && (plan_all(pool_, PlanWork::kFull, [&](Index v) { return !removed_[v]; }), pool_.empty()))
-        break;
+      if (window_.empty()) {
+        tidy(pool_, pool_sorted_);
+        if (pool_.empty() && (plan_all(pool_, PlanWork::kFull, [&](Index v) { return !removed_[v]; }), pool_.empty()))
+          break;
+        choose_window();
+      }
       const std::size_t removed = remove_round(++round, remaining - target);
+      // A window serves rounds until none removes anything from it.
+      if (removed == 0) window_.clear();
       remaining -= removed;
       const std::size_t done = n - remaining;
       if (opt_.progress && done >= next_report) {
@@ -219,16 +225,30 @@ class Simplifier {
       if (valid_[v] && which(v)) pool.push_back(v);
   }
 
-  // One round; returns how many vertices it removed (at most `budget`).
-  std::size_t remove_round(std::uint32_t round, std::size_t budget) {
-    // Ties go to the lower input id: the result does not depend on order_.
-    const auto cheaper = [&](Index a, Index b) { return cost_[a] != cost_[b] ? cost_[a] < cost_[b] : order_[a] < order_[b]; };
-    // The window: about the cheapest share of the candidates by their last
-    // known cost, cut at a pivot taken from a sample of them (one pass over
-    // the pool instead of a selection); `bound` is the cost of the cheapest
-    // candidate left out. The pool stays in vertex order, for the caches.
+  // Ties go to the lower input id: the result does not depend on order_.
+  bool cheaper(Index a, Index b) const { return cost_[a] != cost_[b] ? cost_[a] < cost_[b] : order_[a] < order_[b]; }
+
+  // Drops removed and invalid vertices, and repeats, from a candidate list
+  // whose first `sorted` entries are in vertex order, and sorts it (sorted
+  // then covers it all).
+  void tidy(std::vector<Index>& list, std::size_t& sorted) {
+    const auto tail = list.begin() + static_cast<std::ptrdiff_t>(std::min(sorted, list.size()));
+    std::sort(tail, list.end());
+    std::inplace_merge(list.begin(), tail, list.end());
+    list.erase(std::unique(list.begin(), list.end()), list.end());
+    std::erase_if(list, [&](Index v) { return removed_[v] || !valid_[v]; });
+    sorted = list.size();
+  }
+
+  // The window: about the cheapest share of the candidates by their last
+  // known cost, cut at a pivot taken from a sample of them (one pass over
+  // the pool instead of a selection); bound_ is the cost of the cheapest
+  // candidate left out. It keeps the pool's vertex order, for the caches.
+  // Precondition: the pool is tidy and not empty.
+  void choose_window() {
+    const auto by_cost = [&](Index a, Index b) { return cheaper(a, b); };
     const std::size_t wanted = std::clamp(pool_.size() / kWindowShare, kMinWindow, kMaxWindow);
-    double bound = std::numeric_limits<double>::infinity();
+    bound_ = std::numeric_limits<double>::infinity();
     window_.clear();
     if (wanted >= pool_.size()) {
       window_ = pool_;
@@ -237,19 +257,29 @@ class Simplifier {
       const std::size_t step = std::max<std::size_t>(pool_.size() / kPivotSample, 1);
       for (std::size_t i = 0; i < pool_.size(); i += step) sample.push_back(pool_[i]);
       const std::size_t q = sample.size() * wanted / pool_.size();
-      std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end(), cheaper);
+      std::nth_element(sample.begin(), sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end(), by_cost);
       const Index pivot = sample[q];
       for (Index v : pool_)
         if (cheaper(v, pivot)) window_.push_back(v);
-      bound = cost_[pivot];
+      bound_ = cost_[pivot];
       if (window_.size() > kMaxWindow) {
-        std::nth_element(window_.begin(), window_.begin() + static_cast<std::ptrdiff_t>(kMaxWindow), window_.end(), cheaper);
-        bound = cost_[window_[kMaxWindow]];
+        std::nth_element(window_.begin(), window_.begin() + static_cast<std::ptrdiff_t>(kMaxWindow), window_.end(), by_cost);
+        bound_ = cost_[window_[kMaxWindow]];
         window_.resize(kMaxWindow);
         std::sort(window_.begin(), window_.end());
       }
-      if (window_.empty()) window_.push_back(pivot), bound = std::numeric_limits<double>::infinity();
+      if (window_.empty()) window_.push_back(pivot), bound_ = std::numeric_limits<double>::infinity();
     }
+    window_sorted_ = window_.size();
+  }
+
+  // One round over the window; returns how many vertices it removed (at
+  // most `budget`). Every candidate outside the window costs at least
+  // bound_ (a removal makes its neighbours stale at their old cost, and one
+  // it makes valid again joins the window at the removal's cost).
+  std::size_t remove_round(std::uint32_t round, std::size_t budget) {
+    const auto cheaper = [&](Index a, Index b) { return this->cheaper(a, b); };
+    const double bound = bound_;
     const std::size_t window = window_.size();
     if (plans_.size() < window) plans_.resize(window);
     // Plan the candidates whose rings changed since their last plan; the
@@ -337,7 +367,6 @@ class Simplifier {
 
     // The picks' neighbours have new rings: their costs are stale, and one
     // that could not go before may now. Then drop what left the candidates.
-    const std::size_t kept = pool_.size();
     for (std::uint32_t i : picks) {
       const double c = plans_[i].cost;
       for (Index j : plans_[i].ring.ring) {
@@ -346,11 +375,10 @@ class Simplifier {
         valid_[j] = 1;
         cost_[j] = c;
         pool_.push_back(j);
+        window_.push_back(j);
       }
     }
-    std::sort(pool_.begin() + static_cast<std::ptrdiff_t>(kept), pool_.end());
-    std::inplace_merge(pool_.begin(), pool_.begin() + static_cast<std::ptrdiff_t>(kept), pool_.end());
-    std::erase_if(pool_, [&](Index v) { return removed_[v] || !valid_[v]; });
+    tidy(window_, window_sorted_);
     return picks.size();
   }
 
@@ -678,7 +706,9 @@ class Simplifier {
   std::vector<std::uint8_t> valid_;
   std::vector<std::uint8_t> stale_;  // its ring changed since its cost was computed
   std::vector<Index> pool_;
-  std::vector<Index> window_;      // the round's planned candidates
+  std::vector<Index> window_;      // the candidates the rounds plan, until none goes
+  double bound_ = 0.0;             // no candidate outside the window costs less
+  std::size_t pool_sorted_ = 0, window_sorted_ = 0;  // prefixes in vertex order (tidy)
   std::vector<Index> neighbours_;  // the round's choice: each candidate's neighbours
   std::vector<Plan> plans_;
   std::vector<std::uint32_t> mark_;
