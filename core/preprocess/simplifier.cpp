@@ -101,7 +101,8 @@ void parallel_steps(std::size_t count, int threads, const std::atomic<bool>* sto
 // points and incidences: planning and removing run on all threads, and the
 // result depends only on the mesh and the options, the same hierarchy, byte
 // for byte, for any thread count. With a window of one candidate it is the
-// queue's hierarchy.
+// queue (the elephant's base the same 262 vertices, its quality row within
+// 0.2%: float barycentrics move the costs in their last bits).
 class Simplifier {
  public:
   // `traits` is read here and freed by the caller's move.
