@@ -17,7 +17,8 @@ import numpy as np
 
 from . import _library
 from ._library import FrameInfo, check, lib, read_string, token_bytes
-from .errors import DeadlineExceeded, FiligreeError, StreamEnded
+from .errors import DeadlineExceeded, FiligreeError
+from .handle_stream import HandleStream
 
 if TYPE_CHECKING:  # only for annotations: session.py imports this module
     from .session import Session
@@ -128,16 +129,16 @@ def _parse_changes(text: str) -> list[Change]:
     return out
 
 
-class _Stream:
+class _Stream(HandleStream[Frame]):
     """What drivers and watchers share: polling, waiting and iterating."""
 
+    _what = "stream"
     _poll = _info = _wait_frame = _reconnects = _changes = _close = _free = None  # the C functions, set by subclasses
     _clip_seconds = None  # a watcher's only: drivers play no clips
     _level_count = _level_ids = _level_faces = None  # a watcher's only: levels of detail
 
     def __init__(self, session: Session, handle: ctypes.c_void_p, at_level: bool = False) -> None:
-        self._session = session  # its meshes size the frames; it outlives the handle's use
-        self._handle = handle
+        super().__init__(session, handle)  # the session's meshes size the frames
         self._n = session.vertex_count
         self._at_level = at_level  # opened with a vertex budget: frames of k <= n vertices
         self._level: Optional[Level] = None  # of the latest frame polled
@@ -151,12 +152,6 @@ class _Stream:
         except FiligreeError:
             self._end_raised = True
             raise
-
-    @property
-    def handle(self) -> ctypes.c_void_p:
-        if not self._handle:
-            raise ValueError("the stream was freed")
-        return self._handle
 
     def poll(self, out: Optional[np.ndarray] = None) -> Optional[Frame]:
         """The newest frame if it is newer than the last one polled, else
@@ -246,26 +241,9 @@ class _Stream:
         assert frame is not None  # wait_frame said one was waiting
         return frame
 
-    def __iter__(self) -> Iterator[Frame]:
-        """Frames as they come (the newest when several wait), until the stream ends."""
-        while True:
-            try:
-                yield self.next_frame()
-            except StreamEnded:
-                return
-
-    def close(self) -> None:
-        """Ends the stream and waits for it; raises if it had failed. Idempotent."""
-        check(type(self)._close(self.handle))
-
-    def free(self) -> None:
-        """Cancels the stream if still open and releases the handle. Idempotent."""
-        if self._handle:
-            type(self)._free(self._handle)
-            self._handle = None
-
-    def __enter__(self):
-        return self
+    def next(self) -> Frame:
+        """Iteration yields frames as they come (the newest when several wait), until the stream ends."""
+        return self.next_frame()
 
     def __exit__(self, exc_type, *exc) -> None:
         """Closes the stream; a failure is raised unless it was raised before."""
@@ -278,9 +256,6 @@ class _Stream:
                         raise
         finally:
             self.free()
-
-    def __del__(self) -> None:
-        self.free()
 
 
 class Driver(_Stream):
