@@ -13,24 +13,29 @@ v1::History Client::history(const std::string& session_id, const std::string& to
   return unary_call(*stub_, &v1::Filigree::Stub::GetHistory, session_id, token, request, routing_, call_timeout_);
 }
 
-EditOutcome Client::undo(const std::string& session_id, const std::string& token, const std::string& client_name,
-                         bool force) {
+namespace {
+
+// Undo and Redo take the same request.
+v1::UndoRequest undo_request(const std::string& session_id, const std::string& client_name, bool force) {
   v1::UndoRequest request;
   request.set_session_id(session_id);
   request.set_client_name(client_name);
   request.set_force(force);
-  return to_edit_outcome(
-      unary_call(*stub_, &v1::Filigree::Stub::Undo, session_id, token, request, routing_, call_timeout_));
+  return request;
+}
+
+}  // namespace
+
+EditOutcome Client::undo(const std::string& session_id, const std::string& token, const std::string& client_name,
+                         bool force) {
+  return to_edit_outcome(unary_call(*stub_, &v1::Filigree::Stub::Undo, session_id, token,
+                                    undo_request(session_id, client_name, force), routing_, call_timeout_));
 }
 
 EditOutcome Client::redo(const std::string& session_id, const std::string& token, const std::string& client_name,
                          bool force) {
-  v1::UndoRequest request;
-  request.set_session_id(session_id);
-  request.set_client_name(client_name);
-  request.set_force(force);
-  return to_edit_outcome(
-      unary_call(*stub_, &v1::Filigree::Stub::Redo, session_id, token, request, routing_, call_timeout_));
+  return to_edit_outcome(unary_call(*stub_, &v1::Filigree::Stub::Redo, session_id, token,
+                                    undo_request(session_id, client_name, force), routing_, call_timeout_));
 }
 
 v1::Checkpoint Client::create_checkpoint(const std::string& session_id, const std::string& token,
