@@ -308,8 +308,7 @@ class Simplifier {
       if (planned[i] != 0) stale_[v] = 0;
       if (valid_[v]) order.push_back(static_cast<std::uint32_t>(i));
     }
-    // The removals, cheapest first, while no dearer than any candidate left
-    // out and with closed rings disjoint from those already chosen.
+    // The candidates no dearer than any left out of the window, cheapest first.
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return cheaper(window_[a], window_[b]); });
     order.erase(std::find_if(order.begin(), order.end(), [&](std::uint32_t i) { return cost_[window_[i]] > bound; }),
                 order.end());
@@ -336,12 +335,12 @@ class Simplifier {
     // before a cheaper neighbour two edges away: the coarse elephant's bend
     // was 9x further from the truth.) Each vertex keeps the cheapest rank
     // whose closed ring holds it; ranks go up, so the first is the least.
-    const auto closed_ring = [&](std::size_t o) {
+    const auto neighbours = [&](std::size_t o) {
       return std::span<const Index>(neighbours_.data() + o * kSlots, neighbour_count[o]);
     };
     for (std::size_t o = 0; o < order.size(); ++o) {
       const Index v = window_[order[o]];
-      for (Index u : closed_ring(o))
+      for (Index u : neighbours(o))
         if (mark_[u] != round) mark_[u] = round, least_rank_[u] = static_cast<std::uint32_t>(o);
       if (mark_[v] != round) mark_[v] = round, least_rank_[v] = static_cast<std::uint32_t>(o);
     }
@@ -349,7 +348,7 @@ class Simplifier {
     for (std::size_t o = 0; o < order.size() && picks.size() < budget; ++o) {
       const Index v = window_[order[o]];
       const auto least = [&](Index u) { return least_rank_[u] == o; };
-      if (least(v) && std::all_of(closed_ring(o).begin(), closed_ring(o).end(), least)) picks.push_back(order[o]);
+      if (least(v) && std::all_of(neighbours(o).begin(), neighbours(o).end(), least)) picks.push_back(order[o]);
     }
     // A pick planned this round still needs its topology checked; one
     // planned in an earlier round has its cost, not its plan: plan it again
@@ -706,7 +705,8 @@ class Simplifier {
 
   // Candidates: each vertex's last known cost and whether its last plan was
   // valid; the pool of candidates; the plans of the round's window; per
-  // vertex the last round whose removals' closed rings held it.
+  // vertex the last round whose candidates' closed rings held it, and the
+  // least rank among them.
   std::vector<double> cost_;
   std::vector<std::uint8_t> valid_;
   std::vector<std::uint8_t> stale_;  // its ring changed since its cost was computed
@@ -717,7 +717,7 @@ class Simplifier {
   std::vector<Index> neighbours_;  // the round's choice: each candidate's neighbours
   std::vector<Plan> plans_;
   std::vector<std::uint32_t> mark_;
-  std::vector<std::uint32_t> least_rank_;  // valid where mark_ is this round
+  std::vector<std::uint32_t> least_rank_;  // valid where mark_ is the round
 
   // The hierarchy's node arrays as they grow (moved into out_ at the end).
   std::vector<Index> node_vertex_;
